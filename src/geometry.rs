@@ -1,0 +1,251 @@
+//! Patches in world space: bilinear quads, triangles as collapsed quads.
+//!
+//! `X(s,t) = (1-s)(1-t)P0 + s(1-t)P1 + s t P2 + (1-s) t P3` over `[0,1]^2` (issue 2, item 1), corners in
+//! face order. A triangle `(P0,P1,P2)` is the quad `(P0,P1,P2,P2)`: its edge `t = 1` collapses onto P2.
+//! The front is the side of `(P1-P0) x (P2-P0)`. `A(s,t) = |dX/ds x dX/dt|` is the area element of
+//! eq. (2). A sub-rectangle of a bilinear patch is again a bilinear patch, which is how elements
+//! below a face (hierarchical refinement) reuse everything here.
+
+use glam::DVec3;
+
+use crate::quadrature::GaussLegendre;
+
+/// An axis-aligned box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    pub min: DVec3,
+    pub max: DVec3,
+}
+
+impl Aabb {
+    pub const EMPTY: Aabb = Aabb {
+        min: DVec3::splat(f64::INFINITY),
+        max: DVec3::splat(f64::NEG_INFINITY),
+    };
+
+    pub fn from_points(points: &[DVec3]) -> Self {
+        points.iter().fold(Self::EMPTY, |b, p| b.grow(*p))
+    }
+
+    pub fn grow(self, p: DVec3) -> Self {
+        Aabb {
+            min: self.min.min(p),
+            max: self.max.max(p),
+        }
+    }
+
+    pub fn union(self, o: Aabb) -> Self {
+        Aabb {
+            min: self.min.min(o.min),
+            max: self.max.max(o.max),
+        }
+    }
+
+    pub fn overlaps(&self, o: &Aabb) -> bool {
+        self.min.cmple(o.max).all() && o.min.cmple(self.max).all()
+    }
+
+    pub fn centre(&self) -> DVec3 {
+        (self.min + self.max) * 0.5
+    }
+
+    pub fn diagonal(&self) -> DVec3 {
+        self.max - self.min
+    }
+}
+
+/// A rectangle `[s0,s1] x [t0,t1]` of a patch's parameter domain.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rect {
+    pub s0: f64,
+    pub s1: f64,
+    pub t0: f64,
+    pub t1: f64,
+}
+
+impl Rect {
+    pub const UNIT: Rect = Rect {
+        s0: 0.0,
+        s1: 1.0,
+        t0: 0.0,
+        t1: 1.0,
+    };
+
+    /// Maps local `(s,t)` in `[0,1]^2` into this rectangle.
+    pub fn map(&self, s: f64, t: f64) -> (f64, f64) {
+        (
+            self.s0 + s * (self.s1 - self.s0),
+            self.t0 + t * (self.t1 - self.t0),
+        )
+    }
+
+    pub fn measure(&self) -> f64 {
+        (self.s1 - self.s0) * (self.t1 - self.t0)
+    }
+
+    /// The four quadrants, in the order (s low, t low), (s high, t low), (s high, t high), (s low, t high).
+    pub fn quadrants(&self) -> [Rect; 4] {
+        let sm = 0.5 * (self.s0 + self.s1);
+        let tm = 0.5 * (self.t0 + self.t1);
+        [
+            Rect {
+                s0: self.s0,
+                s1: sm,
+                t0: self.t0,
+                t1: tm,
+            },
+            Rect {
+                s0: sm,
+                s1: self.s1,
+                t0: self.t0,
+                t1: tm,
+            },
+            Rect {
+                s0: sm,
+                s1: self.s1,
+                t0: tm,
+                t1: self.t1,
+            },
+            Rect {
+                s0: self.s0,
+                s1: sm,
+                t0: tm,
+                t1: self.t1,
+            },
+        ]
+    }
+}
+
+/// A bilinear patch in world space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Patch {
+    pub corners: [DVec3; 4],
+}
+
+impl Patch {
+    /// A quad from 4 corners, or a collapsed quad from 3.
+    pub fn from_corners(c: &[DVec3]) -> Self {
+        match c.len() {
+            3 => Patch {
+                corners: [c[0], c[1], c[2], c[2]],
+            },
+            4 => Patch {
+                corners: [c[0], c[1], c[2], c[3]],
+            },
+            n => panic!("a patch has 3 or 4 corners, not {n}"),
+        }
+    }
+
+    /// `X(s,t)`.
+    pub fn point(&self, s: f64, t: f64) -> DVec3 {
+        let [p0, p1, p2, p3] = self.corners;
+        (1.0 - s) * (1.0 - t) * p0 + s * (1.0 - t) * p1 + s * t * p2 + (1.0 - s) * t * p3
+    }
+
+    /// `dX/ds x dX/dt`: the front normal scaled by the area element `A(s,t)`.
+    pub fn area_vector(&self, s: f64, t: f64) -> DVec3 {
+        let [p0, p1, p2, p3] = self.corners;
+        let ds = (1.0 - t) * (p1 - p0) + t * (p2 - p3);
+        let dt = (1.0 - s) * (p3 - p0) + s * (p2 - p1);
+        ds.cross(dt)
+    }
+
+    /// Area by 4x4 Gauss (exact for planar patches, whose `A(s,t)` is bilinear).
+    pub fn area(&self) -> f64 {
+        let q = GaussLegendre::new(4);
+        let mut a = 0.0;
+        for (s, ws) in q.iter() {
+            for (t, wt) in q.iter() {
+                a += ws * wt * self.area_vector(s, t).length();
+            }
+        }
+        a
+    }
+
+    /// Unit front normal at the centre (the normal of `(P1-P0) x (P2-P0)` for planar patches).
+    pub fn centre_normal(&self) -> DVec3 {
+        self.area_vector(0.5, 0.5).normalize_or_zero()
+    }
+
+    /// The sub-patch over a rectangle of the parameter domain (itself bilinear).
+    pub fn sub_patch(&self, r: &Rect) -> Patch {
+        Patch {
+            corners: [
+                self.point(r.s0, r.t0),
+                self.point(r.s1, r.t0),
+                self.point(r.s1, r.t1),
+                self.point(r.s0, r.t1),
+            ],
+        }
+    }
+
+    pub fn bounds(&self) -> Aabb {
+        Aabb::from_points(&self.corners)
+    }
+
+    /// Centre and radius of a sphere bounding the patch (a bilinear patch lies in its corners' hull).
+    pub fn bounding_sphere(&self) -> (DVec3, f64) {
+        let c = self.point(0.5, 0.5);
+        let r = self
+            .corners
+            .iter()
+            .map(|p| p.distance(c))
+            .fold(0.0, f64::max);
+        (c, r)
+    }
+
+    /// Largest distance of a corner from the plane through the centre with the centre normal,
+    /// relative to the patch size: 0 for planar patches.
+    pub fn non_planarity(&self) -> f64 {
+        let (c, r) = self.bounding_sphere();
+        let n = self.centre_normal();
+        let d = self
+            .corners
+            .iter()
+            .map(|p| (*p - c).dot(n).abs())
+            .fold(0.0, f64::max);
+        if r > 0.0 { d / r } else { 0.0 }
+    }
+
+    /// The patch as one or two triangles (for ray casting), in the front orientation.
+    pub fn triangles(&self) -> Vec<[DVec3; 3]> {
+        let [p0, p1, p2, p3] = self.corners;
+        if p2 == p3 {
+            vec![[p0, p1, p2]]
+        } else {
+            vec![[p0, p1, p2], [p0, p2, p3]]
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn triangle_is_a_collapsed_quad_with_half_the_area() {
+        let t = Patch::from_corners(&[DVec3::ZERO, DVec3::X, DVec3::Y]);
+        assert!((t.area() - 0.5).abs() < 1e-14);
+        assert!((t.centre_normal() - DVec3::Z).length() < 1e-14);
+        assert_eq!(t.point(0.3, 1.0), DVec3::Y);
+    }
+
+    #[test]
+    fn sub_patch_is_the_restriction() {
+        let p = Patch::from_corners(&[
+            DVec3::ZERO,
+            DVec3::new(2.0, 0.0, 0.3),
+            DVec3::new(2.5, 1.0, 0.0),
+            DVec3::Y,
+        ]);
+        let r = Rect {
+            s0: 0.25,
+            s1: 0.75,
+            t0: 0.5,
+            t1: 1.0,
+        };
+        let sub = p.sub_patch(&r);
+        let (s, t) = r.map(0.3, 0.6);
+        assert!((sub.point(0.3, 0.6) - p.point(s, t)).length() < 1e-14);
+    }
+}

@@ -1,0 +1,102 @@
+//! Every pair of a scene's elements, in parallel: cull pairs that cannot exchange light, find
+//! visibility, integrate the kernel, and fill the link store.
+
+use rayon::prelude::*;
+
+use super::pair::{PairCoefficients, PairContext, integrate_pair};
+use super::samples::Samples;
+use crate::geometry::{Patch, Rect};
+use crate::links::LinkStore;
+use crate::visibility::{Occluders, Visibility};
+
+/// Element geometry and the whole-domain samples the kernel reuses for every pair.
+pub struct ElementGeometry<'a> {
+    pub patches: &'a [Patch],
+    pub samples: Vec<Samples>,
+}
+
+impl<'a> ElementGeometry<'a> {
+    pub fn new(patches: &'a [Patch], ctx: &PairContext) -> Self {
+        let samples = patches
+            .par_iter()
+            .map(|p| Samples::new(p, &Rect::UNIT, ctx.rule, ctx.basis, ctx.vis_axis))
+            .collect();
+        Self { patches, samples }
+    }
+}
+
+/// True when some point of `b` may lie in front of `a` (conservative for non-planar patches).
+pub fn may_face(a: &Patch, b: &Patch) -> bool {
+    if a.non_planarity() > 1e-9 {
+        return true;
+    }
+    let n = a.centre_normal();
+    let c = a.point(0.5, 0.5);
+    let (_, r) = a.bounding_sphere();
+    b.corners.iter().any(|p| n.dot(*p - c) > 1e-9 * r)
+}
+
+/// The coefficients and visibility of one pair, or `None` when it exchanges nothing.
+pub fn compute_pair(
+    ctx: &PairContext,
+    geom: &ElementGeometry,
+    occluders: Option<&Occluders>,
+    i: usize,
+    j: usize,
+) -> Option<(PairCoefficients, Visibility)> {
+    let (pi, pj) = (&geom.patches[i], &geom.patches[j]);
+    if !may_face(pi, pj) || !may_face(pj, pi) {
+        return None;
+    }
+    let vis = match occluders {
+        Some(o) => o.link_visibility(i, pi, j, pj),
+        None => Visibility::Full,
+    };
+    if vis == Visibility::Blocked {
+        return None;
+    }
+    let c = integrate_pair(ctx, pi, &geom.samples[i], pj, &geom.samples[j], &vis);
+    (!c.is_zero()).then_some((c, vis))
+}
+
+/// Builds the link store of all interacting pairs. `progress(done, total)` is called from worker
+/// threads now and then and returns false to cancel (then `None` is returned).
+pub fn assemble(
+    ctx: &PairContext,
+    geom: &ElementGeometry,
+    occluders: Option<&Occluders>,
+    progress: &(dyn Fn(usize, usize) -> bool + Sync),
+) -> Option<LinkStore> {
+    let n = geom.patches.len();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let cancelled = std::sync::atomic::AtomicBool::new(false);
+    // One task per receiver row i, pairs (i, j > i); rows are uneven, rayon balances them.
+    let rows: Vec<Vec<(u32, PairCoefficients, Visibility)>> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            if cancelled.load(std::sync::atomic::Ordering::Relaxed) {
+                return Vec::new();
+            }
+            let row: Vec<_> = ((i + 1)..n)
+                .filter_map(|j| {
+                    compute_pair(ctx, geom, occluders, i, j).map(|(c, v)| (j as u32, c, v))
+                })
+                .collect();
+            let d = done.fetch_add(n - 1 - i, std::sync::atomic::Ordering::Relaxed) + n - 1 - i;
+            if !progress(d, n * (n - 1) / 2) {
+                cancelled.store(true, std::sync::atomic::Ordering::Relaxed);
+            }
+            row
+        })
+        .collect();
+    if cancelled.load(std::sync::atomic::Ordering::Relaxed) {
+        return None;
+    }
+    let mut store = LinkStore::new(n, ctx.basis.len());
+    for (i, row) in rows.into_iter().enumerate() {
+        for (j, c, v) in row {
+            store.push(i as u32, j, &c.ij, &c.ji, v);
+        }
+    }
+    Some(store)
+}

@@ -1,0 +1,18 @@
+//! Galerkin radiosity (Zatz 1993) with the incremental animation update of Arques, Biri and
+//! Michelin (2001). See README.md for the method and ARCHITECTURE.md for the layout.
+//!
+//! Conventions: right-handed world space, units as given (the solver is scale-free); radiosity
+//! and exitance in W/m^2 per RGB channel; faces are one-sided, front counter-clockwise.
+
+pub mod basis;
+pub mod error;
+pub mod geometry;
+pub mod kernel;
+pub mod links;
+pub mod quadrature;
+pub mod scene;
+pub mod solver;
+pub mod system;
+pub mod visibility;
+
+pub use error::{Error, Result};

@@ -1,0 +1,116 @@
+//! The link store: kernel coefficients between elements, independent of how elements relate to
+//! faces (one element per face today; elements below faces with hierarchical refinement).
+//!
+//! A *pair* `(a, b)` holds both directed links: `G_ab` (receiver `a`, source `b`) and `G_ba`, each
+//! `nb x nb` f32 with rows indexed by the receiver's basis function. Pairs are recomputed in
+//! place by the animation update; a pair that starts or stops interacting is added or emptied.
+
+use crate::visibility::Visibility;
+
+pub type ElementId = u32;
+pub type PairId = u32;
+
+#[derive(Clone, Debug)]
+pub struct Pair {
+    pub a: ElementId,
+    pub b: ElementId,
+    pub visibility: Visibility,
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct LinkStore {
+    nb: usize,
+    pairs: Vec<Pair>,
+    /// `2 nb^2` per pair: `G_ab` then `G_ba`.
+    coeffs: Vec<f32>,
+    /// Per element: the pairs it belongs to.
+    adjacency: Vec<Vec<PairId>>,
+}
+
+impl LinkStore {
+    pub fn new(n_elements: usize, nb: usize) -> Self {
+        Self {
+            nb,
+            pairs: Vec::new(),
+            coeffs: Vec::new(),
+            adjacency: vec![Vec::new(); n_elements],
+        }
+    }
+
+    /// Basis functions per element.
+    pub fn nb(&self) -> usize {
+        self.nb
+    }
+
+    pub fn len(&self) -> usize {
+        self.pairs.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.pairs.is_empty()
+    }
+
+    pub fn pairs(&self) -> &[Pair] {
+        &self.pairs
+    }
+
+    pub fn pair(&self, p: PairId) -> &Pair {
+        &self.pairs[p as usize]
+    }
+
+    /// Pairs that element `e` belongs to.
+    pub fn pairs_of(&self, e: ElementId) -> &[PairId] {
+        &self.adjacency[e as usize]
+    }
+
+    /// Adds a pair with its two blocks (`ab`, `ba`, f64 `nb x nb` each).
+    pub fn push(
+        &mut self,
+        a: ElementId,
+        b: ElementId,
+        ab: &[f64],
+        ba: &[f64],
+        visibility: Visibility,
+    ) -> PairId {
+        let id = self.pairs.len() as PairId;
+        self.pairs.push(Pair { a, b, visibility });
+        self.coeffs.extend(ab.iter().chain(ba).map(|&x| x as f32));
+        self.adjacency[a as usize].push(id);
+        self.adjacency[b as usize].push(id);
+        id
+    }
+
+    /// Replaces a pair's coefficients and visibility.
+    pub fn set(&mut self, p: PairId, ab: &[f64], ba: &[f64], visibility: Visibility) {
+        let n2 = self.nb * self.nb;
+        let block = &mut self.coeffs[p as usize * 2 * n2..(p as usize + 1) * 2 * n2];
+        for (dst, src) in block.iter_mut().zip(ab.iter().chain(ba)) {
+            *dst = *src as f32;
+        }
+        self.pairs[p as usize].visibility = visibility;
+    }
+
+    /// The block with `receiver` as receiver: `G_receiver,other`.
+    #[inline]
+    pub fn block(&self, p: PairId, receiver: ElementId) -> &[f32] {
+        let n2 = self.nb * self.nb;
+        let base = p as usize * 2 * n2;
+        if self.pairs[p as usize].a == receiver {
+            &self.coeffs[base..base + n2]
+        } else {
+            &self.coeffs[base + n2..base + 2 * n2]
+        }
+    }
+
+    /// The other element of pair `p`.
+    #[inline]
+    pub fn other(&self, p: PairId, e: ElementId) -> ElementId {
+        let pair = &self.pairs[p as usize];
+        if pair.a == e { pair.b } else { pair.a }
+    }
+
+    /// Bytes held by coefficients and pair records.
+    pub fn memory_bytes(&self) -> usize {
+        self.coeffs.len() * 4 + self.pairs.len() * std::mem::size_of::<Pair>()
+    }
+}

@@ -1,0 +1,133 @@
+//! The validated scene: materials, objects (object-space meshes with a world placement that may
+//! be keyed over frames), and solver settings.
+//!
+//! [`json`] reads the version-1 scene file; [`Scene::new`] validates any scene, however it was
+//! made (JSON, the C ABI), so every entry point shares one set of checks.
+
+pub mod json;
+mod placement;
+mod validate;
+
+pub use placement::{Key, KeyTransform};
+
+use glam::{DMat4, DVec3};
+
+/// Solver settings. Defaults are documented in the README.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Settings {
+    /// Legendre degree per axis, 0..=3 (0: classic constant radiosity).
+    pub basis_order: usize,
+    /// Gauss-Legendre points per axis for a well-separated pair of patches.
+    pub quadrature_order: usize,
+    /// Progressive refinement stops when the unshot power is below `tolerance` x emitted power.
+    pub tolerance: f64,
+    /// Ray-cast visibility inside the kernel; `false` treats everything as mutually visible.
+    pub visibility: bool,
+    /// Visibility samples per axis of each patch (rays per link = this^4).
+    pub visibility_samples: usize,
+    /// Worker threads; 0 means one per core.
+    pub threads: usize,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            basis_order: 2,
+            quadrature_order: 4,
+            tolerance: 1e-4,
+            visibility: true,
+            visibility_samples: 2,
+            threads: 0,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    pub name: String,
+    /// Diffuse reflectance per RGB channel, each in [0,1).
+    pub reflectance: [f64; 3],
+    /// Radiant exitance per RGB channel (W/m^2), >= 0.
+    pub emission: [f64; 3],
+}
+
+/// A mesh in object space and its world placement.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Object {
+    pub name: String,
+    pub vertices: Vec<DVec3>,
+    /// Vertex indices per face, 3 or 4, counter-clockwise seen from the lit (front) side.
+    pub faces: Vec<Vec<u32>>,
+    /// Material index per face.
+    pub face_materials: Vec<u32>,
+    /// World-from-object at frames without keys (and the base of translation keys).
+    pub matrix: DMat4,
+    /// Placement keys, sorted by frame.
+    pub animation: Vec<Key>,
+}
+
+impl Object {
+    /// World-from-object matrix at `frame`: keys interpolated linearly, held outside them.
+    pub fn world_from_object(&self, frame: f64) -> DMat4 {
+        placement::world_from_object(self.matrix, &self.animation, frame)
+    }
+
+    /// True when the object's placement changes over some frame range.
+    pub fn is_animated(&self) -> bool {
+        !self.animation.is_empty()
+    }
+}
+
+/// A material's emission keyed over frames (linear between keys, held outside).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EmissionKey {
+    pub frame: f64,
+    pub emission: [f64; 3],
+}
+
+/// A validated scene. Construct with [`Scene::new`] or [`json::parse_scene`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scene {
+    pub settings: Settings,
+    /// First and last frame, inclusive.
+    pub frames: (i64, i64),
+    pub materials: Vec<Material>,
+    /// Emission keys per material (empty: constant emission).
+    pub emission_keys: Vec<Vec<EmissionKey>>,
+    pub objects: Vec<Object>,
+    /// Faces skipped because their area is zero: (object, face).
+    pub degenerate_faces: Vec<(usize, usize)>,
+}
+
+impl Scene {
+    /// Validates everything and records zero-area faces (which are skipped, with a warning).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        settings: Settings,
+        frames: (i64, i64),
+        materials: Vec<Material>,
+        emission_keys: Vec<Vec<EmissionKey>>,
+        objects: Vec<Object>,
+    ) -> crate::Result<Self> {
+        let mut scene = Scene {
+            settings,
+            frames,
+            materials,
+            emission_keys,
+            objects,
+            degenerate_faces: Vec::new(),
+        };
+        validate::validate(&mut scene)?;
+        Ok(scene)
+    }
+
+    /// Emission of material `m` at `frame`.
+    pub fn emission_at(&self, m: usize, frame: f64) -> [f64; 3] {
+        placement::emission_at(self.materials[m].emission, &self.emission_keys[m], frame)
+    }
+
+    /// Total number of faces over all objects.
+    pub fn face_count(&self) -> usize {
+        self.objects.iter().map(|o| o.faces.len()).sum()
+    }
+}

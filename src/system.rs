@@ -1,0 +1,323 @@
+//! One frame's Galerkin system: elements, links, emission and radiosity coefficients, and the
+//! evaluation of the solution on faces.
+
+use std::time::Instant;
+
+use glam::DVec3;
+
+use crate::basis::Basis;
+use crate::error::{Error, Result};
+use crate::geometry::{Patch, Rect};
+use crate::kernel::PairContext;
+use crate::kernel::assemble::{ElementGeometry, assemble};
+use crate::links::LinkStore;
+use crate::quadrature::GaussLegendre;
+use crate::scene::Scene;
+use crate::scene::json::ObjectResult;
+use crate::solver::{self, Coefficients, ShootStats};
+use crate::visibility::Occluders;
+
+/// Progress callback: fraction done in [0,1] and a short stage name; returns false to cancel.
+pub type Progress<'a> = &'a (dyn Fn(f64, &str) -> bool + Sync);
+
+/// A progress callback that never cancels.
+pub fn no_progress(_: f64, _: &str) -> bool {
+    true
+}
+
+/// A region of a face that carries its own radiosity polynomial.
+#[derive(Clone, Debug)]
+pub struct Element {
+    pub object: u32,
+    pub face: u32,
+    /// The element's part of the face's parameter domain (the whole face today).
+    pub domain: Rect,
+    /// World-space geometry of the element (a bilinear patch over `domain`).
+    pub patch: Patch,
+    pub material: u32,
+    pub area: f64,
+    /// `integral Gamma_k A ds dt` over the element: the mean radiosity is `sum_k b^k m_k / area`.
+    pub moments: Vec<f64>,
+}
+
+/// World-space elements of a scene at a frame: one per non-degenerate face.
+pub fn build_elements(scene: &Scene, frame: f64, basis: Basis) -> Vec<Element> {
+    let rule = GaussLegendre::new(4);
+    let mut elements = Vec::with_capacity(scene.face_count());
+    let mut degenerate = scene.degenerate_faces.iter().peekable();
+    for (o, obj) in scene.objects.iter().enumerate() {
+        let m = obj.world_from_object(frame);
+        let world: Vec<DVec3> = obj
+            .vertices
+            .iter()
+            .map(|v| m.transform_point3(*v))
+            .collect();
+        for (f, face) in obj.faces.iter().enumerate() {
+            if degenerate.peek() == Some(&&(o, f)) {
+                degenerate.next();
+                continue;
+            }
+            let corners: Vec<DVec3> = face.iter().map(|&v| world[v as usize]).collect();
+            let patch = Patch::from_corners(&corners);
+            elements.push(element(
+                o as u32,
+                f as u32,
+                Rect::UNIT,
+                patch,
+                obj.face_materials[f],
+                basis,
+                &rule,
+            ));
+        }
+    }
+    elements
+}
+
+fn element(
+    object: u32,
+    face: u32,
+    domain: Rect,
+    patch: Patch,
+    material: u32,
+    basis: Basis,
+    rule: &GaussLegendre,
+) -> Element {
+    let nb = basis.len();
+    let mut moments = vec![0.0; nb];
+    let mut area = 0.0;
+    let mut g = vec![0.0; nb];
+    for (s, ws) in rule.iter() {
+        for (t, wt) in rule.iter() {
+            let a = patch.area_vector(s, t).length() * ws * wt;
+            area += a;
+            basis.eval_into(s, t, &mut g);
+            for k in 0..nb {
+                moments[k] += a * g[k];
+            }
+        }
+    }
+    Element {
+        object,
+        face,
+        domain,
+        patch,
+        material,
+        area,
+        moments,
+    }
+}
+
+/// Timings and counts of one build and solve.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct SystemStats {
+    pub elements: usize,
+    pub pairs: usize,
+    pub link_bytes: usize,
+    pub pairs_with_partial_visibility: usize,
+    pub kernel_seconds: f64,
+    pub solve_seconds: f64,
+    pub shots: usize,
+}
+
+/// The Galerkin system of one frame.
+pub struct System {
+    pub basis: Basis,
+    pub elements: Vec<Element>,
+    pub links: LinkStore,
+    pub reflectance: Vec<[f64; 3]>,
+    /// Emission coefficients `e_i^k` (eq. 5): constant exitance projects onto `k = 0` only.
+    pub emission: Vec<[f64; 3]>,
+    pub solution: Coefficients,
+    pub stats: SystemStats,
+}
+
+impl System {
+    /// Places the scene at `frame`, builds elements and every link. Runs on the current rayon pool.
+    pub fn build(scene: &Scene, frame: f64, progress: Progress) -> Result<System> {
+        let s = &scene.settings;
+        let basis = Basis::new(s.basis_order);
+        let rule = GaussLegendre::new(s.quadrature_order);
+        let ctx = PairContext {
+            basis,
+            rule: &rule,
+            vis_axis: s.visibility_samples,
+        };
+        let start = Instant::now();
+        let elements = build_elements(scene, frame, basis);
+        let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
+        let occluders = s
+            .visibility
+            .then(|| Occluders::new(&patches, s.visibility_samples));
+        let geom = ElementGeometry::new(&patches, &ctx);
+        let links = assemble(&ctx, &geom, occluders.as_ref(), &|done, total| {
+            progress(
+                if total > 0 {
+                    done as f64 / total as f64
+                } else {
+                    1.0
+                },
+                "kernel",
+            )
+        })
+        .ok_or(Error::Cancelled)?;
+        let kernel_seconds = start.elapsed().as_secs_f64();
+        let nb = basis.len();
+        let reflectance = elements
+            .iter()
+            .map(|e| scene.materials[e.material as usize].reflectance)
+            .collect();
+        let mut emission = vec![[0.0; 3]; elements.len() * nb];
+        for (i, e) in elements.iter().enumerate() {
+            emission[i * nb] = scene.emission_at(e.material as usize, frame);
+        }
+        let stats = SystemStats {
+            elements: elements.len(),
+            pairs: links.len(),
+            link_bytes: links.memory_bytes(),
+            pairs_with_partial_visibility: links
+                .pairs()
+                .iter()
+                .filter(|p| matches!(p.visibility, crate::visibility::Visibility::Partial(_)))
+                .count(),
+            kernel_seconds,
+            ..Default::default()
+        };
+        let solution = Coefficients::zeros(elements.len(), nb);
+        Ok(System {
+            basis,
+            elements,
+            links,
+            reflectance,
+            emission,
+            solution,
+            stats,
+        })
+    }
+
+    /// Element areas, in element order.
+    pub fn areas(&self) -> Vec<f64> {
+        self.elements.iter().map(|e| e.area).collect()
+    }
+
+    /// Total emitted power-norm, the reference for the tolerance.
+    pub fn emitted_power(&self) -> f64 {
+        let nb = self.basis.len();
+        self.elements
+            .iter()
+            .enumerate()
+            .map(|(i, e)| solver::power(&self.emission[i * nb..(i + 1) * nb], e.area))
+            .sum()
+    }
+
+    /// Solves from scratch by progressive refinement down to `tolerance` x emitted power.
+    pub fn solve(&mut self, tolerance: f64, cancel: &dyn Fn() -> bool) -> Result<ShootStats> {
+        let start = Instant::now();
+        self.solution = Coefficients::from_emission(&self.emission, self.basis.len());
+        let stop = tolerance * self.emitted_power();
+        let stats = solver::shoot(
+            &self.links,
+            &self.reflectance,
+            &self.areas(),
+            &mut self.solution,
+            stop,
+            cancel,
+        )?;
+        self.stats.solve_seconds = start.elapsed().as_secs_f64();
+        self.stats.shots = stats.shots;
+        Ok(stats)
+    }
+
+    /// `B` of element `e` at its local `(s,t)`.
+    pub fn eval(&self, e: usize, s: f64, t: f64) -> [f64; 3] {
+        let g = self.basis.eval(s, t);
+        let mut out = [0.0; 3];
+        for (k, gk) in g.iter().enumerate() {
+            for c in 0..3 {
+                out[c] += gk * self.solution.b[e * g.len() + k][c];
+            }
+        }
+        out
+    }
+
+    /// Area-mean `B` of element `e`.
+    pub fn mean(&self, e: usize) -> [f64; 3] {
+        let el = &self.elements[e];
+        let nb = self.basis.len();
+        let mut out = [0.0; 3];
+        for k in 0..nb {
+            for c in 0..3 {
+                out[c] += el.moments[k] * self.solution.b[e * nb + k][c];
+            }
+        }
+        out.map(|x| x / el.area)
+    }
+
+    /// Per object, per face: the mean `B` and `B` at each corner (issue 2, items 6 and 8).
+    pub fn face_results(&self, scene: &Scene, frame: f64) -> Vec<ObjectResult> {
+        let mut out: Vec<ObjectResult> = scene
+            .objects
+            .iter()
+            .map(|o| ObjectResult {
+                name: o.name.clone(),
+                face_radiosity: Vec::with_capacity(o.faces.len()),
+                corner_radiosity: Vec::new(),
+            })
+            .collect();
+        let mut elements = self.elements.iter().enumerate().peekable();
+        for (o, obj) in scene.objects.iter().enumerate() {
+            for (f, face) in obj.faces.iter().enumerate() {
+                let res = &mut out[o];
+                match elements.peek() {
+                    Some((e, el)) if el.object as usize == o && el.face as usize == f => {
+                        let e = *e;
+                        elements.next();
+                        res.face_radiosity.push(to_f32(self.mean(e)));
+                        for (s, t) in corner_params(face.len()) {
+                            let v = if face.len() == 3 && t == 1.0 {
+                                self.apex(e)
+                            } else {
+                                self.eval(e, s, t)
+                            };
+                            res.corner_radiosity.push(to_f32(v));
+                        }
+                    }
+                    _ => {
+                        // A skipped zero-area face shows its own exitance.
+                        let e = to_f32(scene.emission_at(obj.face_materials[f] as usize, frame));
+                        res.face_radiosity.push(e);
+                        res.corner_radiosity
+                            .extend(std::iter::repeat_n(e, face.len()));
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// `B` at a triangle's apex, where the collapsed edge `t = 1` maps to one point: the mean
+    /// over that edge (only the `a = 0` functions survive the integral over `s`).
+    fn apex(&self, e: usize) -> [f64; 3] {
+        let n = self.basis.order() + 1;
+        let pt = crate::basis::legendre_1d(1.0);
+        let mut out = [0.0; 3];
+        for b in 0..n {
+            for c in 0..3 {
+                out[c] += pt[b] * self.solution.b[e * n * n + b][c];
+            }
+        }
+        out
+    }
+}
+
+/// Parameter coordinates of a face's corners, in face order.
+pub fn corner_params(n: usize) -> Vec<(f64, f64)> {
+    if n == 3 {
+        vec![(0.0, 0.0), (1.0, 0.0), (1.0, 1.0)]
+    } else {
+        vec![(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]
+    }
+}
+
+fn to_f32(v: [f64; 3]) -> [f32; 3] {
+    v.map(|x| x as f32)
+}

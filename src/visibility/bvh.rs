@@ -1,0 +1,264 @@
+//! A bounding volume hierarchy over the scene's triangles, for the two queries visibility needs:
+//! "which triangles overlap this box" (shaft candidates) and "does this segment hit any triangle
+//! other than these" (any-hit, early exit).
+//!
+//! Why our own and not parry3d: parry's trimesh ray cast is closest-hit only and cannot skip the
+//! two patches of a link, and the shaft query needs the triangle ids; both are a few lines here.
+//! Built by median split on the longest centroid axis: O(n log n), 100k triangles in ~20 ms.
+
+use glam::DVec3;
+
+use crate::geometry::Aabb;
+
+/// A triangle tagged with the element whose surface it approximates (to exclude a link's own patches).
+#[derive(Clone, Copy, Debug)]
+pub struct Triangle {
+    pub v: [DVec3; 3],
+    pub element: u32,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    bounds: Aabb,
+    /// Leaf: first triangle index; inner: index of the left child (right is left + 1).
+    start: u32,
+    /// Leaf: triangle count (> 0); inner: 0.
+    count: u32,
+}
+
+const LEAF_SIZE: usize = 4;
+
+#[derive(Clone, Debug, Default)]
+pub struct Bvh {
+    nodes: Vec<Node>,
+    triangles: Vec<Triangle>,
+}
+
+impl Bvh {
+    pub fn build(mut triangles: Vec<Triangle>) -> Self {
+        let mut nodes = Vec::with_capacity(2 * triangles.len() / LEAF_SIZE + 1);
+        if triangles.is_empty() {
+            return Bvh { nodes, triangles };
+        }
+        nodes.push(Node {
+            bounds: Aabb::EMPTY,
+            start: 0,
+            count: 0,
+        });
+        let mut stack = vec![(0usize, 0usize, triangles.len())];
+        while let Some((node, lo, hi)) = stack.pop() {
+            let tris = &mut triangles[lo..hi];
+            let bounds = tris
+                .iter()
+                .fold(Aabb::EMPTY, |b, t| b.union(Aabb::from_points(&t.v)));
+            if tris.len() <= LEAF_SIZE {
+                nodes[node] = Node {
+                    bounds,
+                    start: lo as u32,
+                    count: (hi - lo) as u32,
+                };
+                continue;
+            }
+            let cb = tris.iter().fold(Aabb::EMPTY, |b, t| b.grow(centroid(t)));
+            let d = cb.diagonal();
+            let axis = if d.x >= d.y && d.x >= d.z {
+                0
+            } else if d.y >= d.z {
+                1
+            } else {
+                2
+            };
+            let mid = tris.len() / 2;
+            tris.select_nth_unstable_by(mid, |a, b| {
+                centroid(a)[axis].total_cmp(&centroid(b)[axis])
+            });
+            let left = nodes.len();
+            nodes.push(Node {
+                bounds: Aabb::EMPTY,
+                start: 0,
+                count: 0,
+            });
+            nodes.push(Node {
+                bounds: Aabb::EMPTY,
+                start: 0,
+                count: 0,
+            });
+            nodes[node] = Node {
+                bounds,
+                start: left as u32,
+                count: 0,
+            };
+            stack.push((left, lo, lo + mid));
+            stack.push((left + 1, lo + mid, hi));
+        }
+        Bvh { nodes, triangles }
+    }
+
+    pub fn triangles(&self) -> &[Triangle] {
+        &self.triangles
+    }
+
+    /// Calls `f` with the index of every triangle whose bounds overlap `query`.
+    pub fn for_each_overlapping(&self, query: &Aabb, mut f: impl FnMut(usize)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack = [0u32; 64];
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let node = &self.nodes[stack[sp] as usize];
+            if !node.bounds.overlaps(query) {
+                continue;
+            }
+            if node.count > 0 {
+                for i in node.start..node.start + node.count {
+                    let t = &self.triangles[i as usize];
+                    if Aabb::from_points(&t.v).overlaps(query) {
+                        f(i as usize);
+                    }
+                }
+            } else {
+                stack[sp] = node.start;
+                stack[sp + 1] = node.start + 1;
+                sp += 2;
+            }
+        }
+    }
+
+    /// True if the open segment `origin + t * dir, t in (t_min, t_max)` hits a triangle whose element
+    /// is neither `skip_a` nor `skip_b`.
+    pub fn occluded(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        t_min: f64,
+        t_max: f64,
+        skip_a: u32,
+        skip_b: u32,
+    ) -> bool {
+        if self.nodes.is_empty() {
+            return false;
+        }
+        let inv = dir.recip();
+        let mut stack = [0u32; 64];
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let node = &self.nodes[stack[sp] as usize];
+            if !slab_hit(&node.bounds, origin, inv, t_min, t_max) {
+                continue;
+            }
+            if node.count > 0 {
+                for t in &self.triangles[node.start as usize..(node.start + node.count) as usize] {
+                    if t.element != skip_a
+                        && t.element != skip_b
+                        && segment_hits(t, origin, dir, t_min, t_max)
+                    {
+                        return true;
+                    }
+                }
+            } else {
+                stack[sp] = node.start;
+                stack[sp + 1] = node.start + 1;
+                sp += 2;
+            }
+        }
+        false
+    }
+}
+
+fn centroid(t: &Triangle) -> DVec3 {
+    (t.v[0] + t.v[1] + t.v[2]) / 3.0
+}
+
+fn slab_hit(b: &Aabb, o: DVec3, inv: DVec3, t_min: f64, t_max: f64) -> bool {
+    let t0 = (b.min - o) * inv;
+    let t1 = (b.max - o) * inv;
+    // NaN (0 * inf on a slab boundary) is ignored by min/max, which keeps the test conservative.
+    let near = t0.min(t1).max_element().max(t_min);
+    let far = t0.max(t1).min_element().min(t_max);
+    near <= far
+}
+
+/// Moeller-Trumbore, both faces: a triangle blocks light from either side.
+pub fn segment_hits(t: &Triangle, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> bool {
+    let e1 = t.v[1] - t.v[0];
+    let e2 = t.v[2] - t.v[0];
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    if det.abs() < 1e-300 {
+        return false;
+    }
+    let inv_det = 1.0 / det;
+    let s = o - t.v[0];
+    let u = s.dot(p) * inv_det;
+    if !(0.0..=1.0).contains(&u) {
+        return false;
+    }
+    let q = s.cross(e1);
+    let v = d.dot(q) * inv_det;
+    if v < 0.0 || u + v > 1.0 {
+        return false;
+    }
+    let h = e2.dot(q) * inv_det;
+    h > t_min && h < t_max
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid(n: usize) -> Vec<Triangle> {
+        let mut tris = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                let (x, y) = (i as f64, j as f64);
+                let v = [
+                    DVec3::new(x, y, 0.0),
+                    DVec3::new(x + 1.0, y, 0.0),
+                    DVec3::new(x, y + 1.0, 0.0),
+                ];
+                tris.push(Triangle {
+                    v,
+                    element: (i * n + j) as u32,
+                });
+            }
+        }
+        tris
+    }
+
+    #[test]
+    fn queries_agree_with_brute_force() {
+        let tris = grid(20);
+        let bvh = Bvh::build(tris.clone());
+        let q = Aabb {
+            min: DVec3::new(3.5, 4.5, -1.0),
+            max: DVec3::new(7.2, 5.1, 1.0),
+        };
+        let mut got: Vec<u32> = Vec::new();
+        bvh.for_each_overlapping(&q, |i| got.push(bvh.triangles()[i].element));
+        got.sort();
+        let mut want: Vec<u32> = tris
+            .iter()
+            .filter(|t| Aabb::from_points(&t.v).overlaps(&q))
+            .map(|t| t.element)
+            .collect();
+        want.sort();
+        assert_eq!(got, want);
+        for k in 0..200 {
+            let x = 0.1 + (k as f64 * 0.618).fract() * 19.0;
+            let y = 0.1 + (k as f64 * 0.414).fract() * 19.0;
+            let o = DVec3::new(x, y, 1.0);
+            let d = DVec3::new(0.0, 0.0, -2.0);
+            let brute = tris.iter().any(|t| segment_hits(t, o, d, 0.0, 1.0));
+            assert_eq!(
+                bvh.occluded(o, d, 0.0, 1.0, u32::MAX, u32::MAX),
+                brute,
+                "ray {k}"
+            );
+            // Stopping short of the plane never hits.
+            assert!(!bvh.occluded(o, d, 0.0, 0.4, u32::MAX, u32::MAX));
+        }
+    }
+}

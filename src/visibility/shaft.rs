@@ -1,0 +1,120 @@
+//! Box-box shafts (Haines and Wallace 1991, "Shaft culling for efficient ray-cast radiosity"):
+//! the union box of two boxes, cut by planes through the edges where one box sticks out and the
+//! other defines the union. Anything outside the shaft cannot block a segment between the boxes.
+
+use glam::DVec3;
+
+use crate::geometry::Aabb;
+
+#[derive(Clone, Debug)]
+pub struct Shaft {
+    pub bounds: Aabb,
+    /// Planes `n . p > d` is outside.
+    planes: Vec<(DVec3, f64)>,
+}
+
+impl Shaft {
+    pub fn new(a: &Aabb, b: &Aabb) -> Self {
+        let bounds = a.union(*b);
+        let mut planes = Vec::new();
+        // side 0: min face, side 1: max face. For each pair of faces on different axes where A
+        // alone defines one and B alone the other, a plane joins A's and B's edges there.
+        for u in 0..3 {
+            for v in (u + 1)..3 {
+                for su in 0..2 {
+                    for sv in 0..2 {
+                        let (ea_u, eb_u) = (face(a, u, su), face(b, u, su));
+                        let (ea_v, eb_v) = (face(a, v, sv), face(b, v, sv));
+                        let a_u = beyond(ea_u, eb_u, su);
+                        let b_u = beyond(eb_u, ea_u, su);
+                        let a_v = beyond(ea_v, eb_v, sv);
+                        let b_v = beyond(eb_v, ea_v, sv);
+                        if !((a_u && b_v) || (b_u && a_v)) {
+                            continue;
+                        }
+                        // Corner edges of A and B on these two faces, in the (u, v) plane.
+                        let pa = (ea_u, ea_v);
+                        let pb = (eb_u, eb_v);
+                        // Outward direction of this corner of the union box.
+                        let out = (
+                            if su == 1 { 1.0 } else { -1.0 },
+                            if sv == 1 { 1.0 } else { -1.0 },
+                        );
+                        let line = (pb.0 - pa.0, pb.1 - pa.1);
+                        let mut n2 = (line.1, -line.0);
+                        if n2.0 * out.0 + n2.1 * out.1 < 0.0 {
+                            n2 = (-n2.0, -n2.1);
+                        }
+                        let mut n = DVec3::ZERO;
+                        n[u] = n2.0;
+                        n[v] = n2.1;
+                        let len = n.length();
+                        if len == 0.0 {
+                            continue;
+                        }
+                        let n = n / len;
+                        let mut p = DVec3::ZERO;
+                        p[u] = pa.0;
+                        p[v] = pa.1;
+                        planes.push((n, n.dot(p)));
+                    }
+                }
+            }
+        }
+        Shaft { bounds, planes }
+    }
+
+    /// False only if the triangle lies wholly outside the shaft (a conservative test).
+    pub fn may_contain_triangle(&self, v: &[DVec3; 3], eps: f64) -> bool {
+        for axis in 0..3 {
+            if v.iter().all(|p| p[axis] < self.bounds.min[axis] - eps)
+                || v.iter().all(|p| p[axis] > self.bounds.max[axis] + eps)
+            {
+                return false;
+            }
+        }
+        !self
+            .planes
+            .iter()
+            .any(|(n, d)| v.iter().all(|p| n.dot(*p) > d + eps))
+    }
+}
+
+fn face(b: &Aabb, axis: usize, side: usize) -> f64 {
+    if side == 0 { b.min[axis] } else { b.max[axis] }
+}
+
+/// True if face coordinate `x` lies strictly beyond `y` on that side (so it defines the union).
+fn beyond(x: f64, y: f64, side: usize) -> bool {
+    if side == 0 { x < y } else { x > y }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn segment_points_between_boxes_are_inside_and_far_points_outside() {
+        let a = Aabb {
+            min: DVec3::new(0.0, 0.0, 0.0),
+            max: DVec3::new(1.0, 1.0, 0.0),
+        };
+        let b = Aabb {
+            min: DVec3::new(3.0, 2.0, 4.0),
+            max: DVec3::new(4.0, 3.0, 4.0),
+        };
+        let shaft = Shaft::new(&a, &b);
+        // Points on segments between the boxes are inside.
+        for k in 0..50 {
+            let f = |x: f64| x.fract();
+            let pa = DVec3::new(f(k as f64 * 0.37), f(k as f64 * 0.71), 0.0);
+            let pb = DVec3::new(3.0 + f(k as f64 * 0.53), 2.0 + f(k as f64 * 0.29), 4.0);
+            let p = pa.lerp(pb, f(k as f64 * 0.61));
+            assert!(shaft.may_contain_triangle(&[p, p, p], 1e-9));
+        }
+        // A point inside the union box but far from the segment bundle is culled.
+        let p = DVec3::new(4.0, 0.0, 0.0);
+        assert!(shaft.bounds.min.cmple(p).all() && p.cmple(shaft.bounds.max).all());
+        assert!(!shaft.may_contain_triangle(&[p, p, p], 1e-9));
+    }
+}
