@@ -11,6 +11,8 @@ pub mod kernel;
 pub mod links;
 pub mod quadrature;
 pub mod scene;
+pub mod scenes;
+pub mod session;
 pub mod solver;
 pub mod system;
 pub mod visibility;

@@ -321,3 +321,26 @@ pub fn corner_params(n: usize) -> Vec<(f64, f64)> {
 fn to_f32(v: [f64; 3]) -> [f32; 3] {
     v.map(|x| x as f32)
 }
+
+impl System {
+    /// The element covering `(s,t)` of face `f` of object `o`, and the local coordinates in it.
+    pub fn element_of_face(&self, o: usize, f: usize, s: f64, t: f64) -> Option<(usize, f64, f64)> {
+        let start = self
+            .elements
+            .partition_point(|e| (e.object as usize, e.face as usize) < (o, f));
+        self.elements[start..]
+            .iter()
+            .take_while(|e| e.object as usize == o && e.face as usize == f)
+            .position(|e| {
+                e.domain.s0 <= s && s <= e.domain.s1 && e.domain.t0 <= t && t <= e.domain.t1
+            })
+            .map(|k| {
+                let d = &self.elements[start + k].domain;
+                (
+                    start + k,
+                    (s - d.s0) / (d.s1 - d.s0),
+                    (t - d.t0) / (d.t1 - d.t0),
+                )
+            })
+    }
+}

@@ -1,1 +1,228 @@
-fn main() {}
+//! `galerkin-radiosity`: bake a scene file, or write the demo scene.
+//!
+//! ```text
+//! galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--quiet]
+//! galerkin-radiosity demo-scene -o SCENE.json [--frames N] [--subdiv N] [--order N]
+//! ```
+//! Exits 0 on success, 1 on any error with a one-line message on stderr, 2 on a usage error.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Mutex;
+use std::time::Instant;
+
+use galerkin_radiosity::scene::Settings;
+use galerkin_radiosity::scene::json::{FrameResult, ResultFile, read_scene, scene_to_json};
+use galerkin_radiosity::scenes;
+use galerkin_radiosity::session::{Method, Session};
+
+const USAGE: &str = "usage:
+  galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--quiet]
+  galerkin-radiosity demo-scene -o SCENE.json [--frames N] [--subdiv N] [--order N]";
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let result = match args.first().map(String::as_str) {
+        Some("bake") => bake(&args[1..]),
+        Some("demo-scene") => demo_scene(&args[1..]),
+        Some("-h" | "--help") => {
+            println!("{USAGE}");
+            return ExitCode::SUCCESS;
+        }
+        _ => Err(CliError::Usage("expected a command".into())),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(CliError::Usage(m)) => {
+            eprintln!("galerkin-radiosity: {m}\n{USAGE}");
+            ExitCode::from(2)
+        }
+        Err(CliError::Failed(m)) => {
+            eprintln!("galerkin-radiosity: error: {m}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+enum CliError {
+    Usage(String),
+    Failed(String),
+}
+
+impl From<galerkin_radiosity::Error> for CliError {
+    fn from(e: galerkin_radiosity::Error) -> Self {
+        CliError::Failed(e.to_string())
+    }
+}
+
+/// Pulls `--name VALUE` out of `args`.
+fn take_value(args: &mut Vec<String>, names: &[&str]) -> Result<Option<String>, CliError> {
+    match args.iter().position(|a| names.contains(&a.as_str())) {
+        None => Ok(None),
+        Some(i) if i + 1 < args.len() => {
+            let v = args.remove(i + 1);
+            args.remove(i);
+            Ok(Some(v))
+        }
+        Some(i) => Err(CliError::Usage(format!("{} needs a value", args[i]))),
+    }
+}
+
+fn take_flag(args: &mut Vec<String>, name: &str) -> bool {
+    match args.iter().position(|a| a == name) {
+        Some(i) => {
+            args.remove(i);
+            true
+        }
+        None => false,
+    }
+}
+
+fn parse<T: std::str::FromStr>(v: &str, what: &str) -> Result<T, CliError> {
+    v.parse()
+        .map_err(|_| CliError::Usage(format!("{what}: cannot parse {v:?}")))
+}
+
+fn bake(args: &[String]) -> Result<(), CliError> {
+    let mut args = args.to_vec();
+    let out = take_value(&mut args, &["-o", "--output"])?
+        .ok_or_else(|| CliError::Usage("bake needs -o OUT.json".into()))?;
+    let frames = take_value(&mut args, &["--frames"])?;
+    let threads = take_value(&mut args, &["--threads"])?;
+    let full = take_flag(&mut args, "--full");
+    let exact = take_flag(&mut args, "--exact");
+    let quiet = take_flag(&mut args, "--quiet");
+    if full && exact {
+        return Err(CliError::Usage(
+            "--full and --exact exclude each other".into(),
+        ));
+    }
+    let [input] = args.as_slice() else {
+        return Err(CliError::Usage(format!(
+            "bake takes one scene file, got {args:?}"
+        )));
+    };
+    let mut scene = read_scene(&PathBuf::from(input))?;
+    if let Some(t) = threads {
+        scene.settings.threads = parse(&t, "--threads")?;
+    }
+    let (first, last) = match frames {
+        None => scene.frames,
+        Some(r) => {
+            let (a, b) = r
+                .split_once(':')
+                .ok_or_else(|| CliError::Usage(format!("--frames wants A:B, got {r:?}")))?;
+            let (a, b): (i64, i64) = (parse(a, "--frames")?, parse(b, "--frames")?);
+            if a > b {
+                return Err(CliError::Usage(format!(
+                    "--frames {a}:{b}: the first frame is after the last"
+                )));
+            }
+            (a, b)
+        }
+    };
+    if !scene.degenerate_faces.is_empty() && !quiet {
+        let (o, f) = scene.degenerate_faces[0];
+        eprintln!(
+            "warning: {} zero-area face(s) skipped (first: object \"{}\" face {f}); they report their own exitance",
+            scene.degenerate_faces.len(),
+            scene.objects[o].name
+        );
+    }
+    let method = if full {
+        Method::Full
+    } else if exact {
+        Method::Exact
+    } else {
+        Method::Incremental
+    };
+    let mut session = Session::new(scene, method)?;
+    let start = Instant::now();
+    let mut frames_out = Vec::new();
+    let total = (last - first + 1) as usize;
+    let last_print = Mutex::new(Instant::now());
+    for (k, frame) in (first..=last).enumerate() {
+        let progress = |fraction: f64, stage: &str| {
+            let mut t = last_print.lock().unwrap();
+            if !quiet && t.elapsed().as_secs_f64() > 1.0 {
+                *t = Instant::now();
+                eprintln!(
+                    "frame {frame} ({}/{total}): {stage} {:.0}%",
+                    k + 1,
+                    100.0 * fraction
+                );
+            }
+            true
+        };
+        let stats = session.solve_frame(frame as f64, &progress)?;
+        if !quiet {
+            eprintln!(
+                "frame {frame} ({}/{total}): {:.3} s, {} links ({} by series, {} recomputed), {} shots",
+                k + 1,
+                stats.seconds,
+                stats.pairs,
+                stats.links_series,
+                stats.links_recomputed,
+                stats.shots
+            );
+        }
+        frames_out.push(FrameResult {
+            frame,
+            objects: session.face_results()?,
+            stats: serde_json::to_value(&stats).expect("stats serialize"),
+        });
+    }
+    let result = ResultFile {
+        frames: frames_out,
+        stats: serde_json::json!({
+            "seconds": start.elapsed().as_secs_f64(),
+            "frames": total,
+            "method": method,
+        }),
+    };
+    let text = serde_json::to_string(&result)
+        .map_err(|e| CliError::Failed(format!("writing result: {e}")))?;
+    std::fs::write(&out, text).map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
+    if !quiet {
+        eprintln!(
+            "wrote {out}: {total} frame(s) in {:.2} s",
+            start.elapsed().as_secs_f64()
+        );
+    }
+    Ok(())
+}
+
+fn demo_scene(args: &[String]) -> Result<(), CliError> {
+    let mut args = args.to_vec();
+    let out = take_value(&mut args, &["-o", "--output"])?
+        .ok_or_else(|| CliError::Usage("demo-scene needs -o SCENE.json".into()))?;
+    let frames: i64 = take_value(&mut args, &["--frames"])?
+        .map(|v| parse(&v, "--frames"))
+        .transpose()?
+        .unwrap_or(48);
+    let subdiv: usize = take_value(&mut args, &["--subdiv"])?
+        .map(|v| parse(&v, "--subdiv"))
+        .transpose()?
+        .unwrap_or(8);
+    let order: usize = take_value(&mut args, &["--order"])?
+        .map(|v| parse(&v, "--order"))
+        .transpose()?
+        .unwrap_or(2);
+    if !args.is_empty() {
+        return Err(CliError::Usage(format!("unexpected arguments {args:?}")));
+    }
+    if frames < 1 || !(1..=64).contains(&subdiv) || order > 3 {
+        return Err(CliError::Usage(
+            "--frames >= 1, --subdiv in 1..=64, --order in 0..=3".into(),
+        ));
+    }
+    let settings = Settings {
+        basis_order: order,
+        ..Settings::default()
+    };
+    let scene = scenes::cornell_box_animated(subdiv, frames, settings);
+    std::fs::write(&out, scene_to_json(&scene))
+        .map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
+    eprintln!("wrote {out}: {} faces, {frames} frames", scene.face_count());
+    Ok(())
+}

@@ -217,3 +217,54 @@ pub struct ResultFile {
     pub frames: Vec<FrameResult>,
     pub stats: serde_json::Value,
 }
+
+/// Writes a scene as a version-1 scene file (placement keys included).
+pub fn scene_to_json(scene: &Scene) -> String {
+    use serde_json::json;
+    let row_major = |m: &DMat4| m.transpose().to_cols_array().to_vec();
+    let s = &scene.settings;
+    let materials: Vec<_> = scene
+        .materials
+        .iter()
+        .zip(&scene.emission_keys)
+        .map(|(m, keys)| {
+            let keys: Vec<_> = keys.iter().map(|k| json!({"frame": k.frame, "emission": k.emission})).collect();
+            json!({"name": m.name, "reflectance": m.reflectance, "emission": m.emission, "emission_keys": keys})
+        })
+        .collect();
+    let objects: Vec<_> = scene
+        .objects
+        .iter()
+        .map(|o| {
+            let animation: Vec<_> = o
+                .animation
+                .iter()
+                .map(|k| match &k.transform {
+                    KeyTransform::Translation(t) => {
+                        json!({"frame": k.frame, "translation": t.to_array()})
+                    }
+                    KeyTransform::Matrix(m) => json!({"frame": k.frame, "matrix": row_major(m)}),
+                })
+                .collect();
+            json!({
+                "name": o.name,
+                "vertices": o.vertices.iter().map(|v| v.to_array()).collect::<Vec<_>>(),
+                "faces": o.faces,
+                "face_materials": o.face_materials,
+                "matrix": row_major(&o.matrix),
+                "animation": animation,
+            })
+        })
+        .collect();
+    let file = json!({
+        "version": 1,
+        "settings": {
+            "basis_order": s.basis_order, "quadrature_order": s.quadrature_order, "tolerance": s.tolerance,
+            "visibility": s.visibility, "visibility_samples": s.visibility_samples, "threads": s.threads,
+        },
+        "frames": [scene.frames.0, scene.frames.1],
+        "materials": materials,
+        "objects": objects,
+    });
+    serde_json::to_string_pretty(&file).expect("a scene serializes")
+}

@@ -1,0 +1,288 @@
+//! Procedural scenes for tests, benchmarks and the demo: a closed box and the Cornell box.
+//!
+//! Cornell box geometry: the Cornell Program of Computer Graphics' published data, in metres
+//! (../shared/notes/references.md). Reflectances are those spectra integrated to linear sRGB
+//! (D65): white (0.739, 0.736, 0.740), red (0.494, 0.049, 0.051), green (0.068, 0.398, 0.086).
+//! The light has radiance (17, 12, 4) (Tungsten's), so exitance pi x that.
+
+use glam::{DMat4, DVec3};
+
+use crate::scene::{EmissionKey, Key, KeyTransform, Material, Object, Scene, Settings};
+
+/// A quad `[p0,p1,p2,p3]` split into `n x n` bilinear sub-quads, faces counter-clockwise as given.
+pub fn subdivided_quad(name: &str, p: [DVec3; 4], n: usize, material: u32) -> Object {
+    let mut vertices = Vec::with_capacity((n + 1) * (n + 1));
+    for a in 0..=n {
+        for b in 0..=n {
+            let (s, t) = (a as f64 / n as f64, b as f64 / n as f64);
+            vertices.push(
+                (1.0 - s) * (1.0 - t) * p[0]
+                    + s * (1.0 - t) * p[1]
+                    + s * t * p[2]
+                    + (1.0 - s) * t * p[3],
+            );
+        }
+    }
+    let id = |a: usize, b: usize| (a * (n + 1) + b) as u32;
+    let mut faces = Vec::with_capacity(n * n);
+    for a in 0..n {
+        for b in 0..n {
+            faces.push(vec![id(a, b), id(a + 1, b), id(a + 1, b + 1), id(a, b + 1)]);
+        }
+    }
+    let face_materials = vec![material; faces.len()];
+    Object {
+        name: name.into(),
+        vertices,
+        faces,
+        face_materials,
+        matrix: DMat4::IDENTITY,
+        animation: Vec::new(),
+    }
+}
+
+/// Reorders a quad so that its front normal points toward `target` (or away when `away`).
+fn facing(mut p: [DVec3; 4], target: DVec3, away: bool) -> [DVec3; 4] {
+    let n = (p[1] - p[0]).cross(p[2] - p[0]);
+    let centre = (p[0] + p[1] + p[2] + p[3]) / 4.0;
+    if (n.dot(target - centre) < 0.0) != away {
+        p.reverse();
+    }
+    p
+}
+
+fn v(x: f64, y: f64, z: f64) -> DVec3 {
+    DVec3::new(x, y, z) / 1000.0
+}
+
+/// A closed axis-aligned unit box of six inward-facing walls, each `n x n`, one material.
+pub fn closed_box(n: usize, reflectance: f64, emission: f64, settings: Settings) -> Scene {
+    let c = DVec3::splat(0.5);
+    let p = |x, y, z| DVec3::new(x, y, z);
+    let walls = [
+        [p(0., 0., 0.), p(1., 0., 0.), p(1., 1., 0.), p(0., 1., 0.)],
+        [p(0., 0., 1.), p(1., 0., 1.), p(1., 1., 1.), p(0., 1., 1.)],
+        [p(0., 0., 0.), p(0., 1., 0.), p(0., 1., 1.), p(0., 0., 1.)],
+        [p(1., 0., 0.), p(1., 1., 0.), p(1., 1., 1.), p(1., 0., 1.)],
+        [p(0., 0., 0.), p(1., 0., 0.), p(1., 0., 1.), p(0., 0., 1.)],
+        [p(0., 1., 0.), p(1., 1., 0.), p(1., 1., 1.), p(0., 1., 1.)],
+    ];
+    let objects = walls
+        .iter()
+        .enumerate()
+        .map(|(k, w)| subdivided_quad(&format!("wall{k}"), facing(*w, c, false), n, 0))
+        .collect();
+    let materials = vec![Material {
+        name: "grey".into(),
+        reflectance: [reflectance; 3],
+        emission: [emission; 3],
+    }];
+    Scene::new(settings, (1, 1), materials, vec![Vec::new()], objects).expect("closed box is valid")
+}
+
+/// Material indices of [`cornell_box`].
+pub const WHITE: u32 = 0;
+pub const RED: u32 = 1;
+pub const GREEN: u32 = 2;
+pub const LIGHT: u32 = 3;
+
+/// The Cornell box with walls split `n x n`, blocks `max(n/4,1)` per side and face, light
+/// `max(n/4,1)`; about `5 n^2 + ...` patches (n = 14 gives about 1,000).
+pub fn cornell_box(n: usize, settings: Settings) -> Scene {
+    let inside = v(278.0, 274.4, 279.6);
+    let wall = |name: &str, p: [DVec3; 4], m| subdivided_quad(name, facing(p, inside, false), n, m);
+    let mut objects = vec![
+        wall(
+            "Floor",
+            [
+                v(552.8, 0., 0.),
+                v(0., 0., 0.),
+                v(0., 0., 559.2),
+                v(549.6, 0., 559.2),
+            ],
+            WHITE,
+        ),
+        wall(
+            "Ceiling",
+            [
+                v(556., 548.8, 0.),
+                v(556., 548.8, 559.2),
+                v(0., 548.8, 559.2),
+                v(0., 548.8, 0.),
+            ],
+            WHITE,
+        ),
+        wall(
+            "BackWall",
+            [
+                v(549.6, 0., 559.2),
+                v(0., 0., 559.2),
+                v(0., 548.8, 559.2),
+                v(556., 548.8, 559.2),
+            ],
+            WHITE,
+        ),
+        wall(
+            "RightWall",
+            [
+                v(0., 0., 559.2),
+                v(0., 0., 0.),
+                v(0., 548.8, 0.),
+                v(0., 548.8, 559.2),
+            ],
+            GREEN,
+        ),
+        wall(
+            "LeftWall",
+            [
+                v(552.8, 0., 0.),
+                v(549.6, 0., 559.2),
+                v(556., 548.8, 559.2),
+                v(556., 548.8, 0.),
+            ],
+            RED,
+        ),
+    ];
+    let m = (n / 4).max(1);
+    objects.push(block(
+        "ShortBlock",
+        [
+            v(130., 165., 65.),
+            v(82., 165., 225.),
+            v(240., 165., 272.),
+            v(290., 165., 114.),
+        ],
+        m,
+    ));
+    objects.push(block(
+        "TallBlock",
+        [
+            v(423., 330., 247.),
+            v(265., 330., 296.),
+            v(314., 330., 456.),
+            v(472., 330., 406.),
+        ],
+        m,
+    ));
+    // The light, lowered to y = 548.0 so that it does not coincide with the ceiling; faces down.
+    let light = [
+        v(343., 548.0, 227.),
+        v(343., 548.0, 332.),
+        v(213., 548.0, 332.),
+        v(213., 548.0, 227.),
+    ];
+    objects.push(subdivided_quad(
+        "Light",
+        facing(light, v(278., 0., 279.6), false),
+        m,
+        LIGHT,
+    ));
+    let pi = std::f64::consts::PI;
+    let materials = vec![
+        Material {
+            name: "white".into(),
+            reflectance: [0.739, 0.736, 0.740],
+            emission: [0.0; 3],
+        },
+        Material {
+            name: "red".into(),
+            reflectance: [0.494, 0.049, 0.051],
+            emission: [0.0; 3],
+        },
+        Material {
+            name: "green".into(),
+            reflectance: [0.068, 0.398, 0.086],
+            emission: [0.0; 3],
+        },
+        Material {
+            name: "light".into(),
+            reflectance: [0.78, 0.78, 0.78],
+            emission: [17.0 * pi, 12.0 * pi, 4.0 * pi],
+        },
+    ];
+    Scene::new(settings, (1, 1), materials, vec![Vec::new(); 4], objects)
+        .expect("Cornell box is valid")
+}
+
+/// A block from its top quad down to the floor: top and four sides, faces outward, `m x m` each.
+fn block(name: &str, top: [DVec3; 4], m: usize) -> Object {
+    let centre = top.iter().copied().sum::<DVec3>() / 4.0 * DVec3::new(1.0, 0.5, 1.0);
+    let mut parts = vec![subdivided_quad("top", facing(top, centre, true), m, WHITE)];
+    for k in 0..4 {
+        let (a, b) = (top[k], top[(k + 1) % 4]);
+        let side = [a, b, DVec3::new(b.x, 0.0, b.z), DVec3::new(a.x, 0.0, a.z)];
+        parts.push(subdivided_quad(
+            "side",
+            facing(side, centre, true),
+            m,
+            WHITE,
+        ));
+    }
+    merge(name, parts)
+}
+
+/// Concatenates objects into one (placements must be identity).
+pub fn merge(name: &str, parts: Vec<Object>) -> Object {
+    let mut out = Object {
+        name: name.into(),
+        vertices: Vec::new(),
+        faces: Vec::new(),
+        face_materials: Vec::new(),
+        matrix: DMat4::IDENTITY,
+        animation: Vec::new(),
+    };
+    for p in parts {
+        let base = out.vertices.len() as u32;
+        out.vertices.extend(p.vertices);
+        out.faces.extend(
+            p.faces
+                .into_iter()
+                .map(|f| f.into_iter().map(|i| i + base).collect()),
+        );
+        out.face_materials.extend(p.face_materials);
+    }
+    out
+}
+
+/// The demo animation (issue 6): the Cornell box over `frames` frames, the light sliding along
+/// the ceiling and back, the short block sliding across the floor.
+pub fn cornell_box_animated(n: usize, frames: i64, settings: Settings) -> Scene {
+    let mut scene = cornell_box(n, settings);
+    let last = frames as f64;
+    for obj in &mut scene.objects {
+        let keys: Option<Vec<(f64, DVec3)>> = match obj.name.as_str() {
+            "Light" => Some(vec![
+                (1.0, DVec3::ZERO),
+                (last * 0.5, DVec3::new(-0.15, 0.0, 0.1)),
+                (last, DVec3::ZERO),
+            ]),
+            "ShortBlock" => Some(vec![(1.0, DVec3::ZERO), (last, DVec3::new(0.0, 0.0, 0.15))]),
+            _ => None,
+        };
+        if let Some(keys) = keys {
+            obj.animation = keys
+                .into_iter()
+                .map(|(frame, t)| Key {
+                    frame,
+                    transform: KeyTransform::Translation(t),
+                })
+                .collect();
+        }
+    }
+    scene.frames = (1, frames);
+    scene
+}
+
+/// An emission key list for tests: material `m` ramps from `from` to `to` between two frames.
+pub fn emission_ramp(from: (f64, [f64; 3]), to: (f64, [f64; 3])) -> Vec<EmissionKey> {
+    vec![
+        EmissionKey {
+            frame: from.0,
+            emission: from.1,
+        },
+        EmissionKey {
+            frame: to.0,
+            emission: to.1,
+        },
+    ]
+}

@@ -1,0 +1,209 @@
+//! A baking session: a scene, its thread pool, and the solution of the last completed frame.
+//! The CLI, the C ABI and the Blender add-on all drive this type.
+//!
+//! Frames are solved by one of three [`Method`]s. A host may override an object's placement or a
+//! material's emission for the coming frames (the add-on samples Blender's depsgraph); otherwise
+//! the scene's keys apply. A cancelled frame leaves the last completed frame readable.
+
+use std::time::Instant;
+
+use glam::DMat4;
+
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+use crate::scene::json::ObjectResult;
+use crate::system::{Progress, System};
+
+/// How each frame after the first is computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// The seed's update: series for translated links, exact recompute at discontinuities,
+    /// progressive shooting of the differences.
+    Incremental,
+    /// Incremental, but every changed link recomputed by quadrature (no series).
+    Exact,
+    /// Every frame from scratch: all links recomputed, fresh solve.
+    Full,
+}
+
+/// What one frame cost and did.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct FrameStats {
+    pub frame: f64,
+    pub seconds: f64,
+    pub kernel_seconds: f64,
+    pub solve_seconds: f64,
+    pub elements: usize,
+    pub pairs: usize,
+    pub links_series: usize,
+    pub links_recomputed: usize,
+    pub recomputed_bound: usize,
+    pub recomputed_half_space: usize,
+    pub recomputed_visibility: usize,
+    pub recomputed_non_translation: usize,
+    pub shots: usize,
+}
+
+pub struct Session {
+    scene: Scene,
+    method: Method,
+    pool: rayon::ThreadPool,
+    /// Host overrides of world-from-object, per object.
+    placement: Vec<Option<DMat4>>,
+    /// Host overrides of emission, per material.
+    emission: Vec<Option<[f64; 3]>>,
+    system: Option<System>,
+    frame: Option<f64>,
+}
+
+impl Session {
+    pub fn new(scene: Scene, method: Method) -> Result<Self> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(scene.settings.threads)
+            .build()
+            .map_err(|e| Error::Internal(format!("thread pool: {e}")))?;
+        let placement = vec![None; scene.objects.len()];
+        let emission = vec![None; scene.materials.len()];
+        Ok(Self {
+            scene,
+            method,
+            pool,
+            placement,
+            emission,
+            system: None,
+            frame: None,
+        })
+    }
+
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    pub fn method(&self) -> Method {
+        self.method
+    }
+
+    /// The frame whose solution is readable, if any.
+    pub fn frame(&self) -> Option<f64> {
+        self.frame
+    }
+
+    /// Overrides object `o`'s world-from-object matrix from the next solved frame on.
+    pub fn set_object_matrix(&mut self, o: usize, world_from_object: DMat4) -> Result<()> {
+        if o >= self.scene.objects.len() {
+            return Err(Error::InvalidArgument(format!(
+                "object {o} out of range (0..{})",
+                self.scene.objects.len()
+            )));
+        }
+        if !world_from_object.is_finite() {
+            return Err(Error::InvalidArgument(format!(
+                "object {o}: matrix is not finite"
+            )));
+        }
+        self.placement[o] = Some(world_from_object);
+        Ok(())
+    }
+
+    /// Overrides material `m`'s emission from the next solved frame on.
+    pub fn set_material_emission(&mut self, m: usize, emission: [f64; 3]) -> Result<()> {
+        if m >= self.scene.materials.len() {
+            return Err(Error::InvalidArgument(format!(
+                "material {m} out of range (0..{})",
+                self.scene.materials.len()
+            )));
+        }
+        if emission.iter().any(|e| !e.is_finite() || *e < 0.0) {
+            return Err(Error::InvalidArgument(format!(
+                "material {m}: emission {emission:?} must be finite and >= 0"
+            )));
+        }
+        self.emission[m] = Some(emission);
+        Ok(())
+    }
+
+    /// The scene as placed at `frame`: keys, then host overrides.
+    fn scene_at(&self, frame: f64) -> Scene {
+        let mut scene = self.scene.clone();
+        for (o, obj) in scene.objects.iter_mut().enumerate() {
+            obj.matrix = self.placement[o].unwrap_or_else(|| obj.world_from_object(frame));
+            obj.animation.clear();
+        }
+        for (m, mat) in scene.materials.iter_mut().enumerate() {
+            mat.emission = self.emission[m].unwrap_or_else(|| self.scene.emission_at(m, frame));
+            scene.emission_keys[m].clear();
+        }
+        scene
+    }
+
+    /// Solves `frame`. On error (including cancel) the previous frame stays readable.
+    pub fn solve_frame(&mut self, frame: f64, progress: Progress) -> Result<FrameStats> {
+        if !frame.is_finite() {
+            return Err(Error::InvalidArgument(format!(
+                "frame {frame} is not finite"
+            )));
+        }
+        let start = Instant::now();
+        let placed = self.scene_at(frame);
+        let cancel = || !progress(1.0, "solve");
+        let system = self.pool.install(|| -> Result<System> {
+            let mut sys = System::build(&placed, frame, progress)?;
+            sys.solve(placed.settings.tolerance, &cancel)?;
+            Ok(sys)
+        })?;
+        let stats = FrameStats {
+            frame,
+            seconds: start.elapsed().as_secs_f64(),
+            kernel_seconds: system.stats.kernel_seconds,
+            solve_seconds: system.stats.solve_seconds,
+            elements: system.stats.elements,
+            pairs: system.stats.pairs,
+            links_recomputed: system.stats.pairs,
+            shots: system.stats.shots,
+            ..Default::default()
+        };
+        self.system = Some(system);
+        self.frame = Some(frame);
+        Ok(stats)
+    }
+
+    fn solved(&self) -> Result<&System> {
+        self.system
+            .as_ref()
+            .ok_or_else(|| Error::InvalidArgument("no frame has been solved yet".into()))
+    }
+
+    /// Per object: mean radiosity per face and radiosity per face corner.
+    pub fn face_results(&self) -> Result<Vec<ObjectResult>> {
+        let frame = self.frame.unwrap_or(0.0);
+        Ok(self.solved()?.face_results(&self.scene_at(frame), frame))
+    }
+
+    /// `B` at `(s,t)` of face `f` of object `o`; a skipped zero-area face reports its exitance.
+    pub fn eval(&self, o: usize, f: usize, s: f64, t: f64) -> Result<[f64; 3]> {
+        let sys = self.solved()?;
+        let obj = self
+            .scene
+            .objects
+            .get(o)
+            .ok_or_else(|| Error::InvalidArgument(format!("object {o} out of range")))?;
+        if f >= obj.faces.len() {
+            return Err(Error::InvalidArgument(format!(
+                "object {o} face {f} out of range (0..{})",
+                obj.faces.len()
+            )));
+        }
+        if !((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&t)) {
+            return Err(Error::InvalidArgument(format!(
+                "(s, t) = ({s}, {t}) is outside [0,1]^2"
+            )));
+        }
+        match sys.element_of_face(o, f, s, t) {
+            Some((e, ls, lt)) => Ok(sys.eval(e, ls, lt)),
+            None => Ok(self
+                .scene
+                .emission_at(obj.face_materials[f] as usize, self.frame.unwrap_or(0.0))),
+        }
+    }
+}
