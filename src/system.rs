@@ -114,6 +114,8 @@ pub struct SystemStats {
     pub pairs: usize,
     pub link_bytes: usize,
     pub pairs_with_partial_visibility: usize,
+    /// Triangles in the occluder BVH (hull elements such as room walls are left out).
+    pub occluder_triangles: usize,
     pub kernel_seconds: f64,
     pub solve_seconds: f64,
     pub shots: usize,
@@ -141,6 +143,7 @@ impl System {
             basis,
             rule: &rule,
             vis_axis: s.visibility_samples,
+            adaptive: s.adaptive_quadrature,
         };
         let start = Instant::now();
         let elements = build_elements(scene, frame, basis);
@@ -180,6 +183,7 @@ impl System {
                 .filter(|p| matches!(p.visibility, crate::visibility::Visibility::Partial(_)))
                 .count(),
             kernel_seconds,
+            occluder_triangles: occluders.as_ref().map_or(0, |o| o.occluder_triangles()),
             ..Default::default()
         };
         let solution = Coefficients::zeros(elements.len(), nb);

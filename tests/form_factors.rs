@@ -16,10 +16,17 @@ fn form_factors(pi: &Patch, pj: &Patch, order: usize) -> (f64, f64) {
         basis: Basis::new(0),
         rule: &rule,
         vis_axis: 1,
+        adaptive: false,
     };
     let si = Samples::new(pi, &Rect::UNIT, &rule, ctx.basis, 1);
     let sj = Samples::new(pj, &Rect::UNIT, &rule, ctx.basis, 1);
-    let c = integrate_pair(&ctx, pi, &si, pj, &sj, &Visibility::Full);
+    let c = integrate_pair(
+        &ctx,
+        pi,
+        pj,
+        |second, _| if second { &sj } else { &si },
+        &Visibility::Full,
+    );
     (c.ij[0], c.ji[0])
 }
 

@@ -3,25 +3,55 @@
 
 use rayon::prelude::*;
 
-use super::pair::{PairCoefficients, PairContext, integrate_pair};
+use super::pair::{FAR, MID, PairCoefficients, PairContext, integrate_pair};
 use super::samples::Samples;
 use crate::geometry::{Patch, Rect};
 use crate::links::LinkStore;
+use crate::quadrature::GaussLegendre;
 use crate::visibility::{Occluders, Visibility};
 
-/// Element geometry and the whole-domain samples the kernel reuses for every pair.
+/// Element geometry and the whole-domain samples the kernel reuses for every pair, for each of
+/// the rules [`PairContext::points_for`] can choose.
 pub struct ElementGeometry<'a> {
     pub patches: &'a [Patch],
-    pub samples: Vec<Samples>,
+    /// `samples[r][e]`: element `e` with `rules[r]` points per axis.
+    samples: Vec<Vec<Samples>>,
+    rules: Vec<usize>,
 }
 
 impl<'a> ElementGeometry<'a> {
     pub fn new(patches: &'a [Patch], ctx: &PairContext) -> Self {
-        let samples = patches
-            .par_iter()
-            .map(|p| Samples::new(p, &Rect::UNIT, ctx.rule, ctx.basis, ctx.vis_axis))
+        let mut rules = vec![
+            ctx.points_for(f64::INFINITY),
+            ctx.points_for(0.5 * (MID + FAR)),
+            ctx.rule.len(),
+        ];
+        rules.dedup();
+        let samples = rules
+            .iter()
+            .map(|&n| {
+                let rule = GaussLegendre::new(n);
+                patches
+                    .par_iter()
+                    .map(|p| Samples::new(p, &Rect::UNIT, &rule, ctx.basis, ctx.vis_axis))
+                    .collect()
+            })
             .collect();
-        Self { patches, samples }
+        Self {
+            patches,
+            samples,
+            rules,
+        }
+    }
+
+    /// Element `e`'s whole-domain samples with `n` points per axis.
+    pub fn samples(&self, e: usize, n: usize) -> &Samples {
+        let r = self
+            .rules
+            .iter()
+            .position(|&m| m == n)
+            .expect("rule prepared");
+        &self.samples[r][e]
     }
 }
 
@@ -55,7 +85,13 @@ pub fn compute_pair(
     if vis == Visibility::Blocked {
         return None;
     }
-    let c = integrate_pair(ctx, pi, &geom.samples[i], pj, &geom.samples[j], &vis);
+    let c = integrate_pair(
+        ctx,
+        pi,
+        pj,
+        |second, n| geom.samples(if second { j } else { i }, n),
+        &vis,
+    );
     (!c.is_zero()).then_some((c, vis))
 }
 

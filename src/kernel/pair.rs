@@ -21,14 +21,48 @@ use super::samples::Samples;
 /// Bounding spheres farther apart than this many radii-sums are integrated directly.
 const SEPARATION: f64 = 1.5;
 /// Deepest split of a near pair before the analytic inner integral takes over.
-const MAX_DEPTH: usize = 6;
+const MAX_DEPTH: usize = 3;
+
+/// Pairs separated by more than this many radii-sums use [`PairContext::far_points`] per axis.
+pub const FAR: f64 = 6.0;
+/// Pairs separated by more than this (and at most [`FAR`]) use [`PairContext::mid_points`].
+pub const MID: f64 = 3.0;
 
 /// What pair integration needs to know besides the two elements.
 pub struct PairContext<'a> {
     pub basis: Basis,
+    /// The rule for near pairs and sub-pairs (`quadrature_order` points per axis).
     pub rule: &'a GaussLegendre,
     /// Visibility samples per axis (`m`); cells are `m x m`.
     pub vis_axis: usize,
+    /// Use fewer points for separated pairs ([`PairContext::points_for`]).
+    pub adaptive: bool,
+}
+
+impl PairContext<'_> {
+    /// Points per axis for well-separated pairs: the kernel is smooth there (its nearest
+    /// singularity is `FAR` radii away), so `order + 1` points, which still resolve every basis
+    /// function, integrate `Gamma_k` times a cubic kernel exactly. Never more than the near rule.
+    pub fn far_points(&self) -> usize {
+        (self.basis.order() + 1).max(2).min(self.rule.len())
+    }
+
+    pub fn mid_points(&self) -> usize {
+        (self.basis.order() + 1).max(3).min(self.rule.len())
+    }
+
+    /// Points per axis for a pair whose bounding spheres are `ratio` radii-sums apart.
+    pub fn points_for(&self, ratio: f64) -> usize {
+        if !self.adaptive {
+            self.rule.len()
+        } else if ratio > FAR {
+            self.far_points()
+        } else if ratio > MID {
+            self.mid_points()
+        } else {
+            self.rule.len()
+        }
+    }
 }
 
 /// The two coefficient blocks of a pair, `nb x nb` each, row = receiver function `k`.
@@ -53,20 +87,22 @@ impl PairCoefficients {
     }
 }
 
-/// Integrates the pair `(i, j)`; `whole_i` and `whole_j` are their samples over the full domain.
-pub fn integrate_pair(
+/// Integrates the pair `(i, j)`. `whole(e, n)` gives element `e`'s samples over its full domain
+/// with `n` points per axis (cached by the caller: most pairs need nothing else).
+pub fn integrate_pair<'s>(
     ctx: &PairContext,
     pi: &Patch,
-    whole_i: &Samples,
     pj: &Patch,
-    whole_j: &Samples,
+    whole: impl Fn(bool, usize) -> &'s Samples,
     vis: &Visibility,
 ) -> PairCoefficients {
     let mut out = PairCoefficients::zeros(ctx.basis.len());
     let (ci, ri) = pi.bounding_sphere();
     let (cj, rj) = pj.bounding_sphere();
-    if ci.distance(cj) > SEPARATION * (ri + rj) {
-        gauss_leaf(ctx, whole_i, whole_j, vis, &mut out);
+    let ratio = ci.distance(cj) / (ri + rj);
+    if ratio > SEPARATION {
+        let n = ctx.points_for(ratio);
+        gauss_leaf(ctx, whole(false, n), whole(true, n), vis, &mut out);
     } else {
         split(ctx, pi, &Rect::UNIT, pj, &Rect::UNIT, vis, 0, &mut out);
     }

@@ -25,6 +25,7 @@ struct SettingsFile {
     visibility: Option<bool>,
     visibility_samples: Option<usize>,
     threads: Option<usize>,
+    adaptive_quadrature: Option<bool>,
 }
 
 #[derive(Deserialize)]
@@ -100,6 +101,7 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
         visibility: s.visibility.unwrap_or(d.visibility),
         visibility_samples: s.visibility_samples.unwrap_or(d.visibility_samples),
         threads: s.threads.unwrap_or(d.threads),
+        adaptive_quadrature: s.adaptive_quadrature.unwrap_or(d.adaptive_quadrature),
     };
     let mut materials = Vec::new();
     let mut emission_keys = Vec::new();
@@ -260,7 +262,7 @@ pub fn scene_to_json(scene: &Scene) -> String {
         "version": 1,
         "settings": {
             "basis_order": s.basis_order, "quadrature_order": s.quadrature_order, "tolerance": s.tolerance,
-            "visibility": s.visibility, "visibility_samples": s.visibility_samples, "threads": s.threads,
+            "visibility": s.visibility, "visibility_samples": s.visibility_samples, "threads": s.threads, "adaptive_quadrature": s.adaptive_quadrature,
         },
         "frames": [scene.frames.0, scene.frames.1],
         "materials": materials,

@@ -27,6 +27,9 @@ pub struct Settings {
     pub visibility_samples: usize,
     /// Worker threads; 0 means one per core.
     pub threads: usize,
+    /// Fewer quadrature points for well-separated pairs (README, "Quadrature"); off only for
+    /// reference solutions.
+    pub adaptive_quadrature: bool,
 }
 
 impl Default for Settings {
@@ -38,6 +41,7 @@ impl Default for Settings {
             visibility: true,
             visibility_samples: 2,
             threads: 0,
+            adaptive_quadrature: true,
         }
     }
 }

@@ -71,6 +71,42 @@ pub fn cell_of(s: f64, t: f64, m: usize) -> usize {
     a * m + b
 }
 
+/// Elements whose plane has the whole scene on its front side can never block a segment between
+/// two scene points (such a segment stays in the closed front half-space): the walls, floor and
+/// ceiling of a room. They are left out of the BVH. Elements sharing a plane are tested once.
+fn on_hull(elements: &[Patch], planes: &[Option<(DVec3, f64)>], eps: f64) -> Vec<bool> {
+    use rayon::prelude::*;
+    use std::collections::HashMap;
+    type Key = ([i64; 3], i64);
+    let quantize = |(n, d): (DVec3, f64)| -> Key {
+        let q = |x: f64| (x * 1e9).round() as i64;
+        (
+            [q(n.x), q(n.y), q(n.z)],
+            (d / eps.max(1e-300) / 1e3).round() as i64,
+        )
+    };
+    let mut unique: HashMap<Key, (DVec3, f64)> = HashMap::new();
+    for p in planes.iter().flatten() {
+        unique.entry(quantize(*p)).or_insert(*p);
+    }
+    let keys: Vec<_> = unique.into_iter().collect();
+    let verdict: HashMap<Key, bool> = keys
+        .par_iter()
+        .map(|(k, (n, d))| {
+            (
+                *k,
+                elements
+                    .iter()
+                    .all(|p| p.corners.iter().all(|c| n.dot(*c) - d >= -eps)),
+            )
+        })
+        .collect();
+    planes
+        .iter()
+        .map(|p| p.map(|p| verdict[&quantize(p)]).unwrap_or(false))
+        .collect()
+}
+
 /// All occluders of one frame: the triangles of every element, and each element's plane.
 pub struct Occluders {
     bvh: Bvh,
@@ -83,18 +119,11 @@ pub struct Occluders {
 
 impl Occluders {
     pub fn new(elements: &[Patch], samples_per_axis: usize) -> Self {
-        let mut tris = Vec::with_capacity(elements.len() * 2);
-        let mut bounds = crate::geometry::Aabb::EMPTY;
-        for (e, p) in elements.iter().enumerate() {
-            for v in p.triangles() {
-                tris.push(Triangle {
-                    v,
-                    element: e as u32,
-                });
-            }
-            bounds = bounds.union(p.bounds());
-        }
-        let planes = elements
+        let bounds = elements
+            .iter()
+            .fold(crate::geometry::Aabb::EMPTY, |b, p| b.union(p.bounds()));
+        let scale = bounds.diagonal().length().max(1e-300);
+        let planes: Vec<Option<(DVec3, f64)>> = elements
             .iter()
             .map(|p| {
                 (p.non_planarity() < 1e-9).then(|| {
@@ -103,13 +132,30 @@ impl Occluders {
                 })
             })
             .collect();
-        let scale = bounds.diagonal().length().max(1e-300);
+        let hull = on_hull(elements, &planes, 1e-9 * scale);
+        let mut tris = Vec::with_capacity(elements.len() * 2);
+        for (e, p) in elements.iter().enumerate() {
+            if hull[e] {
+                continue;
+            }
+            for v in p.triangles() {
+                tris.push(Triangle {
+                    v,
+                    element: e as u32,
+                });
+            }
+        }
         Occluders {
             bvh: Bvh::build(tris),
             planes,
             scale,
             samples_per_axis,
         }
+    }
+
+    /// Triangles that can occlude anything (elements on the scene's hull are left out).
+    pub fn occluder_triangles(&self) -> usize {
+        self.bvh.triangles().len()
     }
 
     pub fn samples_per_axis(&self) -> usize {
@@ -124,7 +170,7 @@ impl Occluders {
         self.bvh.for_each_overlapping(&shaft.bounds, |t| {
             let tri = &self.bvh.triangles()[t];
             let e = tri.element as usize;
-            if e == i || e == j || !shaft.may_contain_triangle(&tri.v, eps) {
+            if e == i || e == j {
                 return;
             }
             // Segments between the fronts of two planar elements stay in front of both planes.
@@ -133,7 +179,9 @@ impl Occluders {
                     return;
                 }
             }
-            candidates.push(t);
+            if shaft.may_contain_triangle(&tri.v, eps) {
+                candidates.push(t);
+            }
         });
         if candidates.is_empty() {
             return Visibility::Full;
