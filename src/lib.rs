@@ -4,8 +4,10 @@
 //! Conventions: right-handed world space, units as given (the solver is scale-free); radiosity
 //! and exitance in W/m^2 per RGB channel; faces are one-sided, front counter-clockwise.
 
+pub mod animation;
 pub mod basis;
 pub mod error;
+pub mod ffi;
 pub mod geometry;
 pub mod kernel;
 pub mod links;

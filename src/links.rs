@@ -114,3 +114,27 @@ impl LinkStore {
         self.coeffs.len() * 4 + self.pairs.len() * std::mem::size_of::<Pair>()
     }
 }
+
+impl LinkStore {
+    /// The pair joining `a` and `b`, if stored.
+    pub fn find(&self, a: ElementId, b: ElementId) -> Option<PairId> {
+        let (short, other) = if self.adjacency[a as usize].len() <= self.adjacency[b as usize].len()
+        {
+            (a, b)
+        } else {
+            (b, a)
+        };
+        self.adjacency[short as usize]
+            .iter()
+            .copied()
+            .find(|&p| self.other(p, short) == other)
+    }
+
+    /// Both blocks of a pair as f64, oriented as `(G_ab, G_ba)` for the given `a`.
+    pub fn blocks_f64(&self, p: PairId, a: ElementId) -> (Vec<f64>, Vec<f64>) {
+        let b = self.other(p, a);
+        let ab = self.block(p, a).iter().map(|&x| x as f64).collect();
+        let ba = self.block(p, b).iter().map(|&x| x as f64).collect();
+        (ab, ba)
+    }
+}

@@ -9,6 +9,7 @@ use std::time::Instant;
 
 use glam::DMat4;
 
+use crate::animation::{self, Outcome};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use crate::scene::json::ObjectResult;
@@ -42,7 +43,11 @@ pub struct FrameStats {
     pub recomputed_half_space: usize,
     pub recomputed_visibility: usize,
     pub recomputed_non_translation: usize,
+    /// Pairs with a moved element whose motion is a pure translation.
+    pub recomputed_translation: usize,
     pub shots: usize,
+    /// The frame was built from scratch (first frame, `--full`, or after a topology change).
+    pub full_rebuild: bool,
 }
 
 pub struct Session {
@@ -54,6 +59,10 @@ pub struct Session {
     /// Host overrides of emission, per material.
     emission: Vec<Option<[f64; 3]>>,
     system: Option<System>,
+    /// The scene as placed for the solved frame.
+    placed: Option<Scene>,
+    /// The links belong to a cancelled update: the next frame rebuilds from scratch.
+    stale: bool,
     frame: Option<f64>,
 }
 
@@ -72,6 +81,8 @@ impl Session {
             placement,
             emission,
             system: None,
+            placed: None,
+            stale: false,
             frame: None,
         })
     }
@@ -146,6 +157,48 @@ impl Session {
         }
         let start = Instant::now();
         let placed = self.scene_at(frame);
+        let incremental = self.method != Method::Full && !self.stale;
+        if let (true, Some(sys), Some(prev)) =
+            (incremental, self.system.as_mut(), self.placed.as_ref())
+        {
+            // Keep what reads need, so a cancelled update leaves the last frame readable.
+            let saved = (
+                sys.solution.clone(),
+                sys.elements.clone(),
+                sys.emission.clone(),
+                sys.reflectance.clone(),
+            );
+            let outcome = self
+                .pool
+                .install(|| animation::advance(sys, prev, &placed, frame, progress));
+            match outcome {
+                Ok(Outcome::Updated(u)) => {
+                    let stats = FrameStats {
+                        frame,
+                        seconds: start.elapsed().as_secs_f64(),
+                        kernel_seconds: u.kernel_seconds,
+                        solve_seconds: u.solve_seconds,
+                        elements: sys.elements.len(),
+                        pairs: sys.links.len(),
+                        links_recomputed: u.links_recomputed,
+                        recomputed_visibility: u.recomputed_visibility,
+                        recomputed_non_translation: u.recomputed_non_translation,
+                        recomputed_translation: u.recomputed_translation,
+                        shots: u.shots,
+                        ..Default::default()
+                    };
+                    self.placed = Some(placed);
+                    self.frame = Some(frame);
+                    return Ok(stats);
+                }
+                Ok(Outcome::NeedsRebuild) => {}
+                Err(e) => {
+                    (sys.solution, sys.elements, sys.emission, sys.reflectance) = saved;
+                    self.stale = true;
+                    return Err(e);
+                }
+            }
+        }
         let cancel = || !progress(1.0, "solve");
         let system = self.pool.install(|| -> Result<System> {
             let mut sys = System::build(&placed, frame, progress)?;
@@ -161,9 +214,12 @@ impl Session {
             pairs: system.stats.pairs,
             links_recomputed: system.stats.pairs,
             shots: system.stats.shots,
+            full_rebuild: true,
             ..Default::default()
         };
         self.system = Some(system);
+        self.placed = Some(placed);
+        self.stale = false;
         self.frame = Some(frame);
         Ok(stats)
     }

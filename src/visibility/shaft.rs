@@ -66,6 +66,11 @@ impl Shaft {
 
     /// False only if the triangle lies wholly outside the shaft (a conservative test).
     pub fn may_contain_triangle(&self, v: &[DVec3; 3], eps: f64) -> bool {
+        self.may_contain_points(v, eps)
+    }
+
+    /// False only if the convex hull of `v` lies wholly outside the shaft (a conservative test).
+    pub fn may_contain_points(&self, v: &[DVec3], eps: f64) -> bool {
         for axis in 0..3 {
             if v.iter().all(|p| p[axis] < self.bounds.min[axis] - eps)
                 || v.iter().all(|p| p[axis] > self.bounds.max[axis] + eps)
@@ -77,6 +82,18 @@ impl Shaft {
             .planes
             .iter()
             .any(|(n, d)| v.iter().all(|p| n.dot(*p) > d + eps))
+    }
+
+    /// False only if the box lies wholly outside the shaft.
+    pub fn may_contain_box(&self, b: &Aabb, eps: f64) -> bool {
+        let corners: [DVec3; 8] = std::array::from_fn(|k| {
+            DVec3::new(
+                if k & 1 == 0 { b.min.x } else { b.max.x },
+                if k & 2 == 0 { b.min.y } else { b.max.y },
+                if k & 4 == 0 { b.min.z } else { b.max.z },
+            )
+        });
+        self.may_contain_points(&corners, eps)
     }
 }
 
