@@ -1,0 +1,49 @@
+//! The C ABI (issue 4), in the style of rustls-ffi: opaque handles, a status enum, every body
+//! inside a panic boundary, out-parameters written only on success, every pointer NULL-checked
+//! and every buffer passed with its length. `include/galerkin_radiosity.h` is generated from
+//! these modules by cbindgen (`cbindgen.toml`; `GR_UPDATE_HEADER=1 cargo test --test header`).
+//!
+//! - [`error`]: `GrStatus` and the thread-local message behind `gr_last_error`.
+//! - [`panic`]: the boundary.
+//! - [`settings`]: `GrSettings`, `GrMethod`.
+//! - [`session`]: `GrSession` and its functions.
+
+pub mod error;
+pub mod panic;
+pub mod session;
+pub mod settings;
+
+use std::ffi::{CStr, c_char};
+
+pub use error::{GrStatus, gr_last_error};
+pub use panic::run_in_boundary;
+pub use session::{
+    GrProgressFn, GrSession, gr_session_cancel, gr_session_corner_count,
+    gr_session_corner_radiosity, gr_session_eval, gr_session_face_count, gr_session_face_radiosity,
+    gr_session_frame_stats_json, gr_session_free, gr_session_new, gr_session_object_count,
+    gr_session_set_material_emission, gr_session_set_object_matrix, gr_session_solve_frame,
+};
+pub use settings::{GrMethod, GrSettings, gr_settings_default};
+
+/// The version of this C ABI. It changes only when a declaration in this header changes
+/// incompatibly; check it after loading the library.
+pub const GR_ABI_VERSION: u32 = 1;
+
+const VERSION: &CStr =
+    match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {
+        Ok(v) => v,
+        Err(_) => panic!("the crate version contains a NUL"),
+    };
+
+/// Returns the ABI version, `GR_ABI_VERSION` (1).
+#[unsafe(no_mangle)]
+pub extern "C" fn gr_abi_version() -> u32 {
+    GR_ABI_VERSION
+}
+
+/// Returns the library's version (the crate's, e.g. "0.1.0") as a static NUL-terminated string;
+/// do not free it.
+#[unsafe(no_mangle)]
+pub extern "C" fn gr_version_string() -> *const c_char {
+    VERSION.as_ptr()
+}

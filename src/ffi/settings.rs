@@ -1,0 +1,139 @@
+//! `GrSettings` and `GrMethod`: the solver settings as a C struct.
+
+use super::error::{Failure, GrStatus};
+use super::panic::boundary;
+use crate::scene::Settings;
+use crate::session::Method;
+
+/// How each frame after the first is computed.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum GrMethod {
+    /// The incremental update: series for translated links, exact recompute at discontinuities,
+    /// progressive shooting of the differences.
+    Incremental = 0,
+    /// Incremental, but every changed link recomputed by quadrature.
+    Exact = 1,
+    /// Every frame from scratch.
+    Full = 2,
+}
+
+/// Solver settings. Fill with `gr_settings_default`, then change what you need.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GrSettings {
+    /// Legendre degree per axis, 0..=3 (0: classic constant radiosity). Default 2.
+    pub basis_order: u32,
+    /// Gauss-Legendre points per axis for a well-separated pair of patches, 1..=16. Default 4.
+    pub quadrature_order: u32,
+    /// Progressive refinement stops when the unshot power is below this fraction of the emitted
+    /// power, in (0,1). Default 1e-4.
+    pub tolerance: f64,
+    /// 1: ray-cast visibility; 0: everything sees everything. Other values are invalid.
+    /// Default 1.
+    pub visibility: u32,
+    /// Visibility samples per axis of each patch, 1..=4 (rays per link = this^4). Default 2.
+    pub visibility_samples: u32,
+    /// Worker threads, at most 1024; 0 means one per core. Default 0.
+    pub threads: u32,
+    /// How frames after the first are computed. Default `GR_METHOD_INCREMENTAL`.
+    pub method: GrMethod,
+}
+
+impl GrSettings {
+    /// The library's defaults.
+    pub fn new() -> Self {
+        let d = Settings::default();
+        Self {
+            basis_order: d.basis_order as u32,
+            quadrature_order: d.quadrature_order as u32,
+            tolerance: d.tolerance,
+            visibility: u32::from(d.visibility),
+            visibility_samples: d.visibility_samples as u32,
+            threads: d.threads as u32,
+            method: GrMethod::Incremental,
+        }
+    }
+}
+
+impl Default for GrSettings {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Reads settings written by C, where `method` and `visibility` may hold any 32-bit value.
+/// Range checks of the numbers are the scene's (`GR_STATUS_INVALID_SCENE`).
+///
+/// # Safety
+/// `p` is NULL or points to a readable `GrSettings`.
+pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Method), Failure> {
+    if p.is_null() {
+        return Err(Failure::null("settings"));
+    }
+    if !p.is_aligned() {
+        return Err(Failure::invalid("settings is not aligned for GrSettings"));
+    }
+    // SAFETY: p is non-null, aligned and readable. `method` is read as the u32 it is in C, never
+    // as a `GrMethod`, so an unknown value is not undefined behaviour.
+    let (basis_order, quadrature_order, tolerance, visibility, visibility_samples, threads, method) = unsafe {
+        (
+            (&raw const (*p).basis_order).read(),
+            (&raw const (*p).quadrature_order).read(),
+            (&raw const (*p).tolerance).read(),
+            (&raw const (*p).visibility).read(),
+            (&raw const (*p).visibility_samples).read(),
+            (&raw const (*p).threads).read(),
+            (&raw const (*p).method).cast::<u32>().read(),
+        )
+    };
+    let method = match method {
+        0 => Method::Incremental,
+        1 => Method::Exact,
+        2 => Method::Full,
+        m => {
+            return Err(Failure::invalid(format!(
+                "settings.method {m} is not a GrMethod (0, 1 or 2)"
+            )));
+        }
+    };
+    let visibility = match visibility {
+        0 => false,
+        1 => true,
+        v => {
+            return Err(Failure::invalid(format!(
+                "settings.visibility {v} is neither 0 nor 1"
+            )));
+        }
+    };
+    let settings = Settings {
+        basis_order: basis_order as usize,
+        quadrature_order: quadrature_order as usize,
+        tolerance,
+        visibility,
+        visibility_samples: visibility_samples as usize,
+        threads: threads as usize,
+        // Settings the C struct does not carry keep the library's defaults.
+        ..Settings::default()
+    };
+    Ok((settings, method))
+}
+
+/// Writes the library's default settings to `*out` (`GR_METHOD_INCREMENTAL`).
+///
+/// # Safety
+/// `out` is NULL or points to a writable `GrSettings`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn gr_settings_default(out: *mut GrSettings) -> GrStatus {
+    boundary("gr_settings_default", || {
+        if out.is_null() {
+            return Err(Failure::null("out"));
+        }
+        if !out.is_aligned() {
+            return Err(Failure::invalid("out is not aligned for GrSettings"));
+        }
+        // SAFETY: out is non-null, aligned and writable.
+        unsafe { out.write(GrSettings::new()) };
+        Ok(())
+    })
+}

@@ -1,0 +1,764 @@
+//! The C ABI (issue 4): a C program compiled against the checked-in header and linked to the
+//! cdylib, and Rust-side checks that call the exported functions directly (cancel, lengths,
+//! validation, panics, busy sessions).
+
+use std::ffi::{CStr, c_char, c_void};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::ptr::{null, null_mut};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use galerkin_radiosity::ffi::*;
+use galerkin_radiosity::scene::{Scene, Settings};
+use galerkin_radiosity::scenes;
+
+// ---------------------------------------------------------------------------------------------
+// The C program.
+
+/// `target/<profile>`, from this test binary's own place (`target/<profile>/deps/c_abi-*`), so
+/// it matches the profile and any CARGO_TARGET_DIR.
+fn profile_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test binary path");
+    exe.parent()
+        .and_then(Path::parent)
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| {
+            let profile = if cfg!(debug_assertions) {
+                "debug"
+            } else {
+                "release"
+            };
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("target")
+                .join(profile)
+        })
+}
+
+fn cdylib_name() -> &'static str {
+    if cfg!(target_os = "macos") {
+        "libgalerkin_radiosity.dylib"
+    } else if cfg!(windows) {
+        "galerkin_radiosity.dll"
+    } else {
+        "libgalerkin_radiosity.so"
+    }
+}
+
+#[test]
+fn c_program_solves_two_patches() {
+    let dir = profile_dir();
+    let lib = dir.join(cdylib_name());
+    assert!(
+        lib.exists(),
+        "{} is missing. `cargo test` builds it with the library (crate-type cdylib); if it was \
+         removed, run `cargo build --lib` (add --release for a release test run) and retry.",
+        lib.display()
+    );
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let exe = Path::new(env!("CARGO_TARGET_TMPDIR")).join("two_patches");
+    let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+    let out = Command::new(&cc)
+        .args(["-Wall", "-Wextra", "-Werror", "-std=c11"])
+        .arg("-I")
+        .arg(root.join("include"))
+        .arg(root.join("tests/c/two_patches.c"))
+        .arg("-o")
+        .arg(&exe)
+        .arg(format!("-L{}", dir.display()))
+        .arg("-lgalerkin_radiosity")
+        .arg("-lm")
+        .arg(format!("-Wl,-rpath,{}", dir.display()))
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run the C compiler `{cc}`: {e}"));
+    assert!(
+        out.status.success(),
+        "compiling tests/c/two_patches.c failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let run = Command::new(&exe).output().expect("run two_patches");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    println!("{stdout}{stderr}");
+    assert!(run.status.success(), "two_patches failed: {stdout}{stderr}");
+    assert!(stdout.contains("all checks passed"));
+}
+
+#[test]
+fn header_compiles_as_cpp() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let cxx = std::env::var("CXX").unwrap_or_else(|_| "c++".into());
+    let Ok(out) = Command::new(&cxx)
+        .args([
+            "-x",
+            "c++",
+            "-std=c++17",
+            "-fsyntax-only",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+        ])
+        .arg(root.join("include/galerkin_radiosity.h"))
+        .output()
+    else {
+        eprintln!("no C++ compiler `{cxx}`; skipped");
+        return;
+    };
+    assert!(
+        out.status.success(),
+        "the header does not compile as C++:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Rust-side calls of the ABI.
+
+/// A scene as the flat arrays of `gr_session_new`.
+#[derive(Clone, Debug, Default)]
+struct Flat {
+    reflectance: Vec<f32>,
+    emission: Vec<f32>,
+    vertex_counts: Vec<u32>,
+    vertices: Vec<f32>,
+    face_counts: Vec<u32>,
+    face_vertex_counts: Vec<u32>,
+    face_indices: Vec<u32>,
+    face_materials: Vec<u32>,
+    matrices: Vec<f32>,
+}
+
+impl Flat {
+    fn from_scene(scene: &Scene) -> Self {
+        let mut f = Flat::default();
+        for m in &scene.materials {
+            f.reflectance.extend(m.reflectance.map(|x| x as f32));
+            f.emission.extend(m.emission.map(|x| x as f32));
+        }
+        for o in &scene.objects {
+            f.vertex_counts.push(o.vertices.len() as u32);
+            f.vertices.extend(
+                o.vertices
+                    .iter()
+                    .flat_map(|v| v.to_array().map(|x| x as f32)),
+            );
+            f.face_counts.push(o.faces.len() as u32);
+            for face in &o.faces {
+                f.face_vertex_counts.push(face.len() as u32);
+                f.face_indices.extend(face);
+            }
+            f.face_materials.extend(&o.face_materials);
+            f.matrices
+                .extend(o.matrix.transpose().to_cols_array().map(|x| x as f32));
+        }
+        f
+    }
+
+    /// The two patches of tests/c/two_patches.c (receiver first, black emitter at z = 1).
+    fn two_patches() -> Self {
+        Flat {
+            reflectance: vec![0.5, 0.5, 0.5, 0.0, 0.0, 0.0],
+            emission: vec![0.0, 0.0, 0.0, 1.0, 1.0, 1.0],
+            vertex_counts: vec![4, 4],
+            vertices: vec![
+                0., 0., 0., 1., 0., 0., 1., 1., 0., 0., 1., 0., //
+                0., 0., 1., 0., 1., 1., 1., 1., 1., 1., 0., 1.,
+            ],
+            face_counts: vec![1, 1],
+            face_vertex_counts: vec![4, 4],
+            face_indices: vec![0, 1, 2, 3, 0, 1, 2, 3],
+            face_materials: vec![0, 1],
+            matrices: Vec::new(),
+        }
+    }
+
+    fn new_session(&self, settings: &GrSettings) -> Result<*mut GrSession, (GrStatus, String)> {
+        self.new_session_with(settings, self.vertices.len(), self.face_indices.len())
+    }
+
+    fn new_session_with(
+        &self,
+        settings: &GrSettings,
+        vertices_len: usize,
+        face_indices_len: usize,
+    ) -> Result<*mut GrSession, (GrStatus, String)> {
+        let sentinel = 0x5e57 as *mut GrSession;
+        let mut out = sentinel;
+        let matrices = if self.matrices.is_empty() {
+            null()
+        } else {
+            self.matrices.as_ptr()
+        };
+        let status = unsafe {
+            gr_session_new(
+                settings,
+                (self.reflectance.len() / 3) as u32,
+                self.reflectance.as_ptr(),
+                self.emission.as_ptr(),
+                self.vertex_counts.len() as u32,
+                self.vertex_counts.as_ptr(),
+                self.vertices.as_ptr(),
+                self.face_counts.as_ptr(),
+                self.face_vertex_counts.as_ptr(),
+                self.face_indices.as_ptr(),
+                self.face_materials.as_ptr(),
+                matrices,
+                vertices_len,
+                face_indices_len,
+                &mut out,
+            )
+        };
+        if status == GrStatus::Ok {
+            assert!(!out.is_null() && out != sentinel);
+            Ok(out)
+        } else {
+            assert_eq!(out, sentinel, "out written on failure");
+            Err((status, last_error()))
+        }
+    }
+}
+
+fn last_error() -> String {
+    let n = unsafe { gr_last_error(null_mut(), 0) };
+    let mut buf = vec![0u8; n + 1];
+    let m = unsafe { gr_last_error(buf.as_mut_ptr().cast(), buf.len()) };
+    assert_eq!(m, n);
+    CStr::from_bytes_until_nul(&buf)
+        .unwrap()
+        .to_str()
+        .unwrap()
+        .to_owned()
+}
+
+fn defaults() -> GrSettings {
+    let mut s = GrSettings::default();
+    assert_eq!(unsafe { gr_settings_default(&mut s) }, GrStatus::Ok);
+    s
+}
+
+fn face_radiosity(s: *const GrSession, object: u32) -> Result<Vec<f32>, GrStatus> {
+    let mut n = 0;
+    assert_eq!(
+        unsafe { gr_session_face_count(s, object, &mut n) },
+        GrStatus::Ok
+    );
+    let mut out = vec![f32::NAN; 3 * n as usize];
+    match unsafe { gr_session_face_radiosity(s, object, out.as_mut_ptr(), out.len()) } {
+        GrStatus::Ok => Ok(out),
+        e => Err(e),
+    }
+}
+
+fn stats_json(s: *const GrSession) -> Result<serde_json::Value, GrStatus> {
+    let mut needed = 0;
+    let st = unsafe { gr_session_frame_stats_json(s, null_mut(), 0, &mut needed) };
+    if st != GrStatus::InvalidArgument {
+        return Err(st);
+    }
+    let mut buf = vec![0u8; needed];
+    let mut written = 0;
+    let st =
+        unsafe { gr_session_frame_stats_json(s, buf.as_mut_ptr().cast(), buf.len(), &mut written) };
+    if st != GrStatus::Ok {
+        return Err(st);
+    }
+    assert_eq!(written, needed);
+    Ok(serde_json::from_str(CStr::from_bytes_with_nul(&buf).unwrap().to_str().unwrap()).unwrap())
+}
+
+/// A pointer that may cross threads (the ABI's sessions are used from several threads).
+#[derive(Clone, Copy)]
+struct Shared(*mut GrSession);
+unsafe impl Send for Shared {}
+unsafe impl Sync for Shared {}
+
+impl Shared {
+    /// The pointer (a method, so that closures capture the whole `Send` wrapper).
+    fn get(self) -> *mut GrSession {
+        self.0
+    }
+}
+
+#[test]
+fn versions_and_defaults() {
+    assert_eq!(gr_abi_version(), 1);
+    let v = unsafe { CStr::from_ptr(gr_version_string()) };
+    assert_eq!(v.to_str().unwrap(), env!("CARGO_PKG_VERSION"));
+    let s = defaults();
+    let d = Settings::default();
+    assert_eq!(s.basis_order as usize, d.basis_order);
+    assert_eq!(s.quadrature_order as usize, d.quadrature_order);
+    assert_eq!(s.tolerance, d.tolerance);
+    assert_eq!(s.visibility, u32::from(d.visibility));
+    assert_eq!(s.visibility_samples as usize, d.visibility_samples);
+    assert_eq!(s.threads as usize, d.threads);
+    assert_eq!(s.method, GrMethod::Incremental);
+}
+
+#[test]
+fn two_patches_value_and_results() {
+    let s = Flat::two_patches().new_session(&defaults()).unwrap();
+    assert_eq!(face_radiosity(s, 0), Err(GrStatus::NotSolved));
+    assert!(last_error().contains("no frame has been solved"));
+    assert_eq!(stats_json(s).unwrap_err(), GrStatus::NotSolved);
+    assert_eq!(
+        unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) },
+        GrStatus::Ok
+    );
+    assert_eq!(last_error(), "");
+    let b = face_radiosity(s, 0).unwrap();
+    let want = 0.5 * 0.199825;
+    for c in b {
+        assert!(
+            ((c as f64) - want).abs() / want < 0.01,
+            "B = {c}, want {want}"
+        );
+    }
+    let stats = stats_json(s).unwrap();
+    assert_eq!(stats["frame"], 1.0);
+    assert_eq!(stats["elements"], 2);
+    let mut corners = vec![0f32; 12];
+    assert_eq!(
+        unsafe { gr_session_corner_radiosity(s, 0, corners.as_mut_ptr(), 11) },
+        GrStatus::InvalidArgument
+    );
+    assert_eq!(corners, vec![0.0; 12], "nothing written on failure");
+    assert_eq!(
+        unsafe { gr_session_corner_radiosity(s, 0, corners.as_mut_ptr(), 12) },
+        GrStatus::Ok
+    );
+    // eval: a good point and a bad one; nothing is written unless all are good.
+    let objects = [0u32, 0];
+    let faces = [0u32, 3];
+    let st = [0.5f32, 0.5, 0.5, 0.5];
+    let mut out = [-1f32; 6];
+    assert_eq!(
+        unsafe {
+            gr_session_eval(
+                s,
+                2,
+                objects.as_ptr(),
+                faces.as_ptr(),
+                st.as_ptr(),
+                out.as_mut_ptr(),
+            )
+        },
+        GrStatus::InvalidArgument
+    );
+    assert!(last_error().contains("point 1"), "{}", last_error());
+    assert_eq!(out, [-1.0; 6]);
+    assert_eq!(
+        unsafe {
+            gr_session_eval(
+                s,
+                1,
+                objects.as_ptr(),
+                faces.as_ptr(),
+                st.as_ptr(),
+                out.as_mut_ptr(),
+            )
+        },
+        GrStatus::Ok
+    );
+    assert!(out[0] > 0.1 && out[3] == -1.0);
+    unsafe { gr_session_free(s) };
+}
+
+struct CancelAt {
+    calls: AtomicU32,
+    cancel_on_call: u32,
+}
+
+unsafe extern "C" fn cancel_at(_f: f64, stage: *const c_char, user: *mut c_void) -> i32 {
+    let c = unsafe { &*(user as *const CancelAt) };
+    let stage_ok = !stage.is_null() && !unsafe { CStr::from_ptr(stage) }.is_empty();
+    let n = c.calls.fetch_add(1, Ordering::SeqCst) + 1;
+    i32::from(stage_ok && n < c.cancel_on_call)
+}
+
+#[test]
+fn progress_returning_zero_cancels_and_keeps_the_previous_frame() {
+    let s = Flat::two_patches().new_session(&defaults()).unwrap();
+    assert_eq!(
+        unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) },
+        GrStatus::Ok
+    );
+    let before = face_radiosity(s, 0).unwrap();
+    let red = [3.0f32, 0.0, 0.0];
+    assert_eq!(
+        unsafe { gr_session_set_material_emission(s, 1, red.as_ptr()) },
+        GrStatus::Ok
+    );
+    let cb = CancelAt {
+        calls: AtomicU32::new(0),
+        cancel_on_call: 1,
+    };
+    let st = unsafe {
+        gr_session_solve_frame(
+            s,
+            2.0,
+            Some(cancel_at),
+            &cb as *const CancelAt as *mut c_void,
+        )
+    };
+    assert_eq!(st, GrStatus::Cancelled);
+    assert_eq!(last_error(), "cancelled");
+    assert_eq!(
+        cb.calls.load(Ordering::SeqCst),
+        1,
+        "not called again once it said stop"
+    );
+    assert_eq!(face_radiosity(s, 0).unwrap(), before);
+    assert_eq!(stats_json(s).unwrap()["frame"], 1.0);
+    // A cancel with no solve running does not affect the next solve.
+    assert_eq!(unsafe { gr_session_cancel(s) }, GrStatus::Ok);
+    assert_eq!(
+        unsafe { gr_session_solve_frame(s, 2.0, None, null_mut()) },
+        GrStatus::Ok
+    );
+    let after = face_radiosity(s, 0).unwrap();
+    assert!((after[0] / before[0] - 3.0).abs() < 0.01 && after[1] == 0.0);
+    unsafe { gr_session_free(s) };
+}
+
+struct Watch {
+    /// Fraction of the kernel done, as f64 bits.
+    fraction: AtomicU64,
+    calls: AtomicU32,
+}
+
+unsafe extern "C" fn watch(f: f64, _stage: *const c_char, user: *mut c_void) -> i32 {
+    let w = unsafe { &*(user as *const Watch) };
+    w.fraction.store(f.to_bits(), Ordering::SeqCst);
+    w.calls.fetch_add(1, Ordering::SeqCst);
+    1
+}
+
+#[test]
+fn cancel_from_another_thread_stops_a_big_solve_promptly() {
+    let scene = scenes::cornell_box(10, Settings::default());
+    let flat = Flat::from_scene(&scene);
+    let s = Shared(flat.new_session(&defaults()).unwrap());
+    let w = Watch {
+        fraction: AtomicU64::new(0),
+        calls: AtomicU32::new(0),
+    };
+    let (status, finished, cancelled_at) = std::thread::scope(|scope| {
+        let solver = scope.spawn(|| {
+            let start = Instant::now();
+            let st = unsafe {
+                gr_session_solve_frame(s.get(), 1.0, Some(watch), &w as *const Watch as *mut c_void)
+            };
+            (st, Instant::now(), start)
+        });
+        // Cancel once the kernel is well under way.
+        let wait = Instant::now();
+        while f64::from_bits(w.fraction.load(Ordering::SeqCst)) < 0.05 {
+            assert!(wait.elapsed() < Duration::from_secs(120), "no progress");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        std::thread::sleep(Duration::from_millis(50));
+        let at = Instant::now();
+        assert_eq!(unsafe { gr_session_cancel(s.0) }, GrStatus::Ok);
+        let (st, finished, _) = solver.join().unwrap();
+        (st, finished, at)
+    });
+    let latency = finished.saturating_duration_since(cancelled_at);
+    println!(
+        "cancel latency: {:.1} ms (kernel at {:.1}% when cancelled, {} progress calls)",
+        latency.as_secs_f64() * 1e3,
+        100.0 * f64::from_bits(w.fraction.load(Ordering::SeqCst)),
+        w.calls.load(Ordering::SeqCst)
+    );
+    assert_eq!(status, GrStatus::Cancelled);
+    assert!(latency < Duration::from_secs(2), "cancel took {latency:?}");
+    assert_eq!(face_radiosity(s.0, 0), Err(GrStatus::NotSolved));
+    unsafe { gr_session_free(s.0) };
+}
+
+#[test]
+fn lengths_that_disagree_with_the_counts() {
+    let f = Flat::two_patches();
+    let d = defaults();
+    for (v, i) in [(23, 8), (25, 8), (0, 8), (24, 7), (24, 9), (24, 0)] {
+        let (st, msg) = f.new_session_with(&d, v, i).unwrap_err();
+        assert_eq!(st, GrStatus::InvalidArgument, "{v} {i}: {msg}");
+        assert!(msg.contains("_len"), "{msg}");
+    }
+    // Face vertex counts that do not sum to face_indices_len (3 + 4 = 7 != 8).
+    let mut g = f.clone();
+    g.face_vertex_counts = vec![3, 4];
+    let (st, msg) = g.new_session(&d).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidArgument);
+    assert!(msg.contains("face_vertex_counts"), "{msg}");
+    // A face count the index array cannot hold is caught before reading per-face arrays.
+    let mut g = f.clone();
+    g.face_counts = vec![1, 1_000_000];
+    let (st, msg) = g.new_session(&d).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidArgument, "{msg}");
+}
+
+#[test]
+fn invalid_scenes_name_the_object_and_face() {
+    let d = defaults();
+    let f = Flat::two_patches();
+    let mut g = f.clone();
+    g.vertices[13] = f32::NAN;
+    let (st, msg) = g.new_session(&d).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidScene);
+    assert!(
+        msg.contains("object 1") && msg.contains("vertex 0"),
+        "{msg}"
+    );
+
+    let mut g = f.clone();
+    g.vertices[0] = f32::INFINITY;
+    assert_eq!(g.new_session(&d).unwrap_err().0, GrStatus::InvalidScene);
+
+    let mut g = f.clone();
+    g.face_indices[6] = 7;
+    let (st, msg) = g.new_session(&d).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidScene);
+    assert!(msg.contains("object 1") && msg.contains("face 0"), "{msg}");
+
+    let mut g = f.clone();
+    g.face_vertex_counts = vec![5, 3];
+    let (st, msg) = g.new_session(&d).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidScene);
+    assert!(msg.contains("object 0") && msg.contains("face 0"), "{msg}");
+
+    let mut g = f.clone();
+    g.face_materials[1] = 2;
+    let (st, msg) = g.new_session(&d).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidScene);
+    assert!(msg.contains("material 2"), "{msg}");
+
+    let mut g = f.clone();
+    g.matrices = vec![0.0; 32];
+    g.matrices[16 + 5] = f32::NAN;
+    let (st, msg) = g.new_session(&d).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidScene);
+    assert!(msg.contains("matrix"), "{msg}");
+
+    let mut g = f.clone();
+    g.reflectance[0] = 1.5;
+    assert_eq!(g.new_session(&d).unwrap_err().0, GrStatus::InvalidScene);
+
+    let mut bad = d;
+    bad.basis_order = 9;
+    let (st, msg) = f.new_session(&bad).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidScene);
+    assert!(msg.contains("basis_order"), "{msg}");
+}
+
+#[test]
+fn unknown_enum_values_and_nulls() {
+    let f = Flat::two_patches();
+    let d = defaults();
+    // GrSettings with `method` = 9, which is not a GrMethod: written as C would, via raw bytes.
+    let mut raw = d;
+    unsafe { (&raw mut raw.method).cast::<u32>().write(9) };
+    let (st, msg) = f.new_session(&raw).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidArgument);
+    assert!(msg.contains("method"), "{msg}");
+    let mut vis = d;
+    vis.visibility = 2;
+    assert_eq!(
+        f.new_session(&vis).unwrap_err().0,
+        GrStatus::InvalidArgument
+    );
+
+    let mut out = null_mut();
+    let st = unsafe {
+        gr_session_new(
+            null(),
+            0,
+            null(),
+            null(),
+            0,
+            null(),
+            null(),
+            null(),
+            null(),
+            null(),
+            null(),
+            null(),
+            0,
+            0,
+            &mut out,
+        )
+    };
+    assert_eq!(st, GrStatus::NullPointer);
+    assert_eq!(last_error(), "settings is NULL");
+    let st = unsafe {
+        gr_session_new(
+            &d,
+            2,
+            null(),
+            null(),
+            0,
+            null(),
+            null(),
+            null(),
+            null(),
+            null(),
+            null(),
+            null(),
+            0,
+            0,
+            &mut out,
+        )
+    };
+    assert_eq!(st, GrStatus::NullPointer);
+    assert_eq!(last_error(), "reflectance is NULL");
+    // Empty arrays may be NULL: an empty scene is valid.
+    let st = unsafe {
+        gr_session_new(
+            &d,
+            0,
+            null(),
+            null(),
+            0,
+            null(),
+            null(),
+            null(),
+            null(),
+            null(),
+            null(),
+            null(),
+            0,
+            0,
+            &mut out,
+        )
+    };
+    assert_eq!(st, GrStatus::Ok, "{}", last_error());
+    let mut n = 7;
+    assert_eq!(
+        unsafe { gr_session_object_count(out, &mut n) },
+        GrStatus::Ok
+    );
+    assert_eq!(n, 0);
+    assert_eq!(
+        unsafe { gr_session_solve_frame(out, f64::NAN, None, null_mut()) },
+        GrStatus::InvalidArgument
+    );
+    assert_eq!(
+        unsafe { gr_session_solve_frame(out, 1.0, None, null_mut()) },
+        GrStatus::Ok
+    );
+    assert_eq!(
+        unsafe { gr_session_object_count(out, null_mut()) },
+        GrStatus::NullPointer
+    );
+    assert_eq!(
+        unsafe { gr_session_face_count(out, 0, &mut n) },
+        GrStatus::InvalidArgument
+    );
+    unsafe { gr_session_free(out) };
+    unsafe { gr_session_free(null_mut()) };
+}
+
+#[test]
+fn last_error_is_per_thread_and_truncates_safely() {
+    let f = Flat::two_patches();
+    let mut g = f.clone();
+    g.face_indices[6] = 7;
+    assert!(g.new_session(&defaults()).is_err());
+    let full = last_error();
+    let n = unsafe { gr_last_error(null_mut(), 0) };
+    assert_eq!(n, full.len());
+    let mut small = [0x7fu8; 6];
+    assert_eq!(unsafe { gr_last_error(small.as_mut_ptr().cast(), 5) }, n);
+    assert_eq!(
+        &small[..5],
+        &full.as_bytes()[..4]
+            .iter()
+            .copied()
+            .chain([0])
+            .collect::<Vec<_>>()[..]
+    );
+    assert_eq!(small[5], 0x7f, "wrote past len");
+    let other = std::thread::spawn(|| unsafe { gr_last_error(null_mut(), 0) })
+        .join()
+        .unwrap();
+    assert_eq!(other, 0, "another thread has its own last error");
+    // A successful call clears it.
+    let mut settings = GrSettings::default();
+    assert_eq!(unsafe { gr_settings_default(&mut settings) }, GrStatus::Ok);
+    assert_eq!(unsafe { gr_last_error(null_mut(), 0) }, 0);
+}
+
+#[test]
+fn panics_become_internal_errors() {
+    let st = run_in_boundary("gr_test", || panic!("boom {}", 42));
+    assert_eq!(st, GrStatus::Internal);
+    let msg = last_error();
+    assert!(msg.contains("gr_test") && msg.contains("boom 42"), "{msg}");
+    // A panic in a rayon worker is re-raised on the calling thread and caught there too.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    let st = run_in_boundary("gr_test_workers", || {
+        use rayon::prelude::*;
+        pool.install(|| {
+            (0..64).into_par_iter().for_each(|i| {
+                if i == 37 {
+                    panic!("worker {i} failed");
+                }
+            })
+        })
+    });
+    assert_eq!(st, GrStatus::Internal);
+    assert!(
+        last_error().contains("worker 37 failed"),
+        "{}",
+        last_error()
+    );
+    assert_eq!(run_in_boundary("gr_test", || ()), GrStatus::Ok);
+    assert_eq!(last_error(), "");
+}
+
+struct Reentry {
+    session: Shared,
+    face_radiosity: AtomicU32,
+    face_count: AtomicU32,
+    cancel: AtomicU32,
+}
+
+unsafe extern "C" fn reenter(_f: f64, _stage: *const c_char, user: *mut c_void) -> i32 {
+    let r = unsafe { &*(user as *const Reentry) };
+    let s = r.session.0;
+    let mut out = [0f32; 3];
+    let mut n = 0;
+    let st = unsafe { gr_session_face_radiosity(s, 0, out.as_mut_ptr(), 3) };
+    r.face_radiosity.store(st as u32, Ordering::SeqCst);
+    let st = unsafe { gr_session_face_count(s, 0, &mut n) };
+    r.face_count.store(st as u32, Ordering::SeqCst);
+    let st = unsafe { gr_session_cancel(s) };
+    r.cancel.store(st as u32, Ordering::SeqCst);
+    1
+}
+
+#[test]
+fn calls_from_the_progress_callback_do_not_deadlock() {
+    let s = Flat::two_patches().new_session(&defaults()).unwrap();
+    let r = Reentry {
+        session: Shared(s),
+        face_radiosity: AtomicU32::new(99),
+        face_count: AtomicU32::new(99),
+        cancel: AtomicU32::new(99),
+    };
+    let st = unsafe {
+        gr_session_solve_frame(s, 1.0, Some(reenter), &r as *const Reentry as *mut c_void)
+    };
+    // The callback asked to cancel through gr_session_cancel, so the solve stops.
+    assert_eq!(st, GrStatus::Cancelled);
+    assert_eq!(
+        r.face_radiosity.load(Ordering::SeqCst),
+        GrStatus::InvalidArgument as u32
+    );
+    assert_eq!(r.face_count.load(Ordering::SeqCst), GrStatus::Ok as u32);
+    assert_eq!(r.cancel.load(Ordering::SeqCst), GrStatus::Ok as u32);
+    unsafe { gr_session_free(s) };
+}
