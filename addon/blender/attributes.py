@@ -1,0 +1,125 @@
+"""Colour attributes: one FLOAT_COLOR corner attribute per frame (``Rad_0001``...), holding the
+outgoing radiance B / pi (scene-linear, alpha 1), and the ``Radiosity`` attribute the viewport
+and renderers read (the Geometry Nodes switch overwrites it with the current frame's values).
+
+Colours go either on the object's own mesh ("mesh" storage: its evaluated polygons and corners
+match the original mesh's) or on a bake-time copy ("copy" storage: display subdivision, or
+modifiers that change the topology); see ``switch.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core import frames as core_frames
+from ..core.grids import Grid
+
+COPY_PREFIX = "Radiosity Copy: "
+
+
+def write(mesh, name: str, rgb: np.ndarray) -> None:
+    """Writes (n,3) colours into the FLOAT_COLOR corner attribute `name` (created if needed)."""
+    n = len(mesh.loops)
+    rgb = np.asarray(rgb, np.float32).reshape(-1, 3)
+    if len(rgb) != n:
+        raise ValueError(f"{mesh.name}: {len(rgb)} colours for {n} corners")
+    attr = mesh.color_attributes.get(name)
+    if attr is not None and (attr.data_type != "FLOAT_COLOR" or attr.domain != "CORNER"):
+        mesh.color_attributes.remove(attr)
+        attr = None
+    if attr is None:
+        attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "CORNER")
+    rgba = np.ones((n, 4), np.float32)
+    rgba[:, :3] = rgb
+    attr.data.foreach_set("color", rgba.reshape(-1))
+
+
+def read(mesh, name: str) -> np.ndarray | None:
+    attr = mesh.color_attributes.get(name)
+    if attr is None or attr.domain != "CORNER":
+        return None
+    buf = np.empty(len(mesh.loops) * 4, np.float32)
+    attr.data.foreach_get("color", buf)
+    return buf.reshape(-1, 4)[:, :3].copy()
+
+
+def write_frame(mesh, frame: int, rgb: np.ndarray) -> None:
+    write(mesh, core_frames.attribute_name(frame), rgb)
+
+
+def read_frame(mesh, frame: int) -> np.ndarray | None:
+    return read(mesh, core_frames.attribute_name(frame))
+
+
+def baked_frames(mesh) -> list[int]:
+    found = (core_frames.frame_of_attribute(a.name) for a in mesh.color_attributes)
+    return sorted(f for f in found if f is not None)
+
+
+def remove_frames(mesh, keep=lambda frame: False) -> int:
+    """Removes the ``Rad_NNNN`` attributes whose frame `keep` rejects; returns how many."""
+    names = [a.name for a in mesh.color_attributes
+             if (f := core_frames.frame_of_attribute(a.name)) is not None and not keep(f)]
+    for name in names:
+        mesh.color_attributes.remove(mesh.color_attributes[name])
+    return len(names)
+
+
+def ensure_result(mesh, rgb: np.ndarray | None = None) -> None:
+    """The ``Radiosity`` attribute, made active and the render colour, so the viewport's Color
+    Attribute shading and a Color Attribute node with an empty name show it."""
+    name = core_frames.RESULT_ATTRIBUTE
+    if rgb is None:
+        rgb = np.zeros((len(mesh.loops), 3), np.float32)
+    write(mesh, name, rgb)
+    attrs = mesh.color_attributes
+    attrs.active_color = attrs[name]
+    attrs.render_color_index = attrs.find(name)
+
+
+def remove_result(mesh) -> None:
+    attr = mesh.color_attributes.get(core_frames.RESULT_ATTRIBUTE)
+    if attr is not None:
+        mesh.color_attributes.remove(attr)
+
+
+def build_copy(bpy, name: str, grid: Grid, polygon_material: np.ndarray, polygon_smooth: np.ndarray,
+               materials: list):
+    """A mesh (and an unlinked object holding it, for the switch's Object Info) with the display
+    grid's faces; each grid face takes its source polygon's material index and smoothing."""
+    mesh_name = COPY_PREFIX + name
+    mesh = bpy.data.meshes.get(mesh_name)
+    if mesh is None:
+        mesh = bpy.data.meshes.new(mesh_name)
+    else:
+        mesh.clear_geometry()
+    n_v, n_f, n_c = len(grid.vertices), len(grid.face_sizes), len(grid.face_indices)
+    mesh.vertices.add(n_v)
+    mesh.vertices.foreach_set("co", grid.vertices.astype(np.float32).reshape(-1))
+    mesh.loops.add(n_c)
+    mesh.loops.foreach_set("vertex_index", grid.face_indices.astype(np.int32))
+    mesh.polygons.add(n_f)
+    starts = np.concatenate([[0], np.cumsum(grid.face_sizes)[:-1]]).astype(np.int32)
+    mesh.polygons.foreach_set("loop_start", starts)
+    mesh.polygons.foreach_set("material_index", polygon_material[grid.source_face].astype(np.int32))
+    mesh.polygons.foreach_set("use_smooth", polygon_smooth[grid.source_face].astype(bool))
+    mesh.update(calc_edges=True)
+    mesh.materials.clear()
+    for mat in materials:
+        mesh.materials.append(mat)
+    obj = bpy.data.objects.get(mesh_name)
+    if obj is None:
+        obj = bpy.data.objects.new(mesh_name, mesh)
+    else:
+        obj.data = mesh
+    obj.hide_render = True
+    return obj, mesh
+
+
+def remove_copy(bpy, name: str) -> None:
+    obj = bpy.data.objects.get(COPY_PREFIX + name)
+    if obj is not None:
+        bpy.data.objects.remove(obj)
+    mesh = bpy.data.meshes.get(COPY_PREFIX + name)
+    if mesh is not None:
+        bpy.data.meshes.remove(mesh)

@@ -1,0 +1,579 @@
+"""The bake job: export, solve frame by frame, write colours, keep the switch consistent.
+
+A job runs in phases so that the operator can put the native solve on a worker thread:
+``start()``, then per frame ``prepare()`` (main thread: frame_set, sample, hand changes to the
+session), ``solve()`` (any thread: the long native call, which releases the GIL) and ``commit()``
+(main thread: write the frame's colours), then ``finish()``. ``run()`` does it all synchronously
+(headless, or an operator without an event loop).
+
+Colours are written only when a frame has completed; ``finish()`` removes frames that are not
+complete (left over from an older bake) and points the switch at the complete range, so a
+cancelled or failed bake leaves complete frames only.
+
+The session is kept for the Blender session (``held()``), keyed by file and scene: a re-bake, or
+the live preview, continues from its last solution when the scene's key still matches.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+
+from ..core import frames as core_frames
+from ..core.grids import Grid, subdivide
+from ..core.materials import radiance_from_radiosity
+from ..core.record import BakeRecord, FrameState, first_changed
+from ..core.settings import BakeSettings, SettingsError
+from . import attributes, switch
+from .export import TopologyChanged, collect, export, sample
+
+RECORD_PROPERTY = "radiosity_bake"
+
+# Observers of every bake: fn(event: dict) -> False to cancel. Events:
+#   {"kind": "progress", "frame", "index", "total", "fraction", "stage"}  (may come from a worker thread)
+#   {"kind": "frame", "frame", "index", "total", "seconds"}               (main thread, after a commit)
+listeners: list = []
+
+
+class BakeError(Exception):
+    """A problem the user can fix; the message is one line."""
+
+
+def binding():
+    from ..native import binding as _binding
+
+    return _binding
+
+
+# ---------------------------------------------------------------------------------------------
+# Sessions held for the Blender session
+
+
+@dataclass
+class Held:
+    session: object
+    scene_key: str
+    state: FrameState            # what the session holds now (matrices, geometry, emission digests)
+    frame: float | None = None   # last solved frame
+    export: object = None        # the Export the session was built from
+
+    def close(self):
+        try:
+            self.session.close()
+        except Exception as e:  # noqa: BLE001 - closing must not mask the caller's error
+            print(f"Radiosity: closing a session failed: {e}")
+
+
+_held: dict[str, Held] = {}
+
+
+def scene_id(scene) -> str:
+    return f"{bpy.data.filepath}|{scene.name}"
+
+
+def held(scene) -> Held | None:
+    return _held.get(scene_id(scene))
+
+
+def drop_held(scene=None) -> None:
+    keys = list(_held) if scene is None else [scene_id(scene)]
+    for k in keys:
+        h = _held.pop(k, None)
+        if h is not None:
+            h.close()
+
+
+def session_key(settings: BakeSettings, exp) -> str:
+    """Sessions are reused while this stays the same: solve settings, objects, topology, reflectances."""
+    return exp.scene_key(settings.solve_signature())
+
+
+def new_session(settings: BakeSettings, exp, state: FrameState, scene_key: str) -> Held:
+    b = binding()
+    rho, emission = exp.materials.arrays()
+    try:
+        session = b.Session(settings.native(), rho, emission, [o.data.native() for o in exp.objects])
+    except b.RadiosityError as e:
+        raise BakeError(str(e)) from e
+    return Held(session, scene_key, state, None, exp)
+
+
+def apply_sample(h: Held, smp, state: FrameState) -> int:
+    """Hands the matrices and emissions that changed since the session's state to it."""
+    changed = 0
+    for i, (new, old) in enumerate(zip(state.matrices, h.state.matrices, strict=True)):
+        if new != old:
+            h.session.set_object_matrix(i, smp.matrices[i])
+            changed += 1
+    if state.emission != h.state.emission:
+        for m, rgb in enumerate(smp.emission):
+            h.session.set_material_emission(m, tuple(float(x) for x in rgb))
+        changed += 1
+    h.state = FrameState(list(state.matrices), list(h.state.geometry), state.emission)
+    return changed
+
+
+# ---------------------------------------------------------------------------------------------
+# Where each object's colours go
+
+
+@dataclass
+class Target:
+    index: int            # library object index
+    obj: object
+    mode: str             # "mesh" or "copy"
+    mesh: object          # the mesh holding the Rad_NNNN attributes
+    copy: object = None   # copy mode: the unlinked object the switch reads
+    grid: Grid | None = None
+    level: int = 0
+
+    def values(self, session, split) -> np.ndarray:
+        """This frame's B / pi at the target's corners, (n,3) float32."""
+        if self.mode == "mesh":
+            b = split.to_loops(session.corner_radiosity(self.index))
+        elif self.level == 0:
+            b = session.corner_radiosity(self.index)
+        else:
+            g = self.grid
+            b = session.eval(np.full(len(g.corner_face), self.index, np.int64), g.corner_face, g.corner_st)
+        return radiance_from_radiosity(b)
+
+
+def read_record(scene) -> BakeRecord | None:
+    return BakeRecord.loads(scene.get(RECORD_PROPERTY))
+
+
+def clear_object(obj, stored: dict | None = None) -> int:
+    """Removes an object's bake: switch, frame attributes, Radiosity attribute, copy."""
+    n = 0
+    switch.remove(obj)
+    if obj.type == "MESH" and obj.data is not None and obj.data.library is None:
+        n += attributes.remove_frames(obj.data)
+        attributes.remove_result(obj.data)
+    attributes.remove_copy(bpy, obj.name)
+    return n
+
+
+# ---------------------------------------------------------------------------------------------
+# The job
+
+
+class BakeJob:
+    def __init__(self, context, settings: BakeSettings, collection=None, verbose: bool = False, log=print):
+        self.context = context
+        self.scene = context.scene
+        self.view_layer = context.view_layer
+        self.settings = settings
+        self.collection = collection
+        self.verbose = verbose
+        self.log = log
+        self.warnings: list[str] = []
+        self.cancel_event = threading.Event()
+        self.cancelled = False
+        self.finished = False
+        self.fraction = 0.0
+        self.stage = ""
+        self.done = 0
+        self.total = 0
+        self.seconds_solving = 0.0
+        self.seconds_saved = 0.0
+        self.kept = 0
+        self.rebuilt = 0
+        self.summary = ""
+        self._last_print = (None, -1)
+
+    # -- start ----------------------------------------------------------------------------------
+
+    def start(self) -> None:
+        s = self.settings
+        try:
+            s.validate()
+        except SettingsError as e:
+            raise BakeError(str(e)) from e
+        binding().load()  # a missing library fails here, before anything is touched
+        self.frames = s.baked_frames()
+        self.original_frame = self.scene.frame_current
+        self.t0 = time.perf_counter()
+        where = f"collection {self.collection.name!r}" if self.collection else f"scene {self.scene.name!r}"
+        sel = collect(self.scene, self.view_layer, self.collection)
+        self.warnings += sel.notes()
+        if any(o.mode == "EDIT" for o in sel.objects):
+            raise BakeError("leave Edit Mode before baking (edits are not in the evaluated mesh yet)")
+        if not sel.objects:
+            raise BakeError(f"nothing to bake: no visible, renderable mesh objects in {where}"
+                            + ("; " + "; ".join(sel.notes()) if sel.notes() else ""))
+        self.muted = {o.name: switch.set_muted(o, True) for o in sel.objects}
+        try:
+            self._start(sel, where)
+        except BaseException:
+            self._unmute()
+            self.scene.frame_set(self.original_frame)
+            raise
+
+    def _start(self, sel, where) -> None:
+        s = self.settings
+        self.scene.frame_set(self.frames[0])
+        dg = self.context.evaluated_depsgraph_get()
+        self.rest = rest = export(dg, sel.objects)
+        faces = sum(len(o.data.split.face_sizes) for o in rest.objects)
+        if faces == 0:
+            raise BakeError(f"nothing to bake: the mesh objects in {where} have no faces ("
+                            + ", ".join(o.obj.name for o in rest.objects) + ")")
+        good = faces - sum(len(o.data.degenerate) for o in rest.objects)
+        if good == 0:
+            raise BakeError(f"nothing to bake: every face in {where} has zero area")
+        for line in (rest.problems_line(), rest.degenerate_line()):
+            if line:
+                self.warnings.append(line)
+        self.names = [o.obj.name for o in rest.objects]
+        level = s.display_subdivision
+        modes = []
+        claimed = set()
+        for o in rest.objects:
+            mesh = o.obj.data
+            own = level == 0 and o.original_topology and mesh.name not in claimed and mesh.library is None
+            modes.append("mesh" if own else "copy")
+            claimed.add(mesh.name)
+        self.session_key = session_key(s, rest)
+        self.scene_key = rest.scene_key(s.solve_signature(), extra=f"L{level}:" + ",".join(modes))
+        if not self._has_emitter(dg):
+            raise BakeError(f"no emitters: no material in {where} emits light in frames "
+                            f"{self.frames[0]}-{self.frames[-1]} (give a Principled BSDF an Emission "
+                            "Strength > 0, or use an Emission shader; Light objects are not used)")
+        # Storage targets.
+        self.targets = []
+        copies = [o for o, m in zip(rest.objects, modes, strict=True) if m == "copy"]
+        if copies and any(o.deforms for o in copies):
+            self.warnings.append("stored on a bake-time copy, which does not follow deformation: "
+                                 + ", ".join(o.obj.name for o in copies if o.deforms))
+        for i, (o, mode) in enumerate(zip(rest.objects, modes, strict=True)):
+            if mode == "mesh":
+                self.targets.append(Target(i, o.obj, "mesh", o.obj.data))
+            else:
+                self.targets.append(Target(i, o.obj, "copy", None, level=level))
+        # What the previous bake left that can be kept: solved frames up to the first change,
+        # as long as their colours are all still there.
+        record = read_record(self.scene)
+        reusable = record is not None and record.reusable(
+            self.scene_key, self.frames[0], s.frame_step, self.names)
+        self._state_cache = {}
+        k = first_changed(record, self.frames, self._state_at) if reusable else 0
+        for t in self.targets:
+            if t.mode != "copy":
+                continue
+            o = rest.objects[t.index]
+            t.grid = subdivide(o.data.vertices, o.data.split.face_sizes, o.data.split.face_indices, t.level)
+            existing = bpy.data.meshes.get(attributes.COPY_PREFIX + t.obj.name)
+            if reusable and existing is not None and len(existing.loops) == len(t.grid.face_indices):
+                t.mesh = existing
+                t.copy = bpy.data.objects.get(attributes.COPY_PREFIX + t.obj.name)
+            if reusable and (t.mesh is None or t.copy is None):
+                self._build_copy(t)  # nothing of an older bake to lose
+                k = 0
+        for t in self.targets if reusable else ():
+            have = set(attributes.baked_frames(t.mesh))
+            k = next((i for i, f in enumerate(self.frames[:k]) if f not in have), k)
+        self.previous = record  # for objects that left the bake
+        if reusable:
+            self.record = record
+            self.record.solved = {f: v for f, v in record.solved.items() if f in self.frames[:k]}
+            self.record.complete = (self.frames[0], self.frames[k - 1]) if k else None
+        else:
+            self.record = BakeRecord(self.scene_key, s.frame_step, self.frames[0], self.names)
+        self.kept = k
+        self.seconds_saved = sum(v["seconds"] for v in self.record.solved.values())
+        self.queue = list(self.frames[k:])
+        self.total = len(self.queue)
+        # A fresh bake clears the old one (and builds its copies) when its first frame commits,
+        # so a bake cancelled before that leaves the file as it was.
+        self.cleared = reusable
+        # Frame values of the last kept solved frame, for interpolation.
+        self.prev = None
+        if self.kept:
+            f = self.frames[self.kept - 1]
+            self.prev = (f, [attributes.read_frame(t.mesh, f) for t in self.targets])
+        # The session: the held one if it is for this scene key, else a new one.
+        h = held(self.scene)
+        if h is None or h.scene_key != self.session_key:
+            drop_held(self.scene)
+            h = new_session(s, rest, self._state_at(self.frames[0]), self.session_key)
+            _held[scene_id(self.scene)] = h
+        self.held = h
+
+    def _build_copy(self, t: Target) -> None:
+        o = self.rest.objects[t.index]
+        smooth = o.polygon_smooth[o.data.split.source_face]
+        slots = self._polygon_slots(o)[o.data.split.source_face]
+        t.copy, t.mesh = attributes.build_copy(bpy, t.obj.name, t.grid, slots, smooth, o.slot_materials)
+
+    def _polygon_slots(self, o) -> np.ndarray:
+        """Material slot index per library face of an exported object (for the copy)."""
+        dg = self.context.evaluated_depsgraph_get()
+        ev = o.obj.evaluated_get(dg)
+        mesh = ev.to_mesh()
+        try:
+            mats = np.empty(len(mesh.polygons), np.int32)
+            mesh.polygons.foreach_get("material_index", mats)
+        finally:
+            ev.to_mesh_clear()
+        if len(mats) != o.data.polygon_count:
+            mats = np.zeros(o.data.polygon_count, np.int32)
+        return mats
+
+    def _state_at(self, frame: int) -> FrameState:
+        if frame not in self._state_cache:
+            self.scene.frame_set(frame)
+            smp = sample(self.context.evaluated_depsgraph_get(), self.rest)
+            self._state_cache[frame] = smp.state(self.rest)
+        return self._state_cache[frame]
+
+    def _has_emitter(self, dg) -> bool:
+        _, e = self.rest.materials.arrays()
+        if (e > 0).any():
+            return True
+        from .export import frame_emission
+
+        for f in self.frames[1:]:
+            self.scene.frame_set(f)
+            if (frame_emission(self.rest) > 0).any():
+                return True
+        self.scene.frame_set(self.frames[0])
+        return False
+
+    # -- per frame ------------------------------------------------------------------------------
+
+    def has_next(self) -> bool:
+        return bool(self.queue) and not self.cancel_event.is_set()
+
+    def prepare(self) -> None:
+        f = self.queue[0]
+        self.scene.frame_set(f)
+        dg = self.context.evaluated_depsgraph_get()
+        try:
+            smp = sample(dg, self.rest)
+        except TopologyChanged as e:
+            raise BakeError(f"object {e} changes its number of vertices or corners at frame {f}; "
+                            "a bake needs the same topology on every frame") from e
+        state = smp.state(self.rest)
+        h = self.held
+        if state.geometry != h.state.geometry:
+            # Deformed: rebuild the session on this frame's meshes and solve from scratch.
+            exp = export(dg, [o.obj for o in self.rest.objects])
+            topology = [o.data.topology_key() for o in exp.objects]
+            if topology != [o.data.topology_key() for o in self.rest.objects]:
+                raise BakeError(f"the meshes' faces changed at frame {f}; "
+                                "a bake needs the same topology on every frame")
+            h.close()
+            h = new_session(self.settings, exp, state, self.session_key)
+            _held[scene_id(self.scene)] = self.held = h
+            self.rebuilt += 1
+        else:
+            apply_sample(h, smp, state)
+        self.current = (f, state)
+        self.fraction, self.stage = 0.0, "start"
+
+    def _progress(self, fraction: float, stage: str) -> bool:
+        self.fraction, self.stage = fraction, stage
+        f = self.current[0]
+        event = {"kind": "progress", "frame": f, "index": self.done, "total": self.total,
+                 "fraction": fraction, "stage": stage}
+        for fn in list(listeners):
+            if fn(event) is False:
+                self.cancel_event.set()
+        if self.verbose:
+            bucket = int(fraction * 4)
+            if (stage, bucket) != self._last_print:
+                self._last_print = (stage, bucket)
+                self.log(f"Radiosity: frame {f} ({self.done + 1}/{self.total}) {stage} {100 * fraction:.0f}%")
+        return not self.cancel_event.is_set()
+
+    def solve(self) -> None:
+        """The long native call. Raises ``binding.Cancelled`` when cancelled."""
+        f = self.current[0]
+        t = time.perf_counter()
+        self.stats = self.held.session.solve_frame(float(f), progress=self._progress)
+        self.held.frame = float(f)
+        self.frame_seconds = time.perf_counter() - t
+        self.seconds_solving += self.frame_seconds
+
+    def commit(self) -> None:
+        f, state = self.current
+        h = self.held
+        if not self.cleared:
+            self._clear_previous()
+        values = []
+        for t in self.targets:
+            rgb = t.values(h.session, self.rest.objects[t.index].data.split)
+            attributes.write_frame(t.mesh, f, rgb)
+            values.append(rgb)
+        if self.prev is not None:
+            f0, v0 = self.prev
+            for g, w in core_frames.between(f0, f):
+                for t, a, b in zip(self.targets, v0, values, strict=True):
+                    attributes.write_frame(t.mesh, g, (1.0 - w) * a + w * b)
+        self.prev = (f, values)
+        self.record.solved[f] = {"state": state, "seconds": self.frame_seconds}
+        self.record.complete = (self.frames[0], f)
+        self.queue.pop(0)
+        self.done += 1
+        if self.verbose:
+            self.log(f"Radiosity: frame {f} done ({self.done}/{self.total}) in {self.frame_seconds:.2f} s")
+        event = {"kind": "frame", "frame": f, "index": self.done, "total": self.total,
+                 "seconds": self.frame_seconds}
+        for fn in list(listeners):
+            if fn(event) is False:
+                self.cancel_event.set()
+
+    def _clear_previous(self) -> None:
+        """A fresh bake: remove what an older bake left on these and on departed objects."""
+        self.cleared = True
+        names = set(self.names)
+        for t in self.targets:
+            if t.mode == "mesh":
+                attributes.remove_frames(t.mesh)
+                attributes.remove_copy(bpy, t.obj.name)
+            else:
+                if t.obj.data.library is None:
+                    attributes.remove_frames(t.obj.data)
+                    attributes.remove_result(t.obj.data)
+                self._build_copy(t)
+        if self.previous is not None:
+            for name in self.previous.objects:
+                obj = bpy.data.objects.get(name)
+                if name not in names and obj is not None:
+                    clear_object(obj)
+
+    def cancel(self) -> None:
+        """Thread-safe: stops after (or inside) the current frame."""
+        self.cancel_event.set()
+        try:
+            self.held.session.cancel()
+        except AttributeError:
+            pass
+
+    # -- end ------------------------------------------------------------------------------------
+
+    def _unmute(self) -> None:
+        for name, before in getattr(self, "muted", {}).items():
+            obj = bpy.data.objects.get(name)
+            if obj is not None and before is not None:
+                switch.set_muted(obj, not before)
+
+    def finish(self) -> str:
+        if self.finished:
+            return self.summary
+        self.finished = True
+        try:
+            self._finish()
+        finally:
+            self._unmute()
+            self.scene.frame_set(self.original_frame)
+        return self.summary
+
+    def _finish(self) -> None:
+        s = self.settings
+        complete = self.record.complete
+        preview = None
+        if s.preview_material and complete:
+            from .preview import preview_material
+
+            preview = preview_material(bpy)
+        for t in self.targets:
+            if complete is None:
+                if not self.kept and not self.cleared:
+                    continue  # nothing of this bake was written
+                attributes.remove_frames(t.mesh)
+                switch.remove(t.obj)
+                if t.mode == "copy":
+                    attributes.remove_copy(bpy, t.obj.name)
+                continue
+            first, last = complete
+            attributes.remove_frames(t.mesh, keep=lambda fr, a=first, b=last: a <= fr <= b)
+            current = min(max(self.original_frame, first), last)
+            attributes.ensure_result(t.mesh, attributes.read_frame(t.mesh, current))
+            switch.install(bpy, t.obj, first, last, copy=t.copy if t.mode == "copy" else None,
+                           preview_material=preview)
+            self.muted.pop(t.obj.name, None)
+        if complete:
+            self.record.stored = {t.obj.name: {"mode": t.mode, "mesh": t.mesh.name} for t in self.targets}
+            self.scene[RECORD_PROPERTY] = self.record.dumps()
+        elif RECORD_PROPERTY in self.scene and self.cleared:
+            del self.scene[RECORD_PROPERTY]
+        elapsed = time.perf_counter() - self.t0
+        parts = []
+        if self.done:
+            parts.append(f"solved {self.done} frame(s) in {elapsed:.1f} s")
+        if complete:
+            parts.append(f"colours for frames {complete[0]}-{complete[1]}")
+        if self.kept:
+            parts.append(f"kept {self.kept} unchanged solved frame(s), "
+                         f"saving about {self.seconds_saved:.1f} s")
+        if self.rebuilt:
+            parts.append(f"rebuilt the session on {self.rebuilt} deformed frame(s)")
+        if self.cancelled or self.cancel_event.is_set():
+            parts.insert(0, "cancelled")
+        if not self.done and not self.kept:
+            parts.append("nothing written")
+        self.summary = "Radiosity: " + "; ".join(parts)
+
+    # -- synchronous ----------------------------------------------------------------------------
+
+    def run(self) -> str:
+        self.start()
+        b = binding()
+        try:
+            while self.has_next():
+                self.prepare()
+                try:
+                    self.solve()
+                except b.Cancelled:
+                    self.cancelled = True
+                    break
+                except b.RadiosityError as e:
+                    raise BakeError(str(e)) from e
+                self.commit()
+        except BaseException:
+            self.finish()
+            raise
+        return self.finish()
+
+
+def settings_from_scene(scene) -> BakeSettings:
+    """Flattens the scene's Radiosity properties into a BakeSettings."""
+    p = scene.radiosity
+    start, end = (scene.frame_start, scene.frame_end) if p.use_scene_range else (p.frame_start, p.frame_end)
+    return BakeSettings(
+        basis_order=int(p.basis_order),
+        quality=p.quality,
+        tolerance=p.tolerance,
+        visibility=p.visibility,
+        threads=p.threads,
+        method=p.method.lower(),
+        frame_start=start,
+        frame_end=end,
+        frame_step=p.frame_step,
+        display_subdivision=p.display_subdivision,
+        preview_material=p.preview_material,
+    )
+
+
+def clear_bake(scene, objects=None) -> int:
+    """Removes the bake from `objects` (default: every object the record or a switch names)."""
+    record = read_record(scene)
+    if objects is None:
+        names = set(record.objects if record else [])
+        names |= {o.name for o in scene.objects if switch.find(o) is not None}
+        objects = [bpy.data.objects[n] for n in sorted(names) if n in bpy.data.objects]
+    n = 0
+    for obj in objects:
+        n += 1
+        clear_object(obj)
+    if RECORD_PROPERTY in scene:
+        del scene[RECORD_PROPERTY]
+    drop_held(scene)
+    return n
+

@@ -1,0 +1,82 @@
+"""Reads a Blender material into a ``core.materials.MaterialSpec``.
+
+Readable: the shader plugged into the active Material Output's Surface (through reroutes) is a
+Principled BSDF (Base Color; Emission Color x Emission Strength), a Diffuse BSDF (Color) or an
+Emission shader (Color x Strength, reflectance 0). A linked input (a texture, a node chain) cannot
+be read: Base Color falls back to the default grey and a linked emission to none, and the spec
+says why. Any other shader, or no material at all, gives the default (grey 0.8, no emission).
+"""
+
+from __future__ import annotations
+
+from ..core import materials as core
+
+
+def _surface_node(mat):
+    tree = mat.node_tree
+    if tree is None:
+        return None
+    out = None
+    try:
+        out = tree.get_output_node("ALL")
+    except (AttributeError, TypeError):
+        out = None
+    if out is None:
+        outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+        out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
+    if out is None or not out.inputs["Surface"].is_linked:
+        return None
+    node = out.inputs["Surface"].links[0].from_node
+    while node is not None and node.bl_idname == "NodeReroute":
+        node = node.inputs[0].links[0].from_node if node.inputs[0].is_linked else None
+    return node
+
+
+def _value(node, name, problems, what):
+    sock = node.inputs.get(name)
+    if sock is None:
+        problems.append(f"{what}: no input {name!r}")
+        return None
+    if sock.is_linked:
+        problems.append(f"{name} is linked")
+        return None
+    return sock.default_value
+
+
+def read_material(mat, multiplier: float = 1.0, owner: str = "") -> core.MaterialSpec:
+    """The library material for `mat` (None: no material) on an object of emitter `multiplier`."""
+    if mat is None:
+        return core.MaterialSpec(name=f"<no material> on {owner}" if owner else "<no material>",
+                                 problem="no material")
+    name = mat.name if multiplier == 1.0 else f"{mat.name} x{multiplier:g}"
+    use_nodes = getattr(mat, "use_nodes", True)
+    node = _surface_node(mat) if use_nodes else None
+    if node is None:
+        why = "no node tree" if not use_nodes else "nothing plugged into the Material Output's Surface"
+        return core.MaterialSpec(name=name, problem=why)
+    problems: list[str] = []
+    rho = core.DEFAULT_REFLECTANCE
+    emission = (0.0, 0.0, 0.0)
+    kind = node.bl_idname
+    if kind == "ShaderNodeBsdfPrincipled":
+        base = _value(node, "Base Color", problems, "Principled BSDF")
+        if base is not None:
+            rho = core.reflectance(base)
+        color = _value(node, "Emission Color", problems, "Principled BSDF")
+        strength = _value(node, "Emission Strength", problems, "Principled BSDF")
+        if color is not None and strength is not None:
+            emission = core.exitance(color, strength, multiplier)
+    elif kind == "ShaderNodeBsdfDiffuse":
+        base = _value(node, "Color", problems, "Diffuse BSDF")
+        if base is not None:
+            rho = core.reflectance(base)
+    elif kind == "ShaderNodeEmission":
+        rho = (0.0, 0.0, 0.0)
+        color = _value(node, "Color", problems, "Emission")
+        strength = _value(node, "Strength", problems, "Emission")
+        if color is not None and strength is not None:
+            emission = core.exitance(color, strength, multiplier)
+    else:
+        problems.append(f"shader {node.bl_label or kind} is not read")
+    return core.MaterialSpec(name=name, reflectance=rho, emission=emission,
+                             problem="; ".join(problems) or None)

@@ -1,0 +1,90 @@
+"""Meshes to the arrays of ``binding.Session``, and digests used to notice what changed.
+
+A mesh arrives as Blender stores it (object-space vertices, polygon sizes, loop vertex indices,
+polygon material indices mapped to library materials) and leaves as library faces (see
+``polygons.split_faces``), with the world-from-object matrix row-major as ``np.array(matrix_world)``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from .polygons import FaceSplit, degenerate_faces, split_faces
+
+MATRIX_DECIMALS = 6
+VERTEX_DECIMALS = 6
+
+
+def digest(*arrays, decimals: int | None = None) -> str:
+    """A short stable digest of arrays (rounded to `decimals` first, if given)."""
+    h = hashlib.sha1()
+    for a in arrays:
+        a = np.asarray(a)
+        if decimals is not None and a.dtype.kind == "f":
+            a = np.round(a.astype(np.float64), decimals) + 0.0  # + 0.0 folds -0.0 into 0.0
+        h.update(str(a.shape).encode())
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()[:16]
+
+
+@dataclass
+class ObjectData:
+    """One object as the library sees it, plus what maps results back."""
+
+    name: str
+    vertices: np.ndarray        # (N,3) float32, object space
+    split: FaceSplit
+    face_materials: np.ndarray  # (F',) uint32, per library face
+    matrix: np.ndarray          # (4,4) float64, world-from-object, row-major
+    polygon_count: int
+    degenerate: np.ndarray      # library faces of zero area
+
+    @classmethod
+    def from_mesh(cls, name, vertices, polygon_sizes, loop_vertices, polygon_materials, matrix) -> ObjectData:
+        """`polygon_materials` are library material indices per polygon."""
+        vertices = np.asarray(vertices, np.float32).reshape(-1, 3)
+        sizes = np.asarray(polygon_sizes, np.int64)
+        loops = np.asarray(loop_vertices, np.int64)
+        split = split_faces(vertices, sizes, loops)
+        mats = np.asarray(polygon_materials, np.int64)[split.source_face].astype(np.uint32)
+        return cls(
+            name=name,
+            vertices=vertices,
+            split=split,
+            face_materials=mats,
+            matrix=np.asarray(matrix, np.float64).reshape(4, 4),
+            polygon_count=len(sizes),
+            degenerate=degenerate_faces(vertices, split.face_sizes, split.face_indices),
+        )
+
+    @property
+    def loop_count(self) -> int:
+        return self.split.n_loops
+
+    def native(self) -> dict:
+        """The object dict of ``binding.Session``."""
+        return {
+            "vertices": self.vertices,
+            "face_sizes": self.split.face_sizes,
+            "face_indices": self.split.face_indices,
+            "face_materials": self.face_materials,
+            "matrix": self.matrix,
+        }
+
+    def topology_key(self) -> str:
+        """Changes when faces, corners or materials change (not when vertices move)."""
+        return digest(self.split.face_sizes, self.split.face_indices, self.face_materials)
+
+    def geometry_key(self) -> str:
+        """Changes when the object-space vertices move (deformation)."""
+        return digest(self.vertices, decimals=VERTEX_DECIMALS)
+
+    def matrix_key(self) -> str:
+        return digest(self.matrix, decimals=MATRIX_DECIMALS)
+
+
+def emission_key(emission: np.ndarray) -> str:
+    return digest(np.asarray(emission, np.float64), decimals=6)

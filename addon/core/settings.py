@@ -1,0 +1,91 @@
+"""Bake settings as a plain dataclass, flattened from the Blender properties by the operator.
+
+Quality presets map to the library's ``quadrature_order`` (Gauss points per axis for a pair of
+well-separated patches) and ``visibility_samples`` (rays per link = samples^4).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+from . import frames as _frames
+
+# name: (quadrature_order, visibility_samples, description)
+QUALITY = {
+    "DRAFT": (2, 1, "2 Gauss points per axis, 1 visibility ray per link"),
+    "MEDIUM": (4, 2, "4 Gauss points per axis, 16 visibility rays per link (library default)"),
+    "HIGH": (6, 3, "6 Gauss points per axis, 81 visibility rays per link"),
+    "ULTRA": (8, 4, "8 Gauss points per axis, 256 visibility rays per link"),
+}
+
+METHODS = ("incremental", "exact", "full")
+
+MAX_DISPLAY_SUBDIVISION = 4
+
+
+class SettingsError(ValueError):
+    """A setting is out of range; the message names it."""
+
+
+@dataclass(frozen=True)
+class BakeSettings:
+    basis_order: int = 2
+    quality: str = "MEDIUM"
+    tolerance: float = 1e-4
+    visibility: bool = True
+    threads: int = 0
+    method: str = "incremental"
+    frame_start: int = 1
+    frame_end: int = 1
+    frame_step: int = 1
+    display_subdivision: int = 0
+    preview_material: bool = False
+
+    def validate(self) -> BakeSettings:
+        if not 0 <= self.basis_order <= 3:
+            raise SettingsError(f"basis order {self.basis_order} is outside 0..3")
+        if self.quality not in QUALITY:
+            raise SettingsError(f"quality {self.quality!r} is not one of {', '.join(QUALITY)}")
+        if not 0.0 < self.tolerance < 1.0:
+            raise SettingsError(f"tolerance {self.tolerance} is outside (0, 1)")
+        if not 0 <= self.threads <= 1024:
+            raise SettingsError(f"threads {self.threads} is outside 0..1024 (0 = all cores)")
+        if self.method not in METHODS:
+            raise SettingsError(f"method {self.method!r} is not one of {', '.join(METHODS)}")
+        if self.frame_step < 1:
+            raise SettingsError(f"frame step {self.frame_step} must be at least 1")
+        if self.frame_start > self.frame_end:
+            raise SettingsError(f"frame range {self.frame_start}-{self.frame_end}: start is after end")
+        _frames.check_frame(self.frame_start)
+        _frames.check_frame(self.frame_end)
+        if not 0 <= self.display_subdivision <= MAX_DISPLAY_SUBDIVISION:
+            raise SettingsError(
+                f"display subdivision {self.display_subdivision} is outside 0..{MAX_DISPLAY_SUBDIVISION}"
+            )
+        return self
+
+    def native(self) -> dict:
+        """The settings dict of ``binding.Session``."""
+        quadrature, visibility_samples, _ = QUALITY[self.quality]
+        return {
+            "basis_order": self.basis_order,
+            "quadrature_order": quadrature,
+            "visibility_samples": visibility_samples,
+            "tolerance": self.tolerance,
+            "visibility": self.visibility,
+            "threads": self.threads,
+            "method": self.method,
+        }
+
+    def solve_signature(self) -> dict:
+        """What changes the solution of a frame (threads do not)."""
+        native = self.native()
+        native.pop("threads")
+        return native
+
+    def baked_frames(self) -> list[int]:
+        return _frames.baked_frames(self.frame_start, self.frame_end, self.frame_step)
+
+    def replace(self, **changes) -> BakeSettings:
+        return dataclasses.replace(self, **changes)

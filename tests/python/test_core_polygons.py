@@ -1,0 +1,81 @@
+"""N-gon and concave-quad splitting, and results mapped back to loops (no bpy)."""
+
+import numpy as np
+import pytest
+
+from addon.core import polygons
+
+
+def _area(p):
+    return 0.5 * np.linalg.norm(polygons.newell_normal(np.asarray(p, float)))
+
+
+def test_triangles_and_convex_quads_pass_through():
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0]], float)
+    s = polygons.split_faces(v, [4, 3], [0, 1, 2, 3, 1, 4, 2])
+    assert s.identity
+    assert s.face_sizes.tolist() == [4, 3]
+    assert s.face_indices.tolist() == [0, 1, 2, 3, 1, 4, 2]
+    vals = np.arange(7 * 3, dtype=np.float32).reshape(7, 3)
+    np.testing.assert_array_equal(s.to_loops(vals), vals)
+
+
+def test_convex_ngon_is_a_fan_with_same_area_and_winding():
+    ang = np.linspace(0, 2 * np.pi, 7)[:-1]
+    v = np.stack([np.cos(ang), np.sin(ang), np.zeros(6)], axis=1)
+    s = polygons.split_faces(v, [6], np.arange(6))
+    assert s.split_polygons == 1
+    assert s.face_sizes.tolist() == [3, 3, 3, 3]
+    tris = s.face_indices.reshape(-1, 3)
+    total = sum(_area(v[t]) for t in tris)
+    assert total == pytest.approx(_area(v), rel=1e-12)
+    for t in tris:  # same winding as the hexagon (normal +z)
+        assert polygons.newell_normal(v[t])[2] > 0
+    assert s.source_face.tolist() == [0, 0, 0, 0]
+
+
+def test_concave_ngon_ear_clipping_stays_inside():
+    # An L shape (6 corners, one reflex corner at index 3): a fan from 0 would leave the polygon.
+    v = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0], [1, 2, 0], [0, 2, 0]], float)
+    s = polygons.split_faces(v, [6], np.arange(6))
+    tris = s.face_indices.reshape(-1, 3)
+    assert len(tris) == 4
+    areas = [_area(v[t]) for t in tris]
+    assert sum(areas) == pytest.approx(3.0)
+    for t in tris:
+        assert polygons.newell_normal(v[t])[2] > 0
+
+
+def test_concave_quad_is_split_on_the_reflex_diagonal():
+    # Arrowhead: corner 2 is reflex.
+    v = np.array([[0, 0, 0], [2, 1, 0], [0.5, 1, 0], [0, 2, 0]], float)
+    s = polygons.split_faces(v, [4], np.arange(4))
+    assert s.face_sizes.tolist() == [3, 3]
+    tris = s.face_indices.reshape(-1, 3)
+    assert all(2 in t for t in tris)
+    assert sum(_area(v[t]) for t in tris) == pytest.approx(_area(v))
+
+
+def test_results_map_back_to_every_loop_as_means():
+    v = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0], [0, 1, 0], [3, 0, 0]], float)
+    sizes = [6, 3]
+    idx = [0, 1, 2, 3, 4, 5, 2, 6, 3]
+    s = polygons.split_faces(v, sizes, idx)
+    assert s.n_loops == 9
+    # A value per library corner equal to its vertex's x: every loop must get its vertex's x.
+    corner = np.repeat(v[s.face_indices.astype(int), :1], 3, axis=1)
+    loops = s.to_loops(corner)
+    np.testing.assert_allclose(loops[:, 0], v[np.array(idx), 0])
+    # The triangle after the n-gon keeps its loops 6..8.
+    assert s.corner_loop[-3:].tolist() == [6, 7, 8]
+
+
+def test_degenerate_faces_are_found():
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0]], float)
+    bad = polygons.degenerate_faces(v, [4, 3], [0, 1, 2, 3, 1, 4, 4])
+    assert bad.tolist() == [1]
+
+
+def test_fewer_than_three_corners_is_an_error():
+    with pytest.raises(ValueError, match="face 0 has 2 corners"):
+        polygons.split_faces(np.zeros((3, 3)), [2], [0, 1])

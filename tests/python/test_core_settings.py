@@ -1,0 +1,70 @@
+"""Settings, frame plans, material maths and the bake record (no bpy)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from addon.core import frames, materials, record
+from addon.core.settings import QUALITY, BakeSettings, SettingsError
+
+
+def test_native_settings_follow_quality():
+    s = BakeSettings(basis_order=1, quality="HIGH", frame_start=1, frame_end=10).validate()
+    n = s.native()
+    assert (n["quadrature_order"], n["visibility_samples"]) == QUALITY["HIGH"][:2]
+    assert n["basis_order"] == 1 and n["method"] == "incremental"
+    assert "threads" not in s.solve_signature()
+
+
+@pytest.mark.parametrize("bad, match", [
+    (dict(basis_order=4), "basis order"),
+    (dict(quality="SUPER"), "quality"),
+    (dict(tolerance=0.0), "tolerance"),
+    (dict(frame_step=0), "frame step"),
+    (dict(frame_start=5, frame_end=2), "start is after end"),
+    (dict(frame_start=-1), "outside 0..9999"),
+    (dict(method="magic"), "method"),
+    (dict(display_subdivision=9), "display subdivision"),
+])
+def test_bad_settings_name_the_setting(bad, match):
+    with pytest.raises(SettingsError, match=match):
+        BakeSettings(**bad).validate()
+
+
+def test_baked_frames_and_interpolation():
+    assert frames.baked_frames(1, 10, 3) == [1, 4, 7, 10]
+    assert frames.baked_frames(1, 11, 3) == [1, 4, 7, 10, 11]
+    assert frames.baked_frames(5, 5, 2) == [5]
+    assert frames.between(4, 7) == [(5, pytest.approx(1 / 3)), (6, pytest.approx(2 / 3))]
+    assert frames.attribute_name(7) == "Rad_0007"
+    assert frames.frame_of_attribute("Rad_0123") == 123
+    assert frames.frame_of_attribute("Radiosity") is None
+
+
+def test_material_maths():
+    assert materials.reflectance((1.2, 0.5, -0.1, 1.0)) == (0.999, 0.5, 0.0)
+    e = materials.exitance((1.0, 0.5, 0.0, 1.0), 2.0, 3.0)
+    assert e == pytest.approx((6 * math.pi, 3 * math.pi, 0.0))
+    np.testing.assert_allclose(materials.radiance_from_radiosity([[math.pi, 0, 2 * math.pi]]), [[1, 0, 2]],
+                               rtol=1e-6)
+    t = materials.MaterialTable()
+    a = t.add(("A", 1.0), lambda: materials.MaterialSpec("A", problem="Base Color is linked"))
+    b = t.add(("A", 1.0), lambda: materials.MaterialSpec("A2"))
+    assert a == b == 0
+    assert t.problems() == ["A (Base Color is linked)"]
+
+
+def test_record_round_trip_and_first_change():
+    st = lambda m: record.FrameState([m], ["g"], "e")  # noqa: E731
+    r = record.BakeRecord("key", 1, 1, ["A"])
+    for f in (1, 2, 3):
+        r.solved[f] = {"state": st(f"m{f}"), "seconds": 1.5}
+    r.complete = (1, 3)
+    r2 = record.BakeRecord.loads(r.dumps())
+    assert r2 == r
+    assert r2.reusable("key", 1, 1, ["A"])
+    assert not r2.reusable("other", 1, 1, ["A"])
+    assert record.first_changed(r2, [1, 2, 3], lambda f: st(f"m{f}")) == 3
+    assert record.first_changed(r2, [1, 2, 3], lambda f: st("moved" if f == 2 else f"m{f}")) == 1
+    assert record.BakeRecord.loads("not json") is None
