@@ -3,6 +3,7 @@
 //! 1. Kernel build and solve of the Cornell box against patch count and basis order.
 //! 2. Per-frame time of the demo animation: incremental (exact update) vs full recompute,
 //!    measured side by side in one run.
+//!
 //! Prints markdown tables; the README quotes them with this command.
 
 use std::time::Instant;
@@ -15,8 +16,16 @@ use galerkin_radiosity::system::{System, no_progress};
 fn peak_rss_mib() -> f64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
-        .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM")).map(|l| l.to_string()))
-        .and_then(|l| l.split_whitespace().nth(1).and_then(|k| k.parse::<f64>().ok()))
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM"))
+                .map(|l| l.to_string())
+        })
+        .and_then(|l| {
+            l.split_whitespace()
+                .nth(1)
+                .and_then(|k| k.parse::<f64>().ok())
+        })
         .map_or(f64::NAN, |kib| kib / 1024.0)
 }
 
@@ -24,14 +33,28 @@ fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let threads = rayon::current_num_threads();
     println!("## Static Cornell box: kernel (with visibility) and solve, {threads} threads\n");
-    println!("| walls n x n | patches | order | pairs | link MiB | kernel s | solve s | total s | peak RSS MiB |");
+    println!(
+        "| walls n x n | patches | order | pairs | link MiB | kernel s | solve s | total s | peak RSS MiB |"
+    );
     println!("|---|---|---|---|---|---|---|---|---|");
     let sizes: &[usize] = if quick { &[4, 8] } else { &[4, 8, 14, 16] };
     for &n in sizes {
-        let orders: &[usize] = if n >= 32 { &[0] } else if n >= 16 { &[0, 1] } else { &[0, 1, 2, 3] };
+        let orders: &[usize] = if n >= 32 {
+            &[0]
+        } else if n >= 16 {
+            &[0, 1]
+        } else {
+            &[0, 1, 2, 3]
+        };
         let orders: Vec<usize> = if n == 14 { vec![2] } else { orders.to_vec() };
         for &order in &orders {
-            let scene = scenes::cornell_box(n, Settings { basis_order: order, ..Settings::default() });
+            let scene = scenes::cornell_box(
+                n,
+                Settings {
+                    basis_order: order,
+                    ..Settings::default()
+                },
+            );
             let start = Instant::now();
             let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
             sys.solve(scene.settings.tolerance, &|| false).unwrap();
@@ -50,7 +73,10 @@ fn main() {
 
     let (n, frames) = if quick { (6, 4) } else { (14, 8) };
     let scene = scenes::cornell_box_animated(n, frames, Settings::default());
-    println!("\n## Demo animation ({} patches, order 2, light and block moving): seconds per frame\n", scene.face_count());
+    println!(
+        "\n## Demo animation ({} patches, order 2, light and block moving): seconds per frame\n",
+        scene.face_count()
+    );
     println!("| frame | incremental (exact update) | links recomputed | full | speed-up |");
     println!("|---|---|---|---|---|");
     let mut inc = Session::new(scene.clone(), Method::Exact).unwrap();
@@ -63,7 +89,18 @@ fn main() {
             ti += a.seconds;
             tf += b.seconds;
         }
-        println!("| {f} | {:.2} | {} | {:.2} | {:.1}x |", a.seconds, a.links_recomputed, b.seconds, b.seconds / a.seconds);
+        println!(
+            "| {f} | {:.2} | {} | {:.2} | {:.1}x |",
+            a.seconds,
+            a.links_recomputed,
+            b.seconds,
+            b.seconds / a.seconds
+        );
     }
-    println!("| mean of frames 2..{frames} | {:.2} | | {:.2} | {:.1}x |", ti / (frames - 1) as f64, tf / (frames - 1) as f64, tf / ti);
+    println!(
+        "| mean of frames 2..{frames} | {:.2} | | {:.2} | {:.1}x |",
+        ti / (frames - 1) as f64,
+        tf / (frames - 1) as f64,
+        tf / ti
+    );
 }

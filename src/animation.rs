@@ -139,7 +139,9 @@ pub fn advance(
             .par_iter()
             .map(|&(i, j, _)| {
                 let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if d % 4096 == 0 && !progress(d as f64 / total.max(1) as f64, "kernel update") {
+                if d.is_multiple_of(4096)
+                    && !progress(d as f64 / total.max(1) as f64, "kernel update")
+                {
                     return Err(Error::Cancelled);
                 }
                 Ok(compute_pair(

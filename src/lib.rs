@@ -4,6 +4,9 @@
 //! Conventions: right-handed world space, units as given (the solver is scale-free); radiosity
 //! and exitance in W/m^2 per RGB channel; faces are one-sided, front counter-clockwise.
 
+// Numeric kernels index several arrays with one loop variable, as the equations do.
+#![allow(clippy::needless_range_loop)]
+
 pub mod animation;
 pub mod basis;
 pub mod error;

@@ -8,16 +8,28 @@ use galerkin_radiosity::system::no_progress;
 use glam::{DMat4, DVec3};
 
 fn settings() -> Settings {
-    Settings { basis_order: 2, tolerance: 1e-5, ..Settings::default() }
+    Settings {
+        basis_order: 2,
+        tolerance: 1e-5,
+        ..Settings::default()
+    }
 }
 
 /// Bakes all frames with `method`; returns per frame all corner values and the stats.
-fn bake(scene: &Scene, method: Method) -> Vec<(Vec<[f32; 3]>, galerkin_radiosity::session::FrameStats)> {
+fn bake(
+    scene: &Scene,
+    method: Method,
+) -> Vec<(Vec<[f32; 3]>, galerkin_radiosity::session::FrameStats)> {
     let mut session = Session::new(scene.clone(), method).unwrap();
     (scene.frames.0..=scene.frames.1)
         .map(|f| {
             let stats = session.solve_frame(f as f64, &no_progress).unwrap();
-            let corners = session.face_results().unwrap().into_iter().flat_map(|o| o.corner_radiosity).collect();
+            let corners = session
+                .face_results()
+                .unwrap()
+                .into_iter()
+                .flat_map(|o| o.corner_radiosity)
+                .collect();
             (corners, stats)
         })
         .collect()
@@ -28,23 +40,47 @@ fn assert_matches_full(scene: &Scene, what: &str) {
     for method in [Method::Incremental, Method::Exact] {
         let inc = bake(scene, method);
         for (f, ((a, stats), (b, _))) in inc.iter().zip(&full).enumerate() {
-            let peak = b.iter().flat_map(|c| c.iter()).fold(0.0f32, |m, x| m.max(*x));
-            let worst = a.iter().zip(b).flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).abs())).fold(0.0f32, f32::max);
-            eprintln!("{what} {method:?} frame {f}: worst {:.2e} of peak, {} links recomputed", worst / peak, stats.links_recomputed);
-            assert!(worst <= 0.01 * peak, "{what}, {method:?}, frame {f}: {worst} vs peak {peak}");
+            let peak = b
+                .iter()
+                .flat_map(|c| c.iter())
+                .fold(0.0f32, |m, x| m.max(*x));
+            let worst = a
+                .iter()
+                .zip(b)
+                .flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).abs()))
+                .fold(0.0f32, f32::max);
+            eprintln!(
+                "{what} {method:?} frame {f}: worst {:.2e} of peak, {} links recomputed",
+                worst / peak,
+                stats.links_recomputed
+            );
+            assert!(
+                worst <= 0.01 * peak,
+                "{what}, {method:?}, frame {f}: {worst} vs peak {peak}"
+            );
         }
     }
 }
 
 fn translation_keys(points: &[(f64, DVec3)]) -> Vec<Key> {
-    points.iter().map(|&(frame, t)| Key { frame, transform: KeyTransform::Translation(t) }).collect()
+    points
+        .iter()
+        .map(|&(frame, t)| Key {
+            frame,
+            transform: KeyTransform::Translation(t),
+        })
+        .collect()
 }
 
 /// A light panel moving along the ceiling of the Cornell box.
 #[test]
 fn moving_ceiling_light_matches_full() {
     let mut scene = scenes::cornell_box(4, settings());
-    let light = scene.objects.iter_mut().find(|o| o.name == "Light").unwrap();
+    let light = scene
+        .objects
+        .iter_mut()
+        .find(|o| o.name == "Light")
+        .unwrap();
     light.animation = translation_keys(&[(1.0, DVec3::ZERO), (4.0, DVec3::new(-0.15, 0.0, 0.1))]);
     scene.frames = (1, 4);
     assert_matches_full(&scene, "ceiling light");
@@ -55,19 +91,61 @@ fn moving_ceiling_light_matches_full() {
 fn occluder_passing_a_wall_lamp_matches_full() {
     let mut objects = Vec::new();
     let p = DVec3::new;
-    objects.push(scenes::subdivided_quad("floor", [p(0., 0., 0.), p(0., 1., 0.), p(2., 1., 0.), p(2., 0., 0.)], 4, 0));
+    objects.push(scenes::subdivided_quad(
+        "floor",
+        [p(0., 0., 0.), p(0., 1., 0.), p(2., 1., 0.), p(2., 0., 0.)],
+        4,
+        0,
+    ));
     objects[0].faces.iter_mut().for_each(|f| f.reverse());
     // A wall lamp at x = 0 facing +x, and a facing wall at x = 2.
-    objects.push(scenes::subdivided_quad("lamp", [p(0., 0.3, 0.3), p(0., 0.7, 0.3), p(0., 0.7, 0.7), p(0., 0.3, 0.7)], 1, 1));
-    objects.push(scenes::subdivided_quad("wall", [p(2., 0., 0.), p(2., 0., 1.), p(2., 1., 1.), p(2., 1., 0.)], 4, 0));
+    objects.push(scenes::subdivided_quad(
+        "lamp",
+        [
+            p(0., 0.3, 0.3),
+            p(0., 0.7, 0.3),
+            p(0., 0.7, 0.7),
+            p(0., 0.3, 0.7),
+        ],
+        1,
+        1,
+    ));
+    objects.push(scenes::subdivided_quad(
+        "wall",
+        [p(2., 0., 0.), p(2., 0., 1.), p(2., 1., 1.), p(2., 1., 0.)],
+        4,
+        0,
+    ));
     // A blue panel facing the wall, sliding across between them.
-    let mut panel = scenes::subdivided_quad("panel", [p(1., 0.2, 0.2), p(1., 0.2, 0.8), p(1., 0.5, 0.8), p(1., 0.5, 0.2)], 1, 2);
+    let mut panel = scenes::subdivided_quad(
+        "panel",
+        [
+            p(1., 0.2, 0.2),
+            p(1., 0.2, 0.8),
+            p(1., 0.5, 0.8),
+            p(1., 0.5, 0.2),
+        ],
+        1,
+        2,
+    );
     panel.animation = translation_keys(&[(1.0, p(0., -0.5, 0.)), (5.0, p(0., 0.6, 0.))]);
     objects.push(panel);
     let materials = vec![
-        Material { name: "white".into(), reflectance: [0.7; 3], emission: [0.0; 3] },
-        Material { name: "lamp".into(), reflectance: [0.5; 3], emission: [10.0; 3] },
-        Material { name: "blue".into(), reflectance: [0.1, 0.1, 0.8], emission: [0.0; 3] },
+        Material {
+            name: "white".into(),
+            reflectance: [0.7; 3],
+            emission: [0.0; 3],
+        },
+        Material {
+            name: "lamp".into(),
+            reflectance: [0.5; 3],
+            emission: [10.0; 3],
+        },
+        Material {
+            name: "blue".into(),
+            reflectance: [0.1, 0.1, 0.8],
+            emission: [0.0; 3],
+        },
     ];
     let scene = Scene::new(settings(), (1, 5), materials, vec![vec![]; 3], objects).unwrap();
     assert_matches_full(&scene, "occluder");
@@ -80,23 +158,44 @@ fn circle_rotation_and_emission_keys_match_full() {
     let circle: Vec<(f64, DVec3)> = (0..5)
         .map(|f| {
             let a = f as f64 * std::f64::consts::FRAC_PI_2 * 0.5;
-            (1.0 + f as f64, DVec3::new(0.08 * a.cos() - 0.08, 0.0, 0.08 * a.sin()))
+            (
+                1.0 + f as f64,
+                DVec3::new(0.08 * a.cos() - 0.08, 0.0, 0.08 * a.sin()),
+            )
         })
         .collect();
-    let light = scene.objects.iter_mut().find(|o| o.name == "Light").unwrap();
+    let light = scene
+        .objects
+        .iter_mut()
+        .find(|o| o.name == "Light")
+        .unwrap();
     light.animation = translation_keys(&circle);
     // The tall block turns about its own vertical axis.
-    let tall = scene.objects.iter_mut().find(|o| o.name == "TallBlock").unwrap();
+    let tall = scene
+        .objects
+        .iter_mut()
+        .find(|o| o.name == "TallBlock")
+        .unwrap();
     let pivot = DVec3::new(0.368, 0.0, 0.351);
     let turn = |deg: f64| {
-        DMat4::from_translation(pivot) * DMat4::from_rotation_y(deg.to_radians()) * DMat4::from_translation(-pivot)
+        DMat4::from_translation(pivot)
+            * DMat4::from_rotation_y(deg.to_radians())
+            * DMat4::from_translation(-pivot)
     };
     tall.animation = vec![
-        Key { frame: 1.0, transform: KeyTransform::Matrix(turn(0.0)) },
-        Key { frame: 5.0, transform: KeyTransform::Matrix(turn(20.0)) },
+        Key {
+            frame: 1.0,
+            transform: KeyTransform::Matrix(turn(0.0)),
+        },
+        Key {
+            frame: 5.0,
+            transform: KeyTransform::Matrix(turn(20.0)),
+        },
     ];
-    scene.emission_keys[scenes::LIGHT as usize] =
-        scenes::emission_ramp((1.0, scene.materials[3].emission), (5.0, [20.0, 20.0, 20.0]));
+    scene.emission_keys[scenes::LIGHT as usize] = scenes::emission_ramp(
+        (1.0, scene.materials[3].emission),
+        (5.0, [20.0, 20.0, 20.0]),
+    );
     scene.frames = (1, 5);
     assert_matches_full(&scene, "circle + rotation + emission");
 }
