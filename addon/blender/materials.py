@@ -9,7 +9,11 @@ says why. Any other shader, or no material at all, gives the default (grey 0.8, 
 
 from __future__ import annotations
 
+import bpy
+
 from ..core import materials as core
+
+NODES_ALWAYS = bpy.app.version >= (5, 0, 0)  # Material.use_nodes is deprecated in 5.0
 
 
 def _surface_node(mat):
@@ -49,7 +53,7 @@ def read_material(mat, multiplier: float = 1.0, owner: str = "") -> core.Materia
         return core.MaterialSpec(name=f"<no material> on {owner}" if owner else "<no material>",
                                  problem="no material")
     name = mat.name if multiplier == 1.0 else f"{mat.name} x{multiplier:g}"
-    use_nodes = getattr(mat, "use_nodes", True)
+    use_nodes = True if NODES_ALWAYS else mat.use_nodes
     node = _surface_node(mat) if use_nodes else None
     if node is None:
         why = "no node tree" if not use_nodes else "nothing plugged into the Material Output's Surface"

@@ -17,7 +17,7 @@ def preview_material(bpy):
     if mat is None:
         mat = bpy.data.materials.new(NAME)
     mat["radiosity_preview"] = 1
-    if hasattr(mat, "use_nodes") and not mat.use_nodes:
+    if bpy.app.version < (5, 0, 0) and not mat.use_nodes:
         mat.use_nodes = True
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     nodes.clear()
