@@ -38,6 +38,10 @@ RECORD_PROPERTY = "radiosity_bake"
 #   {"kind": "frame", "frame", "index", "total", "seconds"}               (main thread, after a commit)
 listeners: list = []
 
+# Jobs between start() and finish(): the live preview stands aside while one runs (the bake's own
+# frame changes must not trigger it, and a session runs one call at a time).
+running: set = set()
+
 
 class BakeError(Exception):
     """A problem the user can fix; the message is one line."""
@@ -206,12 +210,14 @@ class BakeJob:
         if not sel.objects:
             raise BakeError(f"nothing to bake: no visible, renderable mesh objects in {where}"
                             + ("; " + "; ".join(sel.notes()) if sel.notes() else ""))
+        running.add(self)
         self.muted = {o.name: switch.set_muted(o, True) for o in sel.objects}
         try:
             self._start(sel, where)
         except BaseException:
             self._unmute()
             self.scene.frame_set(self.original_frame)
+            running.discard(self)
             raise
 
     def _start(self, sel, where) -> None:
@@ -472,6 +478,11 @@ class BakeJob:
         finally:
             self._unmute()
             self.scene.frame_set(self.original_frame)
+            running.discard(self)
+        if self.scene.radiosity.live_preview:
+            from . import live
+
+            live.update(self.scene)
         return self.summary
 
     def _finish(self) -> None:

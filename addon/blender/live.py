@@ -35,7 +35,7 @@ def _scene_key(scene, exp) -> str:
 def update(scene, depsgraph=None) -> bool:
     """Re-solves the current frame if anything the solver sees changed; True if it solved."""
     global _busy
-    if _busy or not scene.radiosity.live_preview:
+    if _busy or bake.running or not scene.radiosity.live_preview:
         return False
     _busy = True
     try:
@@ -86,7 +86,7 @@ def _update(scene) -> bool:
         return False
     bake.apply_sample(h, smp, state)
     t = time.perf_counter()
-    h.session.solve_frame(frame)
+    h.session.solve_frame(frame, progress=lambda fraction, stage: True)
     h.frame = frame
     stats["solves"] += 1
     stats["last_seconds"] = time.perf_counter() - t
@@ -108,7 +108,7 @@ def on_frame_change(scene, depsgraph=None):
 
 @persistent
 def on_depsgraph_update(scene, depsgraph):
-    if _busy or not scene.radiosity.live_preview:
+    if _busy or bake.running or not scene.radiosity.live_preview:
         return
     relevant = any(u.is_updated_transform or isinstance(u.id, bpy.types.Material) for u in depsgraph.updates)
     if relevant:

@@ -197,3 +197,10 @@ def evaluate_in_fresh_process(path, names, frames):
     assert proc.returncode == 0, proc.stderr[-2000:]
     line = next(ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT"))
     return json.loads(line[len("RESULT"):])
+
+
+def stored_named(mesh, name):
+    attr = mesh.color_attributes[name]
+    buf = np.empty(len(mesh.loops) * 4, np.float32)
+    attr.data.foreach_get("color", buf)
+    return buf.reshape(-1, 4)[:, :3].copy()

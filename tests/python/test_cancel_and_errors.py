@@ -1,0 +1,160 @@
+"""Cancelling keeps complete frames only; bad scenes give clear messages."""
+
+import numpy as np
+import pytest
+import scenes
+
+
+def _cancel_at(bake_module, frame_index):
+    """A listener that cancels from the progress callback of the `frame_index`-th solved frame."""
+
+    def listener(event):
+        if event["kind"] == "progress" and event["index"] == frame_index:
+            return False
+        return None
+
+    bake_module.listeners.append(listener)
+    return listener
+
+
+def _switch_range(obj):
+    mod = obj.modifiers[-1]
+    ids = {i.name: i.identifier for i in mod.node_group.interface.items_tree if i.in_out == "INPUT"}
+    return mod[ids["First Frame"]], mod[ids["Last Frame"]]
+
+
+def test_cancel_from_progress_keeps_complete_frames_only(blender):
+    bpy = blender
+    from addon.blender import bake
+
+    objs = scenes.cornell_box(bpy, light_frames=(1, 4), box=False)
+    _cancel_at(bake, 2)  # cancel inside the third frame
+    scenes.bake(bpy, basis_order=0)
+    for obj in objs.values():
+        assert scenes.rad_frames(obj.data) == [1, 2]
+        assert _switch_range(obj) == (1, 2)
+    record = bake.read_record(bpy.context.scene)
+    assert record.complete == (1, 2) and sorted(record.solved) == [1, 2]
+    # Frames past the last complete one hold it.
+    sc = bpy.context.scene
+    sc.frame_set(4)
+    got = scenes.corner_colors(objs["Floor"], bpy.context.evaluated_depsgraph_get())
+    np.testing.assert_array_equal(got, scenes.stored(objs["Floor"].data, 2))
+
+
+def test_cancelled_rebake_removes_stale_frames(blender):
+    bpy = blender
+    from addon.blender import bake
+
+    objs = scenes.cornell_box(bpy, light_frames=(1, 4), box=False)
+    scenes.bake(bpy, basis_order=0)
+    floor = objs["Floor"].data
+    frame1 = scenes.stored(floor, 1)
+    # Move the light from frame 2 on, then cancel inside the second recomputed frame.
+    light = objs["Light"]
+    light.animation_data_clear()
+    light.location.x = -0.5
+    light.keyframe_insert("location", index=0, frame=1)
+    light.location.x = -0.4
+    light.keyframe_insert("location", index=0, frame=2)
+    light.location.x = 0.9
+    light.keyframe_insert("location", index=0, frame=4)
+    _cancel_at(bake, 1)
+    scenes.bake(bpy, basis_order=0)
+    assert scenes.rad_frames(floor) == [1, 2]
+    np.testing.assert_array_equal(scenes.stored(floor, 1), frame1)  # kept, not recomputed
+    assert _switch_range(objs["Floor"]) == (1, 2)
+    assert bake.read_record(bpy.context.scene).complete == (1, 2)
+
+
+def test_cancel_before_any_frame_leaves_the_file_as_it_was(blender):
+    bpy = blender
+    from addon.blender import bake
+
+    objs = scenes.cornell_box(bpy, light_frames=(1, 2), box=False)
+    _cancel_at(bake, 0)
+    scenes.bake(bpy, basis_order=0)
+    for obj in objs.values():
+        assert scenes.rad_frames(obj.data) == []
+        assert len(obj.modifiers) == 0
+    assert "radiosity_bake" not in bpy.context.scene
+
+
+def _job(bpy, **changes):
+    from addon.blender import bake
+
+    sc = bpy.context.scene
+    settings = bake.settings_from_scene(sc).replace(basis_order=0, **changes)
+    return bake.BakeJob(bpy.context, settings)
+
+
+def _error(bpy, **changes):
+    from addon.blender import bake
+
+    with pytest.raises(bake.BakeError) as info:
+        _job(bpy, **changes).run()
+    return str(info.value)
+
+
+def test_no_emitter(blender):
+    bpy = blender
+    objs = scenes.cornell_box(bpy, light_frames=(1, 2), box=False)
+    bpy.data.objects.remove(objs["Light"])
+    assert "no emitters" in _error(bpy)
+
+
+def test_no_mesh_objects(blender):
+    bpy = blender
+    light = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
+    bpy.context.scene.collection.objects.link(light)
+    msg = _error(bpy)
+    assert "no visible, renderable mesh objects" in msg and "Light objects are ignored" in msg and "Lamp" in msg
+    # The operator reports the same message as an error.
+    with pytest.raises(RuntimeError, match="no visible, renderable mesh objects"):
+        bpy.ops.radiosity.bake()
+
+
+def test_no_faces(blender):
+    bpy = blender
+    scenes.mesh_object(bpy, "Points", [(0, 0, 0), (1, 0, 0), (0, 1, 0)], [])
+    assert "have no faces" in _error(bpy)
+
+
+def test_frame_outside_the_attribute_range(blender):
+    bpy = blender
+    scenes.cornell_box(bpy, light_frames=(1, 2), box=False)
+    assert "outside 0..9999" in _error(bpy, frame_start=10000, frame_end=10001)
+
+
+def test_zero_area_faces_non_meshes_and_unreadable_materials_are_reported(blender):
+    bpy = blender
+    objs = scenes.cornell_box(bpy, light_frames=(1, 1), box=False)
+    # A zero-area triangle (three collinear vertices) in its own object.
+    scenes.mesh_object(bpy, "Sliver", [(0, 0, 0.5), (0.5, 0, 0.5), (1, 0, 0.5), (0, 0.5, 0.5)],
+                       [(0, 1, 2), (0, 2, 3)], bpy.data.materials["White"])
+    # A curve object, a textured material, a glass material, and no material.
+    curve = bpy.data.objects.new("Curve", bpy.data.curves.new("Curve", "CURVE"))
+    bpy.context.scene.collection.objects.link(curve)
+    tex = scenes.material(bpy, "Wood")
+    nt = tex.node_tree
+    nt.links.new(nt.nodes.new("ShaderNodeTexImage").outputs["Color"],
+                 nt.nodes["Principled BSDF"].inputs["Base Color"])
+    objs["Back"].data.materials[0] = tex
+    glass = bpy.data.materials.new("Glass")
+    gnt = glass.node_tree
+    out = gnt.nodes.get("Material Output") or gnt.nodes.new("ShaderNodeOutputMaterial")
+    gnt.links.new(gnt.nodes.new("ShaderNodeBsdfGlass").outputs[0], out.inputs["Surface"])
+    objs["Front"].data.materials[0] = glass
+    objs["Right"].data.materials.clear()
+    job = _job(bpy)
+    job.run()
+    text = "\n".join(job.warnings)
+    assert "1 zero-area face(s)" in text and "Sliver (1)" in text
+    assert "Curve (CURVE)" in text
+    line = next(w for w in job.warnings if w.startswith("Materials not fully read"))
+    assert "Wood (Base Color is linked)" in line
+    assert "Glass (shader Glass BSDF is not read)" in line
+    assert "<no material> on Right (no material)" in line
+    assert "0.8 grey" in line
+    # The unreadable Back wall used the default grey and still got colours.
+    assert scenes.stored(objs["Back"].data, 1).min() > 0
