@@ -16,11 +16,16 @@ use galerkin_radiosity::scenes;
 // ---------------------------------------------------------------------------------------------
 // The C program.
 
-/// `target/<profile>`, from this test binary's own place (`target/<profile>/deps/c_abi-*`), so
-/// it matches the profile and any CARGO_TARGET_DIR.
-fn profile_dir() -> PathBuf {
+/// The directory of the cdylib this test run built. `cargo test` builds the library (crate types
+/// cdylib + rlib) into `target/<profile>/deps/`, next to this test binary, but copies it up to
+/// `target/<profile>/` only on `cargo build`; so deps/ first (always this build), then the
+/// profile directory (from the binary's place, so any CARGO_TARGET_DIR works; else the
+/// manifest's target/ for this profile).
+fn cdylib_dirs() -> Vec<PathBuf> {
     let exe = std::env::current_exe().expect("test binary path");
-    exe.parent()
+    let deps = exe.parent().map(Path::to_path_buf);
+    let profile = deps
+        .as_deref()
         .and_then(Path::parent)
         .map(Path::to_path_buf)
         .unwrap_or_else(|| {
@@ -32,7 +37,8 @@ fn profile_dir() -> PathBuf {
             Path::new(env!("CARGO_MANIFEST_DIR"))
                 .join("target")
                 .join(profile)
-        })
+        });
+    deps.into_iter().chain([profile]).collect()
 }
 
 fn cdylib_name() -> &'static str {
@@ -47,14 +53,21 @@ fn cdylib_name() -> &'static str {
 
 #[test]
 fn c_program_solves_two_patches() {
-    let dir = profile_dir();
-    let lib = dir.join(cdylib_name());
-    assert!(
-        lib.exists(),
-        "{} is missing. `cargo test` builds it with the library (crate-type cdylib); if it was \
-         removed, run `cargo build --lib` (add --release for a release test run) and retry.",
-        lib.display()
-    );
+    let dirs = cdylib_dirs();
+    let Some(dir) = dirs
+        .iter()
+        .find(|d| d.join(cdylib_name()).is_file())
+        .cloned()
+    else {
+        panic!(
+            "{} not found in {:?}. `cargo test` builds it with the library (crate-type cdylib); \
+             if it was removed, run `cargo build --lib` (add --release for a release test run) \
+             and retry.",
+            cdylib_name(),
+            dirs
+        );
+    };
+    println!("linking {}", dir.join(cdylib_name()).display());
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let exe = Path::new(env!("CARGO_TARGET_TMPDIR")).join("two_patches");
     let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
