@@ -1,0 +1,1 @@
+"""The native library (the C ABI of ``include/galerkin_radiosity.h``) through ctypes; bpy-free."""

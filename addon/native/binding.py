@@ -1,0 +1,488 @@
+"""ctypes binding of the galerkin-radiosity C ABI (``include/galerkin_radiosity.h``). bpy-free.
+
+Arrays cross the boundary as numpy buffers (``ndarray.ctypes.data_as``), never element by element.
+Every function of the ABI has its ``argtypes`` and ``restype`` declared in ``_declare``.
+
+Threads: ctypes releases the GIL during native calls, so ``Session.cancel()`` from another thread
+stops a running ``solve_frame``. The progress callback is called from the library's worker threads
+(one call at a time); an exception it raises is caught, cancels the solve, and is raised again from
+``solve_frame``.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import sys
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from ctypes import (
+    CFUNCTYPE,
+    POINTER,
+    Structure,
+    c_char_p,
+    c_double,
+    c_float,
+    c_int32,
+    c_size_t,
+    c_uint32,
+    c_void_p,
+)
+from pathlib import Path
+
+import numpy as np
+
+ABI_VERSION = 1
+ENV = "GALERKIN_RADIOSITY_LIB"
+
+# GrStatus
+OK = 0
+NULL_POINTER = 1
+INVALID_ARGUMENT = 2
+INVALID_SCENE = 3
+CANCELLED = 4
+NOT_SOLVED = 5
+INTERNAL = 6
+#: Not a GrStatus: the library could not be found or loaded.
+NOT_LOADED = -1
+
+METHODS = {"incremental": 0, "exact": 1, "full": 2}
+
+_ADDON = Path(__file__).resolve().parent.parent
+_REPO = _ADDON.parent
+
+
+class RadiosityError(Exception):
+    """A call failed; ``status`` is its GrStatus (``NOT_LOADED`` when the library is missing)."""
+
+    def __init__(self, message: str, status: int = INTERNAL):
+        super().__init__(message)
+        self.status = status
+
+
+class Cancelled(RadiosityError):
+    """The solve was cancelled (progress returned False, or ``Session.cancel()``)."""
+
+    def __init__(self, message: str = "cancelled", status: int = CANCELLED):
+        super().__init__(message, status)
+
+
+class _Settings(Structure):
+    _fields_ = [
+        ("basis_order", c_uint32),
+        ("quadrature_order", c_uint32),
+        ("tolerance", c_double),
+        ("visibility", c_uint32),
+        ("visibility_samples", c_uint32),
+        ("threads", c_uint32),
+        ("method", c_uint32),
+    ]
+
+
+_PROGRESS = CFUNCTYPE(c_int32, c_double, c_char_p, c_void_p)
+_F32 = POINTER(c_float)
+_U32 = POINTER(c_uint32)
+_SESSION = c_void_p
+
+
+def _library_name() -> str:
+    if sys.platform == "darwin":
+        return "libgalerkin_radiosity.dylib"
+    if sys.platform in ("win32", "cygwin"):
+        return "galerkin_radiosity.dll"
+    return "libgalerkin_radiosity.so"
+
+
+def library_candidates() -> list[Path]:
+    """Where ``load()`` looks, in order: $GALERKIN_RADIOSITY_LIB (a file, or a folder holding the
+    library), the add-on's own ``lib/`` (packaged extension), then the repository's
+    ``target/release`` and ``target/debug``."""
+    name = _library_name()
+    out = []
+    env = os.environ.get(ENV)
+    if env:
+        p = Path(env)
+        out.append(p / name if p.is_dir() else p)
+    out += [_ADDON / "lib" / name, _REPO / "target" / "release" / name, _REPO / "target" / "debug" / name]
+    return out
+
+
+def _declare(lib: ctypes.CDLL) -> None:
+    sigs = {
+        "gr_abi_version": ([], c_uint32),
+        "gr_version_string": ([], c_char_p),
+        "gr_settings_default": ([POINTER(_Settings)], c_uint32),
+        "gr_last_error": ([ctypes.c_char_p, c_size_t], c_size_t),
+        "gr_session_new": (
+            [POINTER(_Settings), c_uint32, _F32, _F32, c_uint32, _U32, _F32, _U32, _U32, _U32, _U32,
+             _F32, c_size_t, c_size_t, POINTER(_SESSION)],
+            c_uint32,
+        ),
+        "gr_session_set_object_matrix": ([_SESSION, c_uint32, _F32], c_uint32),
+        "gr_session_set_material_emission": ([_SESSION, c_uint32, _F32], c_uint32),
+        "gr_session_solve_frame": ([_SESSION, c_double, _PROGRESS, c_void_p], c_uint32),
+        "gr_session_cancel": ([_SESSION], c_uint32),
+        "gr_session_frame_stats_json": ([_SESSION, c_char_p, c_size_t, POINTER(c_size_t)], c_uint32),
+        "gr_session_object_count": ([_SESSION, _U32], c_uint32),
+        "gr_session_face_count": ([_SESSION, c_uint32, _U32], c_uint32),
+        "gr_session_corner_count": ([_SESSION, c_uint32, _U32], c_uint32),
+        "gr_session_face_radiosity": ([_SESSION, c_uint32, _F32, c_size_t], c_uint32),
+        "gr_session_corner_radiosity": ([_SESSION, c_uint32, _F32, c_size_t], c_uint32),
+        "gr_session_eval": ([_SESSION, c_size_t, _U32, _U32, _F32, _F32], c_uint32),
+        "gr_session_free": ([_SESSION], None),
+    }
+    for name, (args, res) in sigs.items():
+        fn = getattr(lib, name)
+        fn.argtypes = args
+        fn.restype = res
+
+
+_lib: ctypes.CDLL | None = None
+_lib_lock = threading.Lock()
+
+
+def _open(path: Path) -> ctypes.CDLL:
+    lib = ctypes.CDLL(str(path))
+    _declare(lib)  # AttributeError when a symbol is missing (an old build)
+    abi = lib.gr_abi_version()
+    if abi != ABI_VERSION:
+        raise OSError(f"ABI version {abi}, this binding needs {ABI_VERSION}")
+    return lib
+
+
+def load(path: str | os.PathLike | None = None) -> ctypes.CDLL:
+    """The library, loaded once (from ``path`` if given, else the first usable candidate)."""
+    global _lib
+    with _lib_lock:
+        if path is None and _lib is not None:
+            return _lib
+        candidates = [Path(path)] if path is not None else library_candidates()
+        looked = []
+        for c in candidates:
+            if not c.is_file():
+                looked.append(f"{c} (no such file)")
+                continue
+            try:
+                _lib = _open(c)
+                return _lib
+            except (OSError, AttributeError) as e:
+                looked.append(f"{c} ({e})")
+        raise RadiosityError(
+            "galerkin-radiosity native library not found or not usable; looked in: "
+            + "; ".join(looked)
+            + f". Build it with `cargo build --release` or set {ENV}.",
+            NOT_LOADED,
+        )
+
+
+def abi_version() -> int:
+    return int(load().gr_abi_version())
+
+
+def version() -> str:
+    return load().gr_version_string().decode()
+
+
+def _last_error(lib: ctypes.CDLL) -> str:
+    n = lib.gr_last_error(None, 0)
+    buf = ctypes.create_string_buffer(n + 1)
+    lib.gr_last_error(buf, n + 1)
+    return buf.value.decode("utf-8", errors="replace")
+
+
+def _check(lib: ctypes.CDLL, status: int) -> None:
+    if status == OK:
+        return
+    message = _last_error(lib) or f"status {status}"
+    if status == CANCELLED:
+        raise Cancelled(message)
+    raise RadiosityError(message, status)
+
+
+def _invalid(message: str) -> RadiosityError:
+    return RadiosityError(message, INVALID_ARGUMENT)
+
+
+def _floats(a, shape: tuple, what: str) -> np.ndarray:
+    """A C-contiguous float32 copy (or view) of ``a`` with ``shape`` (-1: any length)."""
+    try:
+        arr = np.ascontiguousarray(a, dtype=np.float32)
+    except (TypeError, ValueError) as e:
+        raise _invalid(f"{what}: not an array of numbers ({e})") from e
+    if arr.ndim != len(shape) or any(s not in (-1, n) for s, n in zip(shape, arr.shape, strict=True)):
+        raise _invalid(f"{what}: shape {arr.shape}, expected {tuple('n' if s == -1 else s for s in shape)}")
+    return arr
+
+
+def _indices(a, length: int | None, what: str) -> np.ndarray:
+    """A C-contiguous uint32 array from integers in 0..2^32-1."""
+    arr = np.asarray(a)
+    if arr.ndim != 1:
+        raise _invalid(f"{what}: shape {arr.shape}, expected (n,)")
+    if arr.size and not (np.issubdtype(arr.dtype, np.integer) or arr.dtype == np.bool_):
+        raise _invalid(f"{what}: dtype {arr.dtype} is not an integer type")
+    if arr.size and (int(arr.min()) < 0 or int(arr.max()) > 0xFFFFFFFF):
+        raise _invalid(f"{what}: values must be in 0..2^32-1")
+    if length is not None and arr.shape[0] != length:
+        raise _invalid(f"{what}: {arr.shape[0]} entries, expected {length}")
+    return np.ascontiguousarray(arr, dtype=np.uint32)
+
+
+def _matrix(m, what: str) -> np.ndarray:
+    """A 4x4 row-major float32 matrix from a (4, 4) array or 16 numbers."""
+    arr = _floats(m, (-1,) * np.ndim(m), what) if np.ndim(m) else None
+    if arr is None or arr.size != 16:
+        raise _invalid(f"{what}: expected a 4x4 matrix")
+    return np.ascontiguousarray(arr.reshape(4, 4))
+
+
+def _ptr(arr: np.ndarray, kind):
+    return arr.ctypes.data_as(kind)
+
+
+def _u32(value, what: str) -> int:
+    try:
+        v = int(value)
+    except (TypeError, ValueError) as e:
+        raise _invalid(f"{what}: {value!r} is not an integer") from e
+    if not 0 <= v <= 0xFFFFFFFF:
+        raise _invalid(f"{what}: {v} is outside 0..2^32-1")
+    return v
+
+
+def _settings(lib: ctypes.CDLL, settings: dict) -> _Settings:
+    s = _Settings()
+    _check(lib, lib.gr_settings_default(ctypes.byref(s)))
+    for key, value in (settings or {}).items():
+        if key == "method":
+            if value not in METHODS:
+                raise _invalid(f"settings.method {value!r} is not one of {', '.join(METHODS)}")
+            s.method = METHODS[value]
+        elif key == "tolerance":
+            s.tolerance = float(value)
+        elif key == "visibility":
+            s.visibility = _u32(value, "settings.visibility")  # True/False or 1/0
+        elif key in ("basis_order", "quadrature_order", "visibility_samples", "threads"):
+            setattr(s, key, _u32(value, f"settings.{key}"))
+        else:
+            raise _invalid(f"unknown setting {key!r}")
+    return s
+
+
+class Session:
+    """A baking session: the scene, its thread pool and the last solved frame.
+
+    ``settings``: optional keys basis_order, quadrature_order, tolerance, visibility,
+    visibility_samples, threads, method ('incremental' | 'exact' | 'full').
+    ``reflectance``, ``emission``: (M, 3) per material. ``objects``: dicts with ``vertices``
+    (N, 3), ``face_sizes`` (F,) of 3 or 4, ``face_indices`` (sum of face_sizes,) local to the
+    object, ``face_materials`` (F,), and optionally ``matrix`` (4, 4) row-major world-from-object
+    (Blender's ``np.array(obj.matrix_world)``).
+    """
+
+    def __init__(self, settings: dict, reflectance, emission, objects: list[dict]):
+        self._lib = lib = load()
+        self._ptr: int | None = None
+        self._lock = threading.Lock()
+        self._calls = 0
+        self._closing = False
+        s = _settings(lib, settings)
+        rho = _floats(reflectance, (-1, 3), "reflectance")
+        em = _floats(emission, (rho.shape[0], 3), "emission")
+        verts, sizes, idx, mats, matrices = [], [], [], [], []
+        any_matrix = False
+        for i, o in enumerate(objects):
+            try:
+                v = _floats(o["vertices"], (-1, 3), f"object {i} vertices")
+                fs = _indices(o["face_sizes"], None, f"object {i} face_sizes")
+                fi = _indices(o["face_indices"], None, f"object {i} face_indices")
+                fm = _indices(o["face_materials"], fs.shape[0], f"object {i} face_materials")
+            except KeyError as e:
+                raise _invalid(f"object {i}: missing key {e}") from e
+            m = o.get("matrix")
+            if m is None:
+                m = np.eye(4, dtype=np.float32)
+            else:
+                any_matrix = True
+                m = _matrix(m, f"object {i} matrix")
+            verts.append(v)
+            sizes.append(fs)
+            idx.append(fi)
+            mats.append(fm)
+            matrices.append(m)
+        n = len(objects)
+        vertex_counts = np.array([len(v) for v in verts], np.uint32)
+        face_counts = np.array([len(f) for f in sizes], np.uint32)
+        vertices = np.concatenate(verts).reshape(-1) if n else np.zeros(0, np.float32)
+        face_sizes = np.concatenate(sizes) if n else np.zeros(0, np.uint32)
+        face_indices = np.concatenate(idx) if n else np.zeros(0, np.uint32)
+        face_materials = np.concatenate(mats) if n else np.zeros(0, np.uint32)
+        mat = np.ascontiguousarray(np.stack(matrices), np.float32).reshape(-1) if any_matrix else None
+        out = _SESSION()
+        status = lib.gr_session_new(
+            ctypes.byref(s), rho.shape[0], _ptr(rho, _F32), _ptr(em, _F32),
+            n, _ptr(vertex_counts, _U32), _ptr(vertices, _F32),
+            _ptr(face_counts, _U32), _ptr(face_sizes, _U32), _ptr(face_indices, _U32),
+            _ptr(face_materials, _U32), None if mat is None else _ptr(mat, _F32),
+            vertices.size, face_indices.size, ctypes.byref(out),
+        )
+        _check(lib, status)
+        self._ptr = out.value
+        self._faces = face_counts
+        self._corners = np.array([int(f.sum()) for f in sizes], np.int64)
+
+    # -- lifetime -------------------------------------------------------------------------------
+
+    @contextmanager
+    def _use(self) -> Iterator[int]:
+        """The session pointer for one call; a close() during the call frees after it."""
+        with self._lock:
+            if self._ptr is None or self._closing:
+                raise _invalid("the session is closed")
+            self._calls += 1
+            ptr = self._ptr
+        try:
+            yield ptr
+        finally:
+            free = None
+            with self._lock:
+                self._calls -= 1
+                if self._closing and self._calls == 0 and self._ptr is not None:
+                    free, self._ptr = self._ptr, None
+            if free is not None:
+                self._lib.gr_session_free(free)
+
+    def close(self) -> None:
+        """Frees the native session (a running solve is cancelled and freed when it returns)."""
+        lock = getattr(self, "_lock", None)
+        if lock is None:
+            return
+        with lock:
+            if self._ptr is None or self._closing:
+                return
+            self._closing = True
+            if self._calls:
+                self._lib.gr_session_cancel(self._ptr)
+                return
+            ptr, self._ptr = self._ptr, None
+        self._lib.gr_session_free(ptr)
+
+    def __enter__(self) -> Session:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001 - nothing may escape __del__ (interpreter shutdown)
+            pass
+
+    def _call(self, name: str, *args) -> None:
+        """Calls ``name(session, *args)`` and raises on a failed status."""
+        with self._use() as p:
+            _check(self._lib, getattr(self._lib, name)(p, *args))
+
+    # -- changes --------------------------------------------------------------------------------
+
+    def set_object_matrix(self, index: int, matrix) -> None:
+        """Object ``index``'s world-from-object matrix (4x4 row-major) from the next frame on."""
+        m = _matrix(matrix, "matrix")
+        self._call("gr_session_set_object_matrix", _u32(index, "object"), _ptr(m, _F32))
+
+    def set_material_emission(self, index: int, rgb) -> None:
+        """Material ``index``'s emission (RGB, W/m^2) from the next frame on."""
+        e = _floats(rgb, (3,), "rgb")
+        self._call("gr_session_set_material_emission", _u32(index, "material"), _ptr(e, _F32))
+
+    # -- solving --------------------------------------------------------------------------------
+
+    def solve_frame(self, frame: float, progress: Callable[[float, str], bool | None] | None = None) -> dict:
+        """Solves ``frame``; returns its statistics. ``progress(fraction, stage)`` returning False
+        cancels (raises ``Cancelled``); it is called from worker threads."""
+        raised: list[BaseException] = []
+
+        def trampoline(fraction, stage, _user):
+            if raised:
+                return 0
+            try:
+                r = progress(fraction, stage.decode() if stage else "")
+            except BaseException as e:  # noqa: BLE001 - must not cross into C; re-raised below
+                raised.append(e)
+                return 0
+            return 0 if (r is not None and not r) else 1
+
+        callback = _PROGRESS(trampoline) if progress is not None else _PROGRESS()  # NULL
+        with self._use() as p:
+            status = self._lib.gr_session_solve_frame(p, float(frame), callback, None)
+            del callback  # kept alive until here, after the call returned
+            if raised:
+                raise raised[0]
+            _check(self._lib, status)
+            return self._stats(p)
+
+    def cancel(self) -> None:
+        """Thread-safe: a running ``solve_frame`` stops soon and raises ``Cancelled``."""
+        try:
+            with self._use() as p:
+                self._lib.gr_session_cancel(p)
+        except RadiosityError:
+            pass  # closed: nothing runs
+
+    def _stats(self, p) -> dict:
+        needed = c_size_t(0)
+        status = self._lib.gr_session_frame_stats_json(p, None, 0, ctypes.byref(needed))
+        if status != INVALID_ARGUMENT:
+            _check(self._lib, status)
+        buf = ctypes.create_string_buffer(needed.value)
+        _check(self._lib, self._lib.gr_session_frame_stats_json(p, buf, needed.value, ctypes.byref(needed)))
+        return json.loads(buf.value.decode())
+
+    def frame_stats(self) -> dict:
+        """The last solved frame's statistics."""
+        with self._use() as p:
+            return self._stats(p)
+
+    # -- results --------------------------------------------------------------------------------
+
+    @property
+    def object_count(self) -> int:
+        return len(self._faces)
+
+    def _object(self, obj) -> int:
+        o = _u32(obj, "object")
+        if o >= len(self._faces):
+            raise _invalid(f"object {o} out of range (0..{len(self._faces)})")
+        return o
+
+    def face_radiosity(self, obj: int) -> np.ndarray:
+        """Area-mean radiosity per face of object ``obj``: (F, 3) float32, W/m^2."""
+        o = self._object(obj)
+        out = np.empty((int(self._faces[o]), 3), np.float32)
+        self._call("gr_session_face_radiosity", o, _ptr(out, _F32), out.size)
+        return out
+
+    def corner_radiosity(self, obj: int) -> np.ndarray:
+        """Radiosity at each face corner of object ``obj`` (faces in order, corners in face
+        order): (C, 3) float32, W/m^2."""
+        o = self._object(obj)
+        out = np.empty((int(self._corners[o]), 3), np.float32)
+        self._call("gr_session_corner_radiosity", o, _ptr(out, _F32), out.size)
+        return out
+
+    def eval(self, objects, faces, st) -> np.ndarray:
+        """Radiosity at face parameters ``st`` (n, 2) in [0,1]^2 of ``faces`` (n,) of ``objects``
+        (n,) or one object index: (n, 3) float32."""
+        f = _indices(faces, None, "faces")
+        n = f.shape[0]
+        obj = np.asarray(objects)
+        if obj.ndim == 0:
+            obj = np.full(n, obj)
+        o = _indices(obj, n, "objects")
+        st = _floats(np.asarray(st, dtype=np.float32).reshape(-1, 2), (n, 2), "st")
+        out = np.empty((n, 3), np.float32)
+        self._call("gr_session_eval", n, _ptr(o, _U32), _ptr(f, _U32), _ptr(st, _F32), _ptr(out, _F32))
+        return out
