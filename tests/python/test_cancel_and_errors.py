@@ -84,7 +84,7 @@ def _job(bpy, **changes):
     from addon.blender import bake
 
     sc = bpy.context.scene
-    settings = bake.settings_from_scene(sc).replace(basis_order=0, **changes)
+    settings = bake.settings_from_scene(sc).replace(**{"basis_order": 0, **changes})
     return bake.BakeJob(bpy.context, settings)
 
 
@@ -108,7 +108,8 @@ def test_no_mesh_objects(blender):
     light = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
     bpy.context.scene.collection.objects.link(light)
     msg = _error(bpy)
-    assert "no visible, renderable mesh objects" in msg and "Light objects are ignored" in msg and "Lamp" in msg
+    assert "no visible, renderable mesh objects" in msg
+    assert "Light objects are ignored" in msg and "Lamp" in msg
     # The operator reports the same message as an error.
     with pytest.raises(RuntimeError, match="no visible, renderable mesh objects"):
         bpy.ops.radiosity.bake()
@@ -158,3 +159,52 @@ def test_zero_area_faces_non_meshes_and_unreadable_materials_are_reported(blende
     assert "0.8 grey" in line
     # The unreadable Back wall used the default grey and still got colours.
     assert scenes.stored(objs["Back"].data, 1).min() > 0
+
+
+def test_worker_thread_solve_and_cancel_from_the_main_thread(blender):
+    """What the modal operator does: solve on a worker thread, cancel with Session.cancel()
+    from the main thread (Esc), then finish with complete frames only."""
+    import threading
+
+    bpy = blender
+    from addon.blender import bake
+
+    objs = scenes.cornell_box(bpy, n=6, light_frames=(1, 3), box=True)
+    job = _job(bpy, basis_order=2, quality="HIGH")
+    job.start()
+    b = bake.binding()
+    outcome = []
+
+    def solve():
+        try:
+            job.solve()
+        except b.Cancelled as e:
+            outcome.append(e)
+
+    # Frame 1 on a worker thread, committed on the main thread.
+    job.prepare()
+    worker = threading.Thread(target=solve)
+    worker.start()
+    worker.join()
+    assert outcome == []
+    job.commit()
+    # Frame 2: cancelled from the main thread once the worker reports progress.
+    started = threading.Event()
+    bake.listeners.append(lambda e: started.set() if e["kind"] == "progress" else None)
+    job.prepare()
+    worker = threading.Thread(target=solve)
+    worker.start()
+    assert started.wait(30)
+    job.cancel()
+    worker.join(30)
+    assert not worker.is_alive()
+    if outcome:  # else the frame finished before the cancel arrived; it is then complete
+        assert isinstance(outcome[0], b.Cancelled)
+        job.cancelled = True
+    else:
+        job.commit()
+    job.finish()
+    print("cancelled inside the frame:", bool(outcome))
+    expected = [1] if outcome else [1, 2]
+    assert scenes.rad_frames(objs["Floor"].data) == expected
+    assert "cancelled" in job.summary
