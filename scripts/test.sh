@@ -9,6 +9,7 @@ cargo fmt --all -- --check
 cargo clippy --release --all-targets -- -D warnings
 
 echo "== cargo test (release: the C test links target/release)"
+cargo build --release --lib   # the C test links the cdylib
 cargo test --release
 
 if [ -d tests/python ] && ls tests/python/test_*.py >/dev/null 2>&1; then
