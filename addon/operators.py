@@ -13,7 +13,7 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
 
     bl_idname = "radiosity.bake"
     bl_label = "Bake Radiosity"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     _job = None
     _thread = None
@@ -118,17 +118,20 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
 
         b = bake.binding()
         outcome = self._outcome
-        if isinstance(outcome, b.Cancelled) or job.cancel_event.is_set():
+        if isinstance(outcome, b.Cancelled):
             job.cancelled = True
             return self._end(context)
         if outcome is not None:
             self._error = str(outcome)
             return self._end(context, failed=True)
         try:
-            job.commit()
+            job.commit()  # the frame completed: keep it, even if Esc came meanwhile
         except Exception as e:  # noqa: BLE001 - reported, and the complete frames are kept
             self._error = f"writing frame {frame}: {e}"
             return self._end(context, failed=True)
+        if job.cancel_event.is_set():
+            job.cancelled = True
+            return self._end(context)
         if job.has_next():
             if not self._begin_frame(context):
                 return self._end(context, failed=True)
@@ -143,13 +146,15 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
         wm.progress_end()
         context.workspace.status_text_set(None)
         self._job.finish()
+        # FINISHED whenever frames were written, so that the undo step covers them.
+        result = {"FINISHED"} if self._job.done else {"CANCELLED"}
         if failed:
             for line in self._job.warnings:
                 self.report({"WARNING"}, line)
             self.report({"ERROR"}, f"Radiosity: {self._error} ({self._job.summary})")
-            return {"CANCELLED"}
+            return result
         self._report_end(self._job)
-        return {"CANCELLED"} if self._job.cancelled else {"FINISHED"}
+        return result
 
 
 class RADIOSITY_OT_clear(bpy.types.Operator):

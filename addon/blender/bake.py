@@ -198,7 +198,12 @@ class BakeJob:
             s.validate()
         except SettingsError as e:
             raise BakeError(str(e)) from e
-        binding().load()  # a missing library fails here, before anything is touched
+        try:
+            binding().load()  # a missing library fails here, before anything is touched
+        except ImportError as e:
+            raise BakeError(f"the add-on's native binding is missing: {e}") from e
+        except binding().RadiosityError as e:
+            raise BakeError(str(e)) from e
         self.frames = s.baked_frames()
         self.original_frame = self.scene.frame_current
         self.t0 = time.perf_counter()
@@ -544,12 +549,15 @@ class BakeJob:
                 except b.Cancelled:
                     self.cancelled = True
                     break
-                except b.RadiosityError as e:
-                    raise BakeError(str(e)) from e
                 self.commit()
+        except b.RadiosityError as e:
+            self.finish()
+            raise BakeError(str(e)) from e
         except BaseException:
             self.finish()
             raise
+        if self.cancel_event.is_set():
+            self.cancelled = True
         return self.finish()
 
 

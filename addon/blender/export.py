@@ -198,11 +198,12 @@ class Sample:
         return FrameState(mats, geometry, emission_key(self.emission))
 
 
-def sample(depsgraph, rest: Export) -> Sample:
-    """Matrices, vertices of deforming objects, and emission at the depsgraph's current frame."""
+def sample(depsgraph, rest: Export, objects=None) -> Sample:
+    """Matrices, vertices of deforming objects, and emission at the depsgraph's current frame.
+    `objects`: the bpy objects in library order, if `rest`'s references may be stale (undo)."""
     matrices, vertices = [], []
-    for o in rest.objects:
-        ev = o.obj.evaluated_get(depsgraph)
+    for i, o in enumerate(rest.objects):
+        ev = (objects[i] if objects is not None else o.obj).evaluated_get(depsgraph)
         matrices.append(np.array(ev.matrix_world, np.float64))
         if o.deforms:
             mesh = ev.to_mesh()
@@ -214,7 +215,7 @@ def sample(depsgraph, rest: Export) -> Sample:
             finally:
                 ev.to_mesh_clear()
             if n_loops != o.data.loop_count or n != len(o.data.vertices):
-                raise TopologyChanged(o.obj.name)
+                raise TopologyChanged(o.data.name)
             vertices.append(co.reshape(-1, 3))
         else:
             vertices.append(None)

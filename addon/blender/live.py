@@ -40,7 +40,10 @@ def update(scene, depsgraph=None) -> bool:
     _busy = True
     try:
         return _update(scene)
-    except (bake.BakeError, TopologyChanged) as e:
+    except ReferenceError:
+        bake.drop_held(scene)  # objects the held session knew were freed (undo): start over
+        return False
+    except (bake.BakeError, TopologyChanged, bake.binding().RadiosityError) as e:
         stats["last_error"] = str(e)
         print(f"Radiosity live preview: {e}")
         return False
@@ -62,7 +65,7 @@ def _update(scene) -> bool:
     h = bake.held(scene)
     rest = h.export if h is not None else None
     names = [o.name for o in sel.objects]
-    if rest is None or [o.obj.name for o in rest.objects] != names:
+    if rest is None or [o.data.name for o in rest.objects] != names:
         rest = export(dg, sel.objects)
         key = _scene_key(scene, rest)
         if h is None or h.scene_key != key:
@@ -70,11 +73,11 @@ def _update(scene) -> bool:
             if not (e > 0).any():
                 raise bake.BakeError("no emitters in the scene")
             bake.drop_held(scene)
-            smp = sample(dg, rest)
+            smp = sample(dg, rest, sel.objects)
             h = bake.new_session(bake.settings_from_scene(scene), rest, smp.state(rest), key)
             bake._held[bake.scene_id(scene)] = h
             h.frame = None
-    smp = sample(dg, rest)
+    smp = sample(dg, rest, sel.objects)
     state = smp.state(rest)
     if state.geometry != h.state.geometry:
         rest = export(dg, sel.objects)
@@ -91,13 +94,13 @@ def _update(scene) -> bool:
     stats["solves"] += 1
     stats["last_seconds"] = time.perf_counter() - t
     stats["last_error"] = None
-    for i, o in enumerate(rest.objects):
-        mesh = o.obj.data
-        if not o.original_topology or mesh.library is not None:
+    for i, (o, obj) in enumerate(zip(rest.objects, sel.objects, strict=True)):
+        mesh = obj.data
+        if not o.original_topology or mesh.library is not None or len(mesh.loops) != o.data.loop_count:
             continue
         rgb = radiance_from_radiosity(o.data.split.to_loops(h.session.corner_radiosity(i)))
         attributes.ensure_result(mesh, rgb)
-        switch.set_muted(o.obj, True)
+        switch.set_muted(obj, True)
     return True
 
 
