@@ -16,16 +16,8 @@ use galerkin_radiosity::system::{System, no_progress};
 fn peak_rss_mib() -> f64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("VmHWM"))
-                .map(|l| l.to_string())
-        })
-        .and_then(|l| {
-            l.split_whitespace()
-                .nth(1)
-                .and_then(|k| k.parse::<f64>().ok())
-        })
+        .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM")).map(|l| l.to_string()))
+        .and_then(|l| l.split_whitespace().nth(1).and_then(|k| k.parse::<f64>().ok()))
         .map_or(f64::NAN, |kib| kib / 1024.0)
 }
 
@@ -48,13 +40,7 @@ fn main() {
         };
         let orders: Vec<usize> = if n == 14 { vec![2] } else { orders.to_vec() };
         for &order in &orders {
-            let scene = scenes::cornell_box(
-                n,
-                Settings {
-                    basis_order: order,
-                    ..Settings::default()
-                },
-            );
+            let scene = scenes::cornell_box(n, Settings { basis_order: order, ..Settings::default() });
             let start = Instant::now();
             let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
             sys.solve(scene.settings.tolerance, &|| false).unwrap();

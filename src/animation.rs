@@ -59,19 +59,12 @@ pub fn advance(
     let basis: Basis = sys.basis;
     let new_elements = build_elements(next, frame, basis);
     if new_elements.len() != sys.elements.len()
-        || new_elements
-            .iter()
-            .zip(&sys.elements)
-            .any(|(a, b)| (a.object, a.face) != (b.object, b.face))
+        || new_elements.iter().zip(&sys.elements).any(|(a, b)| (a.object, a.face) != (b.object, b.face))
     {
         return Ok(Outcome::NeedsRebuild);
     }
     let n = new_elements.len();
-    let moved: Vec<bool> = new_elements
-        .iter()
-        .zip(&sys.elements)
-        .map(|(a, b)| a.patch != b.patch)
-        .collect();
+    let moved: Vec<bool> = new_elements.iter().zip(&sys.elements).map(|(a, b)| a.patch != b.patch).collect();
     // Objects whose placement changed by a pure translation (the seed's case) or otherwise.
     let translated: Vec<bool> = prev
         .objects
@@ -82,19 +75,12 @@ pub fn advance(
             ma.x_axis == mb.x_axis && ma.y_axis == mb.y_axis && ma.z_axis == mb.z_axis
         })
         .collect();
-    let swept = moved
-        .iter()
-        .enumerate()
-        .filter(|(_, m)| **m)
-        .fold(Aabb::EMPTY, |b, (e, _)| {
-            b.union(sys.elements[e].patch.bounds())
-                .union(new_elements[e].patch.bounds())
-        });
+    let swept = moved.iter().enumerate().filter(|(_, m)| **m).fold(Aabb::EMPTY, |b, (e, _)| {
+        b.union(sys.elements[e].patch.bounds()).union(new_elements[e].patch.bounds())
+    });
     let any_moved = moved.iter().any(|&m| m);
-    let mut stats = UpdateStats {
-        moved_elements: moved.iter().filter(|&&m| m).count(),
-        ..Default::default()
-    };
+    let mut stats =
+        UpdateStats { moved_elements: moved.iter().filter(|&&m| m).count(), ..Default::default() };
 
     let patches: Vec<Patch> = new_elements.iter().map(|e| e.patch).collect();
     let mut delta_b = vec![[0.0f64; 3]; n * basis.len()];
@@ -106,9 +92,7 @@ pub fn advance(
             vis_axis: s.visibility_samples,
             adaptive: s.adaptive_quadrature,
         };
-        let occluders = s
-            .visibility
-            .then(|| Occluders::new(&patches, s.visibility_samples));
+        let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
         let geom = ElementGeometry::new(&patches, &ctx);
         let scale = swept.diagonal().length().max(1e-300) * 1e-9;
         // Candidate pairs, with the reason they are recomputed.
@@ -127,9 +111,7 @@ pub fn advance(
                     if !bi.union(bj).overlaps(swept) {
                         return None;
                     }
-                    Shaft::new(&bi, &bj)
-                        .may_contain_box(swept, scale)
-                        .then_some((i as u32, j as u32, true))
+                    Shaft::new(&bi, &bj).may_contain_box(swept, scale).then_some((i as u32, j as u32, true))
                 })
             })
             .collect();
@@ -139,18 +121,10 @@ pub fn advance(
             .par_iter()
             .map(|&(i, j, _)| {
                 let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if d.is_multiple_of(4096)
-                    && !progress(d as f64 / total.max(1) as f64, "kernel update")
-                {
+                if d.is_multiple_of(4096) && !progress(d as f64 / total.max(1) as f64, "kernel update") {
                     return Err(Error::Cancelled);
                 }
-                Ok(compute_pair(
-                    &ctx,
-                    &geom,
-                    occluders.as_ref(),
-                    i as usize,
-                    j as usize,
-                ))
+                Ok(compute_pair(&ctx, &geom, occluders.as_ref(), i as usize, j as usize))
             })
             .collect::<Result<_>>()?;
         let nb = basis.len();
@@ -169,17 +143,16 @@ pub fn advance(
                 None => (zeros.clone(), zeros.clone(), Visibility::Blocked),
             };
             if vis_only {
-                let old_vis = existing
-                    .map(|p| sys.links.pair(p).visibility.clone())
-                    .unwrap_or(Visibility::Blocked);
+                let old_vis =
+                    existing.map(|p| sys.links.pair(p).visibility.clone()).unwrap_or(Visibility::Blocked);
                 if old_vis == vis {
                     continue;
                 }
                 stats.recomputed_visibility += 1;
             } else {
                 let obj = |e: u32| sys.elements[e as usize].object as usize;
-                let pure = (!moved[i as usize] || translated[obj(i)])
-                    && (!moved[j as usize] || translated[obj(j)]);
+                let pure =
+                    (!moved[i as usize] || translated[obj(i)]) && (!moved[j as usize] || translated[obj(j)]);
                 if pure {
                     stats.recomputed_translation += 1;
                 } else {
@@ -192,11 +165,8 @@ pub fn advance(
             add_delta(&mut delta_b, sys, j as usize, i as usize, &new_ji, &old_ji);
             match existing {
                 Some(p) => {
-                    let (ab, ba) = if sys.links.pair(p).a == i {
-                        (&new_ij, &new_ji)
-                    } else {
-                        (&new_ji, &new_ij)
-                    };
+                    let (ab, ba) =
+                        if sys.links.pair(p).a == i { (&new_ij, &new_ji) } else { (&new_ji, &new_ij) };
                     sys.links.set(p, ab, ba, vis);
                 }
                 None => {
@@ -224,23 +194,12 @@ pub fn advance(
     }
     sys.elements = new_elements;
     sys.emission = emission;
-    sys.reflectance = sys
-        .elements
-        .iter()
-        .map(|e| next.materials[e.material as usize].reflectance)
-        .collect();
+    sys.reflectance = sys.elements.iter().map(|e| next.materials[e.material as usize].reflectance).collect();
 
     let solve_start = std::time::Instant::now();
     let stop = s.tolerance * sys.emitted_power();
     let cancel = || !progress(1.0, "solve");
-    let shot = solver::shoot(
-        &sys.links,
-        &sys.reflectance,
-        &sys.areas(),
-        &mut sys.solution,
-        stop,
-        &cancel,
-    )?;
+    let shot = solver::shoot(&sys.links, &sys.reflectance, &sys.areas(), &mut sys.solution, stop, &cancel)?;
     stats.solve_seconds = solve_start.elapsed().as_secs_f64();
     stats.shots = shot.shots;
     Ok(Outcome::Updated(stats))

@@ -95,10 +95,7 @@ mod tests {
             for k in 0..n {
                 for l in 0..n {
                     let want = if k == l { 1.0 } else { 0.0 };
-                    assert!(
-                        (gram[k * n + l] - want).abs() < 1e-12,
-                        "order {order} <{k}|{l}>"
-                    );
+                    assert!((gram[k * n + l] - want).abs() < 1e-12, "order {order} <{k}|{l}>");
                 }
             }
         }

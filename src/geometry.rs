@@ -18,27 +18,18 @@ pub struct Aabb {
 }
 
 impl Aabb {
-    pub const EMPTY: Aabb = Aabb {
-        min: DVec3::splat(f64::INFINITY),
-        max: DVec3::splat(f64::NEG_INFINITY),
-    };
+    pub const EMPTY: Aabb = Aabb { min: DVec3::splat(f64::INFINITY), max: DVec3::splat(f64::NEG_INFINITY) };
 
     pub fn from_points(points: &[DVec3]) -> Self {
         points.iter().fold(Self::EMPTY, |b, p| b.grow(*p))
     }
 
     pub fn grow(self, p: DVec3) -> Self {
-        Aabb {
-            min: self.min.min(p),
-            max: self.max.max(p),
-        }
+        Aabb { min: self.min.min(p), max: self.max.max(p) }
     }
 
     pub fn union(self, o: Aabb) -> Self {
-        Aabb {
-            min: self.min.min(o.min),
-            max: self.max.max(o.max),
-        }
+        Aabb { min: self.min.min(o.min), max: self.max.max(o.max) }
     }
 
     pub fn overlaps(&self, o: &Aabb) -> bool {
@@ -64,19 +55,11 @@ pub struct Rect {
 }
 
 impl Rect {
-    pub const UNIT: Rect = Rect {
-        s0: 0.0,
-        s1: 1.0,
-        t0: 0.0,
-        t1: 1.0,
-    };
+    pub const UNIT: Rect = Rect { s0: 0.0, s1: 1.0, t0: 0.0, t1: 1.0 };
 
     /// Maps local `(s,t)` in `[0,1]^2` into this rectangle.
     pub fn map(&self, s: f64, t: f64) -> (f64, f64) {
-        (
-            self.s0 + s * (self.s1 - self.s0),
-            self.t0 + t * (self.t1 - self.t0),
-        )
+        (self.s0 + s * (self.s1 - self.s0), self.t0 + t * (self.t1 - self.t0))
     }
 
     pub fn measure(&self) -> f64 {
@@ -88,30 +71,10 @@ impl Rect {
         let sm = 0.5 * (self.s0 + self.s1);
         let tm = 0.5 * (self.t0 + self.t1);
         [
-            Rect {
-                s0: self.s0,
-                s1: sm,
-                t0: self.t0,
-                t1: tm,
-            },
-            Rect {
-                s0: sm,
-                s1: self.s1,
-                t0: self.t0,
-                t1: tm,
-            },
-            Rect {
-                s0: sm,
-                s1: self.s1,
-                t0: tm,
-                t1: self.t1,
-            },
-            Rect {
-                s0: self.s0,
-                s1: sm,
-                t0: tm,
-                t1: self.t1,
-            },
+            Rect { s0: self.s0, s1: sm, t0: self.t0, t1: tm },
+            Rect { s0: sm, s1: self.s1, t0: self.t0, t1: tm },
+            Rect { s0: sm, s1: self.s1, t0: tm, t1: self.t1 },
+            Rect { s0: self.s0, s1: sm, t0: tm, t1: self.t1 },
         ]
     }
 }
@@ -126,12 +89,8 @@ impl Patch {
     /// A quad from 4 corners, or a collapsed quad from 3.
     pub fn from_corners(c: &[DVec3]) -> Self {
         match c.len() {
-            3 => Patch {
-                corners: [c[0], c[1], c[2], c[2]],
-            },
-            4 => Patch {
-                corners: [c[0], c[1], c[2], c[3]],
-            },
+            3 => Patch { corners: [c[0], c[1], c[2], c[2]] },
+            4 => Patch { corners: [c[0], c[1], c[2], c[3]] },
             n => panic!("a patch has 3 or 4 corners, not {n}"),
         }
     }
@@ -186,11 +145,7 @@ impl Patch {
     /// Centre and radius of a sphere bounding the patch (a bilinear patch lies in its corners' hull).
     pub fn bounding_sphere(&self) -> (DVec3, f64) {
         let c = self.point(0.5, 0.5);
-        let r = self
-            .corners
-            .iter()
-            .map(|p| p.distance(c))
-            .fold(0.0, f64::max);
+        let r = self.corners.iter().map(|p| p.distance(c)).fold(0.0, f64::max);
         (c, r)
     }
 
@@ -199,22 +154,14 @@ impl Patch {
     pub fn non_planarity(&self) -> f64 {
         let (c, r) = self.bounding_sphere();
         let n = self.centre_normal();
-        let d = self
-            .corners
-            .iter()
-            .map(|p| (*p - c).dot(n).abs())
-            .fold(0.0, f64::max);
+        let d = self.corners.iter().map(|p| (*p - c).dot(n).abs()).fold(0.0, f64::max);
         if r > 0.0 { d / r } else { 0.0 }
     }
 
     /// The patch as one or two triangles (for ray casting), in the front orientation.
     pub fn triangles(&self) -> Vec<[DVec3; 3]> {
         let [p0, p1, p2, p3] = self.corners;
-        if p2 == p3 {
-            vec![[p0, p1, p2]]
-        } else {
-            vec![[p0, p1, p2], [p0, p2, p3]]
-        }
+        if p2 == p3 { vec![[p0, p1, p2]] } else { vec![[p0, p1, p2], [p0, p2, p3]] }
     }
 }
 
@@ -238,12 +185,7 @@ mod tests {
             DVec3::new(2.5, 1.0, 0.0),
             DVec3::Y,
         ]);
-        let r = Rect {
-            s0: 0.25,
-            s1: 0.75,
-            t0: 0.5,
-            t1: 1.0,
-        };
+        let r = Rect { s0: 0.25, s1: 0.75, t0: 0.5, t1: 1.0 };
         let sub = p.sub_patch(&r);
         let (s, t) = r.map(0.3, 0.6);
         assert!((sub.point(0.3, 0.6) - p.point(s, t)).length() < 1e-14);

@@ -29,12 +29,7 @@ pub struct LinkStore {
 
 impl LinkStore {
     pub fn new(n_elements: usize, nb: usize) -> Self {
-        Self {
-            nb,
-            pairs: Vec::new(),
-            coeffs: Vec::new(),
-            adjacency: vec![Vec::new(); n_elements],
-        }
+        Self { nb, pairs: Vec::new(), coeffs: Vec::new(), adjacency: vec![Vec::new(); n_elements] }
     }
 
     /// Basis functions per element.
@@ -118,16 +113,12 @@ impl LinkStore {
 impl LinkStore {
     /// The pair joining `a` and `b`, if stored.
     pub fn find(&self, a: ElementId, b: ElementId) -> Option<PairId> {
-        let (short, other) = if self.adjacency[a as usize].len() <= self.adjacency[b as usize].len()
-        {
+        let (short, other) = if self.adjacency[a as usize].len() <= self.adjacency[b as usize].len() {
             (a, b)
         } else {
             (b, a)
         };
-        self.adjacency[short as usize]
-            .iter()
-            .copied()
-            .find(|&p| self.other(p, short) == other)
+        self.adjacency[short as usize].iter().copied().find(|&p| self.other(p, short) == other)
     }
 
     /// Both blocks of a pair as f64, oriented as `(G_ab, G_ba)` for the given `a`.

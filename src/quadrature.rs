@@ -90,10 +90,7 @@ mod tests {
             for deg in 0..2 * n {
                 let got: f64 = q.iter().map(|(x, w)| w * x.powi(deg as i32)).sum();
                 let want = 1.0 / (deg as f64 + 1.0);
-                assert!(
-                    (got - want).abs() < 1e-14,
-                    "n={n} degree {deg}: {got} vs {want}"
-                );
+                assert!((got - want).abs() < 1e-14, "n={n} degree {deg}: {got} vs {want}");
             }
         }
     }

@@ -16,10 +16,7 @@ pub fn subdivided_quad(name: &str, p: [DVec3; 4], n: usize, material: u32) -> Ob
         for b in 0..=n {
             let (s, t) = (a as f64 / n as f64, b as f64 / n as f64);
             vertices.push(
-                (1.0 - s) * (1.0 - t) * p[0]
-                    + s * (1.0 - t) * p[1]
-                    + s * t * p[2]
-                    + (1.0 - s) * t * p[3],
+                (1.0 - s) * (1.0 - t) * p[0] + s * (1.0 - t) * p[1] + s * t * p[2] + (1.0 - s) * t * p[3],
             );
         }
     }
@@ -72,11 +69,8 @@ pub fn closed_box(n: usize, reflectance: f64, emission: f64, settings: Settings)
         .enumerate()
         .map(|(k, w)| subdivided_quad(&format!("wall{k}"), facing(*w, c, false), n, 0))
         .collect();
-    let materials = vec![Material {
-        name: "grey".into(),
-        reflectance: [reflectance; 3],
-        emission: [emission; 3],
-    }];
+    let materials =
+        vec![Material { name: "grey".into(), reflectance: [reflectance; 3], emission: [emission; 3] }];
     Scene::new(settings, (1, 1), materials, vec![Vec::new()], objects).expect("closed box is valid")
 }
 
@@ -92,116 +86,50 @@ pub fn cornell_box(n: usize, settings: Settings) -> Scene {
     let inside = v(278.0, 274.4, 279.6);
     let wall = |name: &str, p: [DVec3; 4], m| subdivided_quad(name, facing(p, inside, false), n, m);
     let mut objects = vec![
-        wall(
-            "Floor",
-            [
-                v(552.8, 0., 0.),
-                v(0., 0., 0.),
-                v(0., 0., 559.2),
-                v(549.6, 0., 559.2),
-            ],
-            WHITE,
-        ),
+        wall("Floor", [v(552.8, 0., 0.), v(0., 0., 0.), v(0., 0., 559.2), v(549.6, 0., 559.2)], WHITE),
         wall(
             "Ceiling",
-            [
-                v(556., 548.8, 0.),
-                v(556., 548.8, 559.2),
-                v(0., 548.8, 559.2),
-                v(0., 548.8, 0.),
-            ],
+            [v(556., 548.8, 0.), v(556., 548.8, 559.2), v(0., 548.8, 559.2), v(0., 548.8, 0.)],
             WHITE,
         ),
         wall(
             "BackWall",
-            [
-                v(549.6, 0., 559.2),
-                v(0., 0., 559.2),
-                v(0., 548.8, 559.2),
-                v(556., 548.8, 559.2),
-            ],
+            [v(549.6, 0., 559.2), v(0., 0., 559.2), v(0., 548.8, 559.2), v(556., 548.8, 559.2)],
             WHITE,
         ),
-        wall(
-            "RightWall",
-            [
-                v(0., 0., 559.2),
-                v(0., 0., 0.),
-                v(0., 548.8, 0.),
-                v(0., 548.8, 559.2),
-            ],
-            GREEN,
-        ),
+        wall("RightWall", [v(0., 0., 559.2), v(0., 0., 0.), v(0., 548.8, 0.), v(0., 548.8, 559.2)], GREEN),
         wall(
             "LeftWall",
-            [
-                v(552.8, 0., 0.),
-                v(549.6, 0., 559.2),
-                v(556., 548.8, 559.2),
-                v(556., 548.8, 0.),
-            ],
+            [v(552.8, 0., 0.), v(549.6, 0., 559.2), v(556., 548.8, 559.2), v(556., 548.8, 0.)],
             RED,
         ),
     ];
     let m = (n / 4).max(1);
     objects.push(block(
         "ShortBlock",
-        [
-            v(130., 165., 65.),
-            v(82., 165., 225.),
-            v(240., 165., 272.),
-            v(290., 165., 114.),
-        ],
+        [v(130., 165., 65.), v(82., 165., 225.), v(240., 165., 272.), v(290., 165., 114.)],
         m,
     ));
     objects.push(block(
         "TallBlock",
-        [
-            v(423., 330., 247.),
-            v(265., 330., 296.),
-            v(314., 330., 456.),
-            v(472., 330., 406.),
-        ],
+        [v(423., 330., 247.), v(265., 330., 296.), v(314., 330., 456.), v(472., 330., 406.)],
         m,
     ));
     // The light, lowered to y = 548.0 so that it does not coincide with the ceiling; faces down.
-    let light = [
-        v(343., 548.0, 227.),
-        v(343., 548.0, 332.),
-        v(213., 548.0, 332.),
-        v(213., 548.0, 227.),
-    ];
-    objects.push(subdivided_quad(
-        "Light",
-        facing(light, v(278., 0., 279.6), false),
-        m,
-        LIGHT,
-    ));
+    let light = [v(343., 548.0, 227.), v(343., 548.0, 332.), v(213., 548.0, 332.), v(213., 548.0, 227.)];
+    objects.push(subdivided_quad("Light", facing(light, v(278., 0., 279.6), false), m, LIGHT));
     let pi = std::f64::consts::PI;
     let materials = vec![
-        Material {
-            name: "white".into(),
-            reflectance: [0.739, 0.736, 0.740],
-            emission: [0.0; 3],
-        },
-        Material {
-            name: "red".into(),
-            reflectance: [0.494, 0.049, 0.051],
-            emission: [0.0; 3],
-        },
-        Material {
-            name: "green".into(),
-            reflectance: [0.068, 0.398, 0.086],
-            emission: [0.0; 3],
-        },
+        Material { name: "white".into(), reflectance: [0.739, 0.736, 0.740], emission: [0.0; 3] },
+        Material { name: "red".into(), reflectance: [0.494, 0.049, 0.051], emission: [0.0; 3] },
+        Material { name: "green".into(), reflectance: [0.068, 0.398, 0.086], emission: [0.0; 3] },
         Material {
             name: "light".into(),
             reflectance: [0.78, 0.78, 0.78],
             emission: [17.0 * pi, 12.0 * pi, 4.0 * pi],
         },
     ];
-    Scene::new(settings, (1, 1), materials, vec![Vec::new(); 4], objects)
-        .expect("Cornell box is valid")
+    Scene::new(settings, (1, 1), materials, vec![Vec::new(); 4], objects).expect("Cornell box is valid")
 }
 
 /// A block from its top quad down to the floor: top and four sides, faces outward, `m x m` each.
@@ -211,12 +139,7 @@ fn block(name: &str, top: [DVec3; 4], m: usize) -> Object {
     for k in 0..4 {
         let (a, b) = (top[k], top[(k + 1) % 4]);
         let side = [a, b, DVec3::new(b.x, 0.0, b.z), DVec3::new(a.x, 0.0, a.z)];
-        parts.push(subdivided_quad(
-            "side",
-            facing(side, centre, true),
-            m,
-            WHITE,
-        ));
+        parts.push(subdivided_quad("side", facing(side, centre, true), m, WHITE));
     }
     merge(name, parts)
 }
@@ -234,11 +157,7 @@ pub fn merge(name: &str, parts: Vec<Object>) -> Object {
     for p in parts {
         let base = out.vertices.len() as u32;
         out.vertices.extend(p.vertices);
-        out.faces.extend(
-            p.faces
-                .into_iter()
-                .map(|f| f.into_iter().map(|i| i + base).collect()),
-        );
+        out.faces.extend(p.faces.into_iter().map(|f| f.into_iter().map(|i| i + base).collect()));
         out.face_materials.extend(p.face_materials);
     }
     out
@@ -251,21 +170,16 @@ pub fn cornell_box_animated(n: usize, frames: i64, settings: Settings) -> Scene 
     let last = frames as f64;
     for obj in &mut scene.objects {
         let keys: Option<Vec<(f64, DVec3)>> = match obj.name.as_str() {
-            "Light" => Some(vec![
-                (1.0, DVec3::ZERO),
-                (last * 0.5, DVec3::new(-0.15, 0.0, 0.1)),
-                (last, DVec3::ZERO),
-            ]),
+            "Light" => {
+                Some(vec![(1.0, DVec3::ZERO), (last * 0.5, DVec3::new(-0.15, 0.0, 0.1)), (last, DVec3::ZERO)])
+            }
             "ShortBlock" => Some(vec![(1.0, DVec3::ZERO), (last, DVec3::new(0.0, 0.0, 0.15))]),
             _ => None,
         };
         if let Some(keys) = keys {
             obj.animation = keys
                 .into_iter()
-                .map(|(frame, t)| Key {
-                    frame,
-                    transform: KeyTransform::Translation(t),
-                })
+                .map(|(frame, t)| Key { frame, transform: KeyTransform::Translation(t) })
                 .collect();
         }
     }
@@ -275,14 +189,5 @@ pub fn cornell_box_animated(n: usize, frames: i64, settings: Settings) -> Scene 
 
 /// An emission key list for tests: material `m` ramps from `from` to `to` between two frames.
 pub fn emission_ramp(from: (f64, [f64; 3]), to: (f64, [f64; 3])) -> Vec<EmissionKey> {
-    vec![
-        EmissionKey {
-            frame: from.0,
-            emission: from.1,
-        },
-        EmissionKey {
-            frame: to.0,
-            emission: to.1,
-        },
-    ]
+    vec![EmissionKey { frame: from.0, emission: from.1 }, EmissionKey { frame: to.0, emission: to.1 }]
 }

@@ -109,9 +109,7 @@ impl Session {
             )));
         }
         if !world_from_object.is_finite() {
-            return Err(Error::InvalidArgument(format!(
-                "object {o}: matrix is not finite"
-            )));
+            return Err(Error::InvalidArgument(format!("object {o}: matrix is not finite")));
         }
         self.placement[o] = Some(world_from_object);
         Ok(())
@@ -151,26 +149,16 @@ impl Session {
     /// Solves `frame`. On error (including cancel) the previous frame stays readable.
     pub fn solve_frame(&mut self, frame: f64, progress: Progress) -> Result<FrameStats> {
         if !frame.is_finite() {
-            return Err(Error::InvalidArgument(format!(
-                "frame {frame} is not finite"
-            )));
+            return Err(Error::InvalidArgument(format!("frame {frame} is not finite")));
         }
         let start = Instant::now();
         let placed = self.scene_at(frame);
         let incremental = self.method != Method::Full && !self.stale;
-        if let (true, Some(sys), Some(prev)) =
-            (incremental, self.system.as_mut(), self.placed.as_ref())
-        {
+        if let (true, Some(sys), Some(prev)) = (incremental, self.system.as_mut(), self.placed.as_ref()) {
             // Keep what reads need, so a cancelled update leaves the last frame readable.
-            let saved = (
-                sys.solution.clone(),
-                sys.elements.clone(),
-                sys.emission.clone(),
-                sys.reflectance.clone(),
-            );
-            let outcome = self
-                .pool
-                .install(|| animation::advance(sys, prev, &placed, frame, progress));
+            let saved =
+                (sys.solution.clone(), sys.elements.clone(), sys.emission.clone(), sys.reflectance.clone());
+            let outcome = self.pool.install(|| animation::advance(sys, prev, &placed, frame, progress));
             match outcome {
                 Ok(Outcome::Updated(u)) => {
                     let stats = FrameStats {
@@ -225,9 +213,7 @@ impl Session {
     }
 
     fn solved(&self) -> Result<&System> {
-        self.system
-            .as_ref()
-            .ok_or_else(|| Error::InvalidArgument("no frame has been solved yet".into()))
+        self.system.as_ref().ok_or_else(|| Error::InvalidArgument("no frame has been solved yet".into()))
     }
 
     /// Per object: mean radiosity per face and radiosity per face corner.
@@ -251,15 +237,11 @@ impl Session {
             )));
         }
         if !((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&t)) {
-            return Err(Error::InvalidArgument(format!(
-                "(s, t) = ({s}, {t}) is outside [0,1]^2"
-            )));
+            return Err(Error::InvalidArgument(format!("(s, t) = ({s}, {t}) is outside [0,1]^2")));
         }
         match sys.element_of_face(o, f, s, t) {
             Some((e, ls, lt)) => Ok(sys.eval(e, ls, lt)),
-            None => Ok(self
-                .scene
-                .emission_at(obj.face_materials[f] as usize, self.frame.unwrap_or(0.0))),
+            None => Ok(self.scene.emission_at(obj.face_materials[f] as usize, self.frame.unwrap_or(0.0))),
         }
     }
 }

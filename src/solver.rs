@@ -18,20 +18,12 @@ pub struct Coefficients {
 
 impl Coefficients {
     pub fn zeros(n_elements: usize, nb: usize) -> Self {
-        Self {
-            nb,
-            b: vec![[0.0; 3]; n_elements * nb],
-            unshot: vec![[0.0; 3]; n_elements * nb],
-        }
+        Self { nb, b: vec![[0.0; 3]; n_elements * nb], unshot: vec![[0.0; 3]; n_elements * nb] }
     }
 
     /// Starts a solve from emission coefficients: `b = unshot = e`.
     pub fn from_emission(e: &[[f64; 3]], nb: usize) -> Self {
-        Self {
-            nb,
-            b: e.to_vec(),
-            unshot: e.to_vec(),
-        }
+        Self { nb, b: e.to_vec(), unshot: e.to_vec() }
     }
 
     pub fn element(&self, e: usize) -> &[[f64; 3]] {
@@ -42,10 +34,7 @@ impl Coefficients {
 /// Power-like size of an element's coefficient vector: `area * sum_c ||v_c||_2` (the L2 norm of
 /// the function over the unit parameter square, orthonormal basis), used to pick shooters.
 pub fn power(v: &[[f64; 3]], area: f64) -> f64 {
-    (0..3)
-        .map(|c| v.iter().map(|x| x[c] * x[c]).sum::<f64>().sqrt())
-        .sum::<f64>()
-        * area
+    (0..3).map(|c| v.iter().map(|x| x[c] * x[c]).sum::<f64>().sqrt()).sum::<f64>() * area
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -67,9 +56,7 @@ pub fn shoot(
 ) -> Result<ShootStats> {
     let nb = x.nb;
     let n = area.len();
-    let mut priority: Vec<f64> = (0..n)
-        .map(|e| power(&x.unshot[e * nb..(e + 1) * nb], area[e]))
-        .collect();
+    let mut priority: Vec<f64> = (0..n).map(|e| power(&x.unshot[e * nb..(e + 1) * nb], area[e])).collect();
     let mut shots = 0;
     let mut shooter = vec![[0.0f64; 3]; nb];
     loop {
@@ -82,10 +69,7 @@ pub fn shoot(
             }
         }
         if total <= stop_power || best_p <= 0.0 {
-            return Ok(ShootStats {
-                shots,
-                residual: total,
-            });
+            return Ok(ShootStats { shots, residual: total });
         }
         if shots % 256 == 0 && cancel() {
             return Err(Error::Cancelled);
@@ -126,12 +110,7 @@ pub fn shoot(
 }
 
 /// Gauss-Seidel on eq. (5) until no coefficient moves by more than `tol` (absolute); returns `b`.
-pub fn gauss_seidel(
-    links: &LinkStore,
-    reflectance: &[[f64; 3]],
-    e: &[[f64; 3]],
-    tol: f64,
-) -> Vec<[f64; 3]> {
+pub fn gauss_seidel(links: &LinkStore, reflectance: &[[f64; 3]], e: &[[f64; 3]], tol: f64) -> Vec<[f64; 3]> {
     let nb = links.nb();
     let n = reflectance.len();
     let mut b = e.to_vec();

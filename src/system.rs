@@ -47,11 +47,7 @@ pub fn build_elements(scene: &Scene, frame: f64, basis: Basis) -> Vec<Element> {
     let mut degenerate = scene.degenerate_faces.iter().peekable();
     for (o, obj) in scene.objects.iter().enumerate() {
         let m = obj.world_from_object(frame);
-        let world: Vec<DVec3> = obj
-            .vertices
-            .iter()
-            .map(|v| m.transform_point3(*v))
-            .collect();
+        let world: Vec<DVec3> = obj.vertices.iter().map(|v| m.transform_point3(*v)).collect();
         for (f, face) in obj.faces.iter().enumerate() {
             if degenerate.peek() == Some(&&(o, f)) {
                 degenerate.next();
@@ -96,15 +92,7 @@ fn element(
             }
         }
     }
-    Element {
-        object,
-        face,
-        domain,
-        patch,
-        material,
-        area,
-        moments,
-    }
+    Element { object, face, domain, patch, material, area, moments }
 }
 
 /// Timings and counts of one build and solve.
@@ -148,27 +136,15 @@ impl System {
         let start = Instant::now();
         let elements = build_elements(scene, frame, basis);
         let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
-        let occluders = s
-            .visibility
-            .then(|| Occluders::new(&patches, s.visibility_samples));
+        let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
         let geom = ElementGeometry::new(&patches, &ctx);
         let links = assemble(&ctx, &geom, occluders.as_ref(), &|done, total| {
-            progress(
-                if total > 0 {
-                    done as f64 / total as f64
-                } else {
-                    1.0
-                },
-                "kernel",
-            )
+            progress(if total > 0 { done as f64 / total as f64 } else { 1.0 }, "kernel")
         })
         .ok_or(Error::Cancelled)?;
         let kernel_seconds = start.elapsed().as_secs_f64();
         let nb = basis.len();
-        let reflectance = elements
-            .iter()
-            .map(|e| scene.materials[e.material as usize].reflectance)
-            .collect();
+        let reflectance = elements.iter().map(|e| scene.materials[e.material as usize].reflectance).collect();
         let mut emission = vec![[0.0; 3]; elements.len() * nb];
         for (i, e) in elements.iter().enumerate() {
             emission[i * nb] = scene.emission_at(e.material as usize, frame);
@@ -187,15 +163,7 @@ impl System {
             ..Default::default()
         };
         let solution = Coefficients::zeros(elements.len(), nb);
-        Ok(System {
-            basis,
-            elements,
-            links,
-            reflectance,
-            emission,
-            solution,
-            stats,
-        })
+        Ok(System { basis, elements, links, reflectance, emission, solution, stats })
     }
 
     /// Element areas, in element order.
@@ -218,14 +186,8 @@ impl System {
         let start = Instant::now();
         self.solution = Coefficients::from_emission(&self.emission, self.basis.len());
         let stop = tolerance * self.emitted_power();
-        let stats = solver::shoot(
-            &self.links,
-            &self.reflectance,
-            &self.areas(),
-            &mut self.solution,
-            stop,
-            cancel,
-        )?;
+        let stats =
+            solver::shoot(&self.links, &self.reflectance, &self.areas(), &mut self.solution, stop, cancel)?;
         self.stats.solve_seconds = start.elapsed().as_secs_f64();
         self.stats.shots = stats.shots;
         Ok(stats)
@@ -277,11 +239,8 @@ impl System {
                         elements.next();
                         res.face_radiosity.push(to_f32(self.mean(e)));
                         for (s, t) in corner_params(face.len()) {
-                            let v = if face.len() == 3 && t == 1.0 {
-                                self.apex(e)
-                            } else {
-                                self.eval(e, s, t)
-                            };
+                            let v =
+                                if face.len() == 3 && t == 1.0 { self.apex(e) } else { self.eval(e, s, t) };
                             res.corner_radiosity.push(to_f32(v));
                         }
                     }
@@ -289,8 +248,7 @@ impl System {
                         // A skipped zero-area face shows its own exitance.
                         let e = to_f32(scene.emission_at(obj.face_materials[f] as usize, frame));
                         res.face_radiosity.push(e);
-                        res.corner_radiosity
-                            .extend(std::iter::repeat_n(e, face.len()));
+                        res.corner_radiosity.extend(std::iter::repeat_n(e, face.len()));
                     }
                 }
             }
@@ -329,22 +287,14 @@ fn to_f32(v: [f64; 3]) -> [f32; 3] {
 impl System {
     /// The element covering `(s,t)` of face `f` of object `o`, and the local coordinates in it.
     pub fn element_of_face(&self, o: usize, f: usize, s: f64, t: f64) -> Option<(usize, f64, f64)> {
-        let start = self
-            .elements
-            .partition_point(|e| (e.object as usize, e.face as usize) < (o, f));
+        let start = self.elements.partition_point(|e| (e.object as usize, e.face as usize) < (o, f));
         self.elements[start..]
             .iter()
             .take_while(|e| e.object as usize == o && e.face as usize == f)
-            .position(|e| {
-                e.domain.s0 <= s && s <= e.domain.s1 && e.domain.t0 <= t && t <= e.domain.t1
-            })
+            .position(|e| e.domain.s0 <= s && s <= e.domain.s1 && e.domain.t0 <= t && t <= e.domain.t1)
             .map(|k| {
                 let d = &self.elements[start + k].domain;
-                (
-                    start + k,
-                    (s - d.s0) / (d.s1 - d.s0),
-                    (t - d.t0) / (d.t1 - d.t0),
-                )
+                (start + k, (s - d.s0) / (d.s1 - d.s0), (t - d.t0) / (d.t1 - d.t0))
             })
     }
 }

@@ -8,28 +8,17 @@ use galerkin_radiosity::system::no_progress;
 use glam::{DMat4, DVec3};
 
 fn settings() -> Settings {
-    Settings {
-        basis_order: 2,
-        tolerance: 1e-5,
-        ..Settings::default()
-    }
+    Settings { basis_order: 2, tolerance: 1e-5, ..Settings::default() }
 }
 
 /// Bakes all frames with `method`; returns per frame all corner values and the stats.
-fn bake(
-    scene: &Scene,
-    method: Method,
-) -> Vec<(Vec<[f32; 3]>, galerkin_radiosity::session::FrameStats)> {
+fn bake(scene: &Scene, method: Method) -> Vec<(Vec<[f32; 3]>, galerkin_radiosity::session::FrameStats)> {
     let mut session = Session::new(scene.clone(), method).unwrap();
     (scene.frames.0..=scene.frames.1)
         .map(|f| {
             let stats = session.solve_frame(f as f64, &no_progress).unwrap();
-            let corners = session
-                .face_results()
-                .unwrap()
-                .into_iter()
-                .flat_map(|o| o.corner_radiosity)
-                .collect();
+            let corners =
+                session.face_results().unwrap().into_iter().flat_map(|o| o.corner_radiosity).collect();
             (corners, stats)
         })
         .collect()
@@ -40,10 +29,7 @@ fn assert_matches_full(scene: &Scene, what: &str) {
     for method in [Method::Incremental, Method::Exact] {
         let inc = bake(scene, method);
         for (f, ((a, stats), (b, _))) in inc.iter().zip(&full).enumerate() {
-            let peak = b
-                .iter()
-                .flat_map(|c| c.iter())
-                .fold(0.0f32, |m, x| m.max(*x));
+            let peak = b.iter().flat_map(|c| c.iter()).fold(0.0f32, |m, x| m.max(*x));
             let worst = a
                 .iter()
                 .zip(b)
@@ -54,33 +40,20 @@ fn assert_matches_full(scene: &Scene, what: &str) {
                 worst / peak,
                 stats.links_recomputed
             );
-            assert!(
-                worst <= 0.01 * peak,
-                "{what}, {method:?}, frame {f}: {worst} vs peak {peak}"
-            );
+            assert!(worst <= 0.01 * peak, "{what}, {method:?}, frame {f}: {worst} vs peak {peak}");
         }
     }
 }
 
 fn translation_keys(points: &[(f64, DVec3)]) -> Vec<Key> {
-    points
-        .iter()
-        .map(|&(frame, t)| Key {
-            frame,
-            transform: KeyTransform::Translation(t),
-        })
-        .collect()
+    points.iter().map(|&(frame, t)| Key { frame, transform: KeyTransform::Translation(t) }).collect()
 }
 
 /// A light panel moving along the ceiling of the Cornell box.
 #[test]
 fn moving_ceiling_light_matches_full() {
     let mut scene = scenes::cornell_box(4, settings());
-    let light = scene
-        .objects
-        .iter_mut()
-        .find(|o| o.name == "Light")
-        .unwrap();
+    let light = scene.objects.iter_mut().find(|o| o.name == "Light").unwrap();
     light.animation = translation_keys(&[(1.0, DVec3::ZERO), (4.0, DVec3::new(-0.15, 0.0, 0.1))]);
     scene.frames = (1, 4);
     assert_matches_full(&scene, "ceiling light");
@@ -101,12 +74,7 @@ fn occluder_passing_a_wall_lamp_matches_full() {
     // A wall lamp at x = 0 facing +x, and a facing wall at x = 2.
     objects.push(scenes::subdivided_quad(
         "lamp",
-        [
-            p(0., 0.3, 0.3),
-            p(0., 0.7, 0.3),
-            p(0., 0.7, 0.7),
-            p(0., 0.3, 0.7),
-        ],
+        [p(0., 0.3, 0.3), p(0., 0.7, 0.3), p(0., 0.7, 0.7), p(0., 0.3, 0.7)],
         1,
         1,
     ));
@@ -119,33 +87,16 @@ fn occluder_passing_a_wall_lamp_matches_full() {
     // A blue panel facing the wall, sliding across between them.
     let mut panel = scenes::subdivided_quad(
         "panel",
-        [
-            p(1., 0.2, 0.2),
-            p(1., 0.2, 0.8),
-            p(1., 0.5, 0.8),
-            p(1., 0.5, 0.2),
-        ],
+        [p(1., 0.2, 0.2), p(1., 0.2, 0.8), p(1., 0.5, 0.8), p(1., 0.5, 0.2)],
         1,
         2,
     );
     panel.animation = translation_keys(&[(1.0, p(0., -0.5, 0.)), (5.0, p(0., 0.6, 0.))]);
     objects.push(panel);
     let materials = vec![
-        Material {
-            name: "white".into(),
-            reflectance: [0.7; 3],
-            emission: [0.0; 3],
-        },
-        Material {
-            name: "lamp".into(),
-            reflectance: [0.5; 3],
-            emission: [10.0; 3],
-        },
-        Material {
-            name: "blue".into(),
-            reflectance: [0.1, 0.1, 0.8],
-            emission: [0.0; 3],
-        },
+        Material { name: "white".into(), reflectance: [0.7; 3], emission: [0.0; 3] },
+        Material { name: "lamp".into(), reflectance: [0.5; 3], emission: [10.0; 3] },
+        Material { name: "blue".into(), reflectance: [0.1, 0.1, 0.8], emission: [0.0; 3] },
     ];
     let scene = Scene::new(settings(), (1, 5), materials, vec![vec![]; 3], objects).unwrap();
     assert_matches_full(&scene, "occluder");
@@ -158,24 +109,13 @@ fn circle_rotation_and_emission_keys_match_full() {
     let circle: Vec<(f64, DVec3)> = (0..5)
         .map(|f| {
             let a = f as f64 * std::f64::consts::FRAC_PI_2 * 0.5;
-            (
-                1.0 + f as f64,
-                DVec3::new(0.08 * a.cos() - 0.08, 0.0, 0.08 * a.sin()),
-            )
+            (1.0 + f as f64, DVec3::new(0.08 * a.cos() - 0.08, 0.0, 0.08 * a.sin()))
         })
         .collect();
-    let light = scene
-        .objects
-        .iter_mut()
-        .find(|o| o.name == "Light")
-        .unwrap();
+    let light = scene.objects.iter_mut().find(|o| o.name == "Light").unwrap();
     light.animation = translation_keys(&circle);
     // The tall block turns about its own vertical axis.
-    let tall = scene
-        .objects
-        .iter_mut()
-        .find(|o| o.name == "TallBlock")
-        .unwrap();
+    let tall = scene.objects.iter_mut().find(|o| o.name == "TallBlock").unwrap();
     let pivot = DVec3::new(0.368, 0.0, 0.351);
     let turn = |deg: f64| {
         DMat4::from_translation(pivot)
@@ -183,19 +123,11 @@ fn circle_rotation_and_emission_keys_match_full() {
             * DMat4::from_translation(-pivot)
     };
     tall.animation = vec![
-        Key {
-            frame: 1.0,
-            transform: KeyTransform::Matrix(turn(0.0)),
-        },
-        Key {
-            frame: 5.0,
-            transform: KeyTransform::Matrix(turn(20.0)),
-        },
+        Key { frame: 1.0, transform: KeyTransform::Matrix(turn(0.0)) },
+        Key { frame: 5.0, transform: KeyTransform::Matrix(turn(20.0)) },
     ];
-    scene.emission_keys[scenes::LIGHT as usize] = scenes::emission_ramp(
-        (1.0, scene.materials[3].emission),
-        (5.0, [20.0, 20.0, 20.0]),
-    );
+    scene.emission_keys[scenes::LIGHT as usize] =
+        scenes::emission_ramp((1.0, scene.materials[3].emission), (5.0, [20.0, 20.0, 20.0]));
     scene.frames = (1, 5);
     assert_matches_full(&scene, "circle + rotation + emission");
 }

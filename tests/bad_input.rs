@@ -8,19 +8,10 @@ fn bake(scene: &str) -> (i32, String) {
     let input = dir.join("scene.json");
     std::fs::write(&input, scene).unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_galerkin-radiosity"))
-        .args([
-            "bake",
-            input.to_str().unwrap(),
-            "-o",
-            dir.join("out.json").to_str().unwrap(),
-            "--quiet",
-        ])
+        .args(["bake", input.to_str().unwrap(), "-o", dir.join("out.json").to_str().unwrap(), "--quiet"])
         .output()
         .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
 }
 
 fn scene_with(object: &str, material: &str) -> String {
@@ -44,18 +35,12 @@ fn a_valid_scene_bakes() {
 fn each_bad_input_names_what_is_wrong() {
     let cases: Vec<(String, &str)> = vec![
         ("{not json".into(), "scene JSON"),
-        (
-            scene_with(&QUAD.replace("[1,1,0]", "[1,NaN,0]"), MAT),
-            "scene JSON",
-        ),
+        (scene_with(&QUAD.replace("[1,1,0]", "[1,NaN,0]"), MAT), "scene JSON"),
         (
             scene_with(&QUAD.replace("[0,1,2,3]", "[0,1,2,9]"), MAT),
             "object \"Floor\" face 0: vertex index 9 out of range",
         ),
-        (
-            scene_with(&QUAD.replace("[0,1,2,3]", "[0,1]"), MAT),
-            "object 0 \"Floor\" face 0: 2 vertices",
-        ),
+        (scene_with(&QUAD.replace("[0,1,2,3]", "[0,1]"), MAT), "object 0 \"Floor\" face 0: 2 vertices"),
         (
             scene_with(&QUAD.replace("}", r#", "material": 3}"#), MAT),
             "object \"Floor\": material 3 out of range",
@@ -64,21 +49,11 @@ fn each_bad_input_names_what_is_wrong() {
             scene_with(QUAD, &MAT.replace("[0.5, 0.5, 0.5]", "[0.5, 1.0, 0.5]")),
             "reflectance[1] = 1 is outside [0,1)",
         ),
+        (scene_with(QUAD, &MAT.replace("[1, 1, 1]", "[1, -1, 1]")), "emission[1] = -1"),
+        (scene_with(&QUAD.replace("[0,1,0]]", "[0,1e400,0]]"), MAT), "scene JSON"),
+        (scene_with(QUAD, MAT).replace("\"basis_order\": 1", "\"basis_order\": 7"), "basis_order 7"),
         (
-            scene_with(QUAD, &MAT.replace("[1, 1, 1]", "[1, -1, 1]")),
-            "emission[1] = -1",
-        ),
-        (
-            scene_with(&QUAD.replace("[0,1,0]]", "[0,1e400,0]]"), MAT),
-            "scene JSON",
-        ),
-        (
-            scene_with(QUAD, MAT).replace("\"basis_order\": 1", "\"basis_order\": 7"),
-            "basis_order 7",
-        ),
-        (
-            scene_with(QUAD, MAT)
-                .replace("\"basis_order\": 1", "\"basis_order\": 1, \"tolerence\": 1"),
+            scene_with(QUAD, MAT).replace("\"basis_order\": 1", "\"basis_order\": 1, \"tolerence\": 1"),
             "unknown field `tolerence`",
         ),
     ];
@@ -113,22 +88,11 @@ fn zero_area_faces_are_skipped_with_a_warning() {
         let input = dir.join("scene.json");
         std::fs::write(&input, scene_with(degenerate, MAT)).unwrap();
         let out = Command::new(env!("CARGO_BIN_EXE_galerkin-radiosity"))
-            .args([
-                "bake",
-                input.to_str().unwrap(),
-                "-o",
-                dir.join("out.json").to_str().unwrap(),
-            ])
+            .args(["bake", input.to_str().unwrap(), "-o", dir.join("out.json").to_str().unwrap()])
             .output()
             .unwrap();
-        (
-            out.status.code().unwrap(),
-            String::from_utf8_lossy(&out.stderr).into_owned(),
-        )
+        (out.status.code().unwrap(), String::from_utf8_lossy(&out.stderr).into_owned())
     };
     assert_eq!(code, 0);
-    assert!(
-        err.contains("1 zero-area face(s) skipped (first: object \"Floor\" face 1)"),
-        "{err}"
-    );
+    assert!(err.contains("1 zero-area face(s) skipped (first: object \"Floor\" face 1)"), "{err}");
 }

@@ -24,20 +24,10 @@ use galerkin_radiosity::scenes;
 fn cdylib_dirs() -> Vec<PathBuf> {
     let exe = std::env::current_exe().expect("test binary path");
     let deps = exe.parent().map(Path::to_path_buf);
-    let profile = deps
-        .as_deref()
-        .and_then(Path::parent)
-        .map(Path::to_path_buf)
-        .unwrap_or_else(|| {
-            let profile = if cfg!(debug_assertions) {
-                "debug"
-            } else {
-                "release"
-            };
-            Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("target")
-                .join(profile)
-        });
+    let profile = deps.as_deref().and_then(Path::parent).map(Path::to_path_buf).unwrap_or_else(|| {
+        let profile = if cfg!(debug_assertions) { "debug" } else { "release" };
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("target").join(profile)
+    });
     deps.into_iter().chain([profile]).collect()
 }
 
@@ -54,11 +44,7 @@ fn cdylib_name() -> &'static str {
 #[test]
 fn c_program_solves_two_patches() {
     let dirs = cdylib_dirs();
-    let Some(dir) = dirs
-        .iter()
-        .find(|d| d.join(cdylib_name()).is_file())
-        .cloned()
-    else {
+    let Some(dir) = dirs.iter().find(|d| d.join(cdylib_name()).is_file()).cloned() else {
         panic!(
             "{} not found in {:?}. `cargo test` builds it with the library (crate-type cdylib); \
              if it was removed, run `cargo build --lib` (add --release for a release test run) \
@@ -102,15 +88,7 @@ fn header_compiles_as_cpp() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let cxx = std::env::var("CXX").unwrap_or_else(|_| "c++".into());
     let Ok(out) = Command::new(&cxx)
-        .args([
-            "-x",
-            "c++",
-            "-std=c++17",
-            "-fsyntax-only",
-            "-Wall",
-            "-Wextra",
-            "-Werror",
-        ])
+        .args(["-x", "c++", "-std=c++17", "-fsyntax-only", "-Wall", "-Wextra", "-Werror"])
         .arg(root.join("include/galerkin_radiosity.h"))
         .output()
     else {
@@ -150,19 +128,14 @@ impl Flat {
         }
         for o in &scene.objects {
             f.vertex_counts.push(o.vertices.len() as u32);
-            f.vertices.extend(
-                o.vertices
-                    .iter()
-                    .flat_map(|v| v.to_array().map(|x| x as f32)),
-            );
+            f.vertices.extend(o.vertices.iter().flat_map(|v| v.to_array().map(|x| x as f32)));
             f.face_counts.push(o.faces.len() as u32);
             for face in &o.faces {
                 f.face_vertex_counts.push(face.len() as u32);
                 f.face_indices.extend(face);
             }
             f.face_materials.extend(&o.face_materials);
-            f.matrices
-                .extend(o.matrix.transpose().to_cols_array().map(|x| x as f32));
+            f.matrices.extend(o.matrix.transpose().to_cols_array().map(|x| x as f32));
         }
         f
     }
@@ -197,11 +170,7 @@ impl Flat {
     ) -> Result<*mut GrSession, (GrStatus, String)> {
         let sentinel = 0x5e57 as *mut GrSession;
         let mut out = sentinel;
-        let matrices = if self.matrices.is_empty() {
-            null()
-        } else {
-            self.matrices.as_ptr()
-        };
+        let matrices = if self.matrices.is_empty() { null() } else { self.matrices.as_ptr() };
         let status = unsafe {
             gr_session_new(
                 settings,
@@ -236,11 +205,7 @@ fn last_error() -> String {
     let mut buf = vec![0u8; n + 1];
     let m = unsafe { gr_last_error(buf.as_mut_ptr().cast(), buf.len()) };
     assert_eq!(m, n);
-    CStr::from_bytes_until_nul(&buf)
-        .unwrap()
-        .to_str()
-        .unwrap()
-        .to_owned()
+    CStr::from_bytes_until_nul(&buf).unwrap().to_str().unwrap().to_owned()
 }
 
 fn defaults() -> GrSettings {
@@ -251,10 +216,7 @@ fn defaults() -> GrSettings {
 
 fn face_radiosity(s: *const GrSession, object: u32) -> Result<Vec<f32>, GrStatus> {
     let mut n = 0;
-    assert_eq!(
-        unsafe { gr_session_face_count(s, object, &mut n) },
-        GrStatus::Ok
-    );
+    assert_eq!(unsafe { gr_session_face_count(s, object, &mut n) }, GrStatus::Ok);
     let mut out = vec![f32::NAN; 3 * n as usize];
     match unsafe { gr_session_face_radiosity(s, object, out.as_mut_ptr(), out.len()) } {
         GrStatus::Ok => Ok(out),
@@ -270,8 +232,7 @@ fn stats_json(s: *const GrSession) -> Result<serde_json::Value, GrStatus> {
     }
     let mut buf = vec![0u8; needed];
     let mut written = 0;
-    let st =
-        unsafe { gr_session_frame_stats_json(s, buf.as_mut_ptr().cast(), buf.len(), &mut written) };
+    let st = unsafe { gr_session_frame_stats_json(s, buf.as_mut_ptr().cast(), buf.len(), &mut written) };
     if st != GrStatus::Ok {
         return Err(st);
     }
@@ -314,18 +275,12 @@ fn two_patches_value_and_results() {
     assert_eq!(face_radiosity(s, 0), Err(GrStatus::NotSolved));
     assert!(last_error().contains("no frame has been solved"));
     assert_eq!(stats_json(s).unwrap_err(), GrStatus::NotSolved);
-    assert_eq!(
-        unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) },
-        GrStatus::Ok
-    );
+    assert_eq!(unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) }, GrStatus::Ok);
     assert_eq!(last_error(), "");
     let b = face_radiosity(s, 0).unwrap();
     let want = 0.5 * 0.199825;
     for c in b {
-        assert!(
-            ((c as f64) - want).abs() / want < 0.01,
-            "B = {c}, want {want}"
-        );
+        assert!(((c as f64) - want).abs() / want < 0.01, "B = {c}, want {want}");
     }
     let stats = stats_json(s).unwrap();
     assert_eq!(stats["frame"], 1.0);
@@ -336,41 +291,20 @@ fn two_patches_value_and_results() {
         GrStatus::InvalidArgument
     );
     assert_eq!(corners, vec![0.0; 12], "nothing written on failure");
-    assert_eq!(
-        unsafe { gr_session_corner_radiosity(s, 0, corners.as_mut_ptr(), 12) },
-        GrStatus::Ok
-    );
+    assert_eq!(unsafe { gr_session_corner_radiosity(s, 0, corners.as_mut_ptr(), 12) }, GrStatus::Ok);
     // eval: a good point and a bad one; nothing is written unless all are good.
     let objects = [0u32, 0];
     let faces = [0u32, 3];
     let st = [0.5f32, 0.5, 0.5, 0.5];
     let mut out = [-1f32; 6];
     assert_eq!(
-        unsafe {
-            gr_session_eval(
-                s,
-                2,
-                objects.as_ptr(),
-                faces.as_ptr(),
-                st.as_ptr(),
-                out.as_mut_ptr(),
-            )
-        },
+        unsafe { gr_session_eval(s, 2, objects.as_ptr(), faces.as_ptr(), st.as_ptr(), out.as_mut_ptr(),) },
         GrStatus::InvalidArgument
     );
     assert!(last_error().contains("point 1"), "{}", last_error());
     assert_eq!(out, [-1.0; 6]);
     assert_eq!(
-        unsafe {
-            gr_session_eval(
-                s,
-                1,
-                objects.as_ptr(),
-                faces.as_ptr(),
-                st.as_ptr(),
-                out.as_mut_ptr(),
-            )
-        },
+        unsafe { gr_session_eval(s, 1, objects.as_ptr(), faces.as_ptr(), st.as_ptr(), out.as_mut_ptr(),) },
         GrStatus::Ok
     );
     assert!(out[0] > 0.1 && out[3] == -1.0);
@@ -392,43 +326,21 @@ unsafe extern "C" fn cancel_at(_f: f64, stage: *const c_char, user: *mut c_void)
 #[test]
 fn progress_returning_zero_cancels_and_keeps_the_previous_frame() {
     let s = Flat::two_patches().new_session(&defaults()).unwrap();
-    assert_eq!(
-        unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) },
-        GrStatus::Ok
-    );
+    assert_eq!(unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) }, GrStatus::Ok);
     let before = face_radiosity(s, 0).unwrap();
     let red = [3.0f32, 0.0, 0.0];
-    assert_eq!(
-        unsafe { gr_session_set_material_emission(s, 1, red.as_ptr()) },
-        GrStatus::Ok
-    );
-    let cb = CancelAt {
-        calls: AtomicU32::new(0),
-        cancel_on_call: 1,
-    };
-    let st = unsafe {
-        gr_session_solve_frame(
-            s,
-            2.0,
-            Some(cancel_at),
-            &cb as *const CancelAt as *mut c_void,
-        )
-    };
+    assert_eq!(unsafe { gr_session_set_material_emission(s, 1, red.as_ptr()) }, GrStatus::Ok);
+    let cb = CancelAt { calls: AtomicU32::new(0), cancel_on_call: 1 };
+    let st =
+        unsafe { gr_session_solve_frame(s, 2.0, Some(cancel_at), &cb as *const CancelAt as *mut c_void) };
     assert_eq!(st, GrStatus::Cancelled);
     assert_eq!(last_error(), "cancelled");
-    assert_eq!(
-        cb.calls.load(Ordering::SeqCst),
-        1,
-        "not called again once it said stop"
-    );
+    assert_eq!(cb.calls.load(Ordering::SeqCst), 1, "not called again once it said stop");
     assert_eq!(face_radiosity(s, 0).unwrap(), before);
     assert_eq!(stats_json(s).unwrap()["frame"], 1.0);
     // A cancel with no solve running does not affect the next solve.
     assert_eq!(unsafe { gr_session_cancel(s) }, GrStatus::Ok);
-    assert_eq!(
-        unsafe { gr_session_solve_frame(s, 2.0, None, null_mut()) },
-        GrStatus::Ok
-    );
+    assert_eq!(unsafe { gr_session_solve_frame(s, 2.0, None, null_mut()) }, GrStatus::Ok);
     let after = face_radiosity(s, 0).unwrap();
     assert!((after[0] / before[0] - 3.0).abs() < 0.01 && after[1] == 0.0);
     unsafe { gr_session_free(s) };
@@ -452,10 +364,7 @@ fn cancel_from_another_thread_stops_a_big_solve_promptly() {
     let scene = scenes::cornell_box(10, Settings::default());
     let flat = Flat::from_scene(&scene);
     let s = Shared(flat.new_session(&defaults()).unwrap());
-    let w = Watch {
-        fraction: AtomicU64::new(0),
-        calls: AtomicU32::new(0),
-    };
+    let w = Watch { fraction: AtomicU64::new(0), calls: AtomicU32::new(0) };
     let (status, finished, cancelled_at) = std::thread::scope(|scope| {
         let solver = scope.spawn(|| {
             let start = Instant::now();
@@ -519,10 +428,7 @@ fn invalid_scenes_name_the_object_and_face() {
     g.vertices[13] = f32::NAN;
     let (st, msg) = g.new_session(&d).unwrap_err();
     assert_eq!(st, GrStatus::InvalidScene);
-    assert!(
-        msg.contains("object 1") && msg.contains("vertex 0"),
-        "{msg}"
-    );
+    assert!(msg.contains("object 1") && msg.contains("vertex 0"), "{msg}");
 
     let mut g = f.clone();
     g.vertices[0] = f32::INFINITY;
@@ -576,10 +482,7 @@ fn unknown_enum_values_and_nulls() {
     assert!(msg.contains("method"), "{msg}");
     let mut vis = d;
     vis.visibility = 2;
-    assert_eq!(
-        f.new_session(&vis).unwrap_err().0,
-        GrStatus::InvalidArgument
-    );
+    assert_eq!(f.new_session(&vis).unwrap_err().0, GrStatus::InvalidArgument);
 
     let mut out = null_mut();
     let st = unsafe {
@@ -646,27 +549,12 @@ fn unknown_enum_values_and_nulls() {
     };
     assert_eq!(st, GrStatus::Ok, "{}", last_error());
     let mut n = 7;
-    assert_eq!(
-        unsafe { gr_session_object_count(out, &mut n) },
-        GrStatus::Ok
-    );
+    assert_eq!(unsafe { gr_session_object_count(out, &mut n) }, GrStatus::Ok);
     assert_eq!(n, 0);
-    assert_eq!(
-        unsafe { gr_session_solve_frame(out, f64::NAN, None, null_mut()) },
-        GrStatus::InvalidArgument
-    );
-    assert_eq!(
-        unsafe { gr_session_solve_frame(out, 1.0, None, null_mut()) },
-        GrStatus::Ok
-    );
-    assert_eq!(
-        unsafe { gr_session_object_count(out, null_mut()) },
-        GrStatus::NullPointer
-    );
-    assert_eq!(
-        unsafe { gr_session_face_count(out, 0, &mut n) },
-        GrStatus::InvalidArgument
-    );
+    assert_eq!(unsafe { gr_session_solve_frame(out, f64::NAN, None, null_mut()) }, GrStatus::InvalidArgument);
+    assert_eq!(unsafe { gr_session_solve_frame(out, 1.0, None, null_mut()) }, GrStatus::Ok);
+    assert_eq!(unsafe { gr_session_object_count(out, null_mut()) }, GrStatus::NullPointer);
+    assert_eq!(unsafe { gr_session_face_count(out, 0, &mut n) }, GrStatus::InvalidArgument);
     unsafe { gr_session_free(out) };
     unsafe { gr_session_free(null_mut()) };
 }
@@ -682,18 +570,9 @@ fn last_error_is_per_thread_and_truncates_safely() {
     assert_eq!(n, full.len());
     let mut small = [0x7fu8; 6];
     assert_eq!(unsafe { gr_last_error(small.as_mut_ptr().cast(), 5) }, n);
-    assert_eq!(
-        &small[..5],
-        &full.as_bytes()[..4]
-            .iter()
-            .copied()
-            .chain([0])
-            .collect::<Vec<_>>()[..]
-    );
+    assert_eq!(&small[..5], &full.as_bytes()[..4].iter().copied().chain([0]).collect::<Vec<_>>()[..]);
     assert_eq!(small[5], 0x7f, "wrote past len");
-    let other = std::thread::spawn(|| unsafe { gr_last_error(null_mut(), 0) })
-        .join()
-        .unwrap();
+    let other = std::thread::spawn(|| unsafe { gr_last_error(null_mut(), 0) }).join().unwrap();
     assert_eq!(other, 0, "another thread has its own last error");
     // A successful call clears it.
     let mut settings = GrSettings::default();
@@ -708,10 +587,7 @@ fn panics_become_internal_errors() {
     let msg = last_error();
     assert!(msg.contains("gr_test") && msg.contains("boom 42"), "{msg}");
     // A panic in a rayon worker is re-raised on the calling thread and caught there too.
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(2)
-        .build()
-        .unwrap();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
     let st = run_in_boundary("gr_test_workers", || {
         use rayon::prelude::*;
         pool.install(|| {
@@ -723,11 +599,7 @@ fn panics_become_internal_errors() {
         })
     });
     assert_eq!(st, GrStatus::Internal);
-    assert!(
-        last_error().contains("worker 37 failed"),
-        "{}",
-        last_error()
-    );
+    assert!(last_error().contains("worker 37 failed"), "{}", last_error());
     assert_eq!(run_in_boundary("gr_test", || ()), GrStatus::Ok);
     assert_eq!(last_error(), "");
 }
@@ -762,15 +634,10 @@ fn calls_from_the_progress_callback_do_not_deadlock() {
         face_count: AtomicU32::new(99),
         cancel: AtomicU32::new(99),
     };
-    let st = unsafe {
-        gr_session_solve_frame(s, 1.0, Some(reenter), &r as *const Reentry as *mut c_void)
-    };
+    let st = unsafe { gr_session_solve_frame(s, 1.0, Some(reenter), &r as *const Reentry as *mut c_void) };
     // The callback asked to cancel through gr_session_cancel, so the solve stops.
     assert_eq!(st, GrStatus::Cancelled);
-    assert_eq!(
-        r.face_radiosity.load(Ordering::SeqCst),
-        GrStatus::InvalidArgument as u32
-    );
+    assert_eq!(r.face_radiosity.load(Ordering::SeqCst), GrStatus::InvalidArgument as u32);
     assert_eq!(r.face_count.load(Ordering::SeqCst), GrStatus::Ok as u32);
     assert_eq!(r.cancel.load(Ordering::SeqCst), GrStatus::Ok as u32);
     unsafe { gr_session_free(s) };

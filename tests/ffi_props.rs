@@ -102,15 +102,7 @@ fn matrix() -> impl Strategy<Value = [f32; 16]> {
 }
 
 fn settings() -> impl Strategy<Value = RawSettings> {
-    (
-        0u32..=3,
-        1u32..=6,
-        prop::sample::select(vec![1e-4, 1e-2, 0.5]),
-        0u32..=1,
-        1u32..=2,
-        0u32..=2,
-        0u32..=2,
-    )
+    (0u32..=3, 1u32..=6, prop::sample::select(vec![1e-4, 1e-2, 0.5]), 0u32..=1, 1u32..=2, 0u32..=2, 0u32..=2)
         .prop_map(|(b, q, t, v, vs, th, m)| RawSettings {
             basis_order: b,
             quadrature_order: q,
@@ -139,10 +131,7 @@ enum Fault {
 
 fn fault() -> impl Strategy<Value = Fault> {
     let setting = prop_oneof![
-        (
-            0usize..7,
-            prop_oneof![Just(0u64), 3u64..20, Just(u64::from(u32::MAX))]
-        ),
+        (0usize..7, prop_oneof![Just(0u64), 3u64..20, Just(u64::from(u32::MAX))]),
         Just(2usize).prop_flat_map(|k| {
             (
                 Just(k),
@@ -168,21 +157,14 @@ fn fault() -> impl Strategy<Value = Fault> {
 
 fn object(materials: u32) -> impl Strategy<Value = Obj> {
     prop_oneof![20 => 3u32..7, 1 => 0u32..3].prop_flat_map(move |n| {
-        let face = (
-            prop_oneof![30 => 3usize..=4, 1 => 0usize..=6],
-            index(materials),
-        )
+        let face = (prop_oneof![30 => 3usize..=4, 1 => 0usize..=6], index(materials))
             .prop_flat_map(move |(k, m)| (prop::collection::vec(index(n), k), Just(m)));
         (
             prop::collection::vec(prop::array::uniform3(number()), n as usize),
             prop::collection::vec(face, 0..4),
             matrix(),
         )
-            .prop_map(|(vertices, faces, matrix)| Obj {
-                vertices,
-                faces,
-                matrix,
-            })
+            .prop_map(|(vertices, faces, matrix)| Obj { vertices, faces, matrix })
     })
 }
 
@@ -190,8 +172,7 @@ fn op(objects: u32, materials: u32) -> impl Strategy<Value = Op> {
     let st = prop_oneof![8 => 0.0f32..=1.0, 1 => number()];
     prop_oneof![
         (index(objects), matrix()).prop_map(|(o, m)| Op::SetMatrix(o, m)),
-        (index(materials), prop::array::uniform3(number()))
-            .prop_map(|(m, e)| Op::SetEmission(m, e)),
+        (index(materials), prop::array::uniform3(number())).prop_map(|(m, e)| Op::SetEmission(m, e)),
         (
             prop_oneof![8 => -5.0f64..5.0, 1 => Just(f64::NAN), 1 => Just(f64::INFINITY)],
             prop_oneof![3 => Just(u32::MAX), 1 => 0u32..4],
@@ -213,10 +194,7 @@ fn case() -> impl Strategy<Value = Case> {
         (
             Just(settings),
             prop::collection::vec(
-                (
-                    prop::array::uniform3(unit()),
-                    prop::array::uniform3(number()),
-                )
+                (prop::array::uniform3(unit()), prop::array::uniform3(number()))
                     .prop_map(|(r, e)| [r[0], r[1], r[2], e[0].abs(), e[1].abs(), e[2].abs()]),
                 nm as usize,
             ),
@@ -226,28 +204,16 @@ fn case() -> impl Strategy<Value = Case> {
             any::<bool>(),
             prop::collection::vec(op(no, nm), 0..8),
         )
-            .prop_map(
-                |(settings, materials, objects, with_matrices, fault, solve_first, ops)| Case {
-                    settings,
-                    materials,
-                    objects,
-                    with_matrices,
-                    fault,
-                    solve_first,
-                    ops,
-                },
-            )
+            .prop_map(|(settings, materials, objects, with_matrices, fault, solve_first, ops)| {
+                Case { settings, materials, objects, with_matrices, fault, solve_first, ops }
+            })
     })
 }
 
 fn last_error() -> String {
     let mut buf = vec![0u8; 4096];
     let n = unsafe { gr_last_error(buf.as_mut_ptr().cast(), buf.len()) };
-    let s = CStr::from_bytes_until_nul(&buf)
-        .unwrap()
-        .to_str()
-        .unwrap()
-        .to_owned();
+    let s = CStr::from_bytes_until_nul(&buf).unwrap().to_str().unwrap().to_owned();
     assert_eq!(n.min(4095), s.len());
     s
 }
@@ -347,11 +313,7 @@ fn run(c: &Case) -> Result<(), TestCaseError> {
     let mut out: *mut GrSession = std::ptr::dangling_mut::<GrSession>();
     let st = unsafe {
         gr_session_new(
-            if is_null(0) {
-                null()
-            } else {
-                (&raw const settings).cast::<GrSettings>()
-            },
+            if is_null(0) { null() } else { (&raw const settings).cast::<GrSettings>() },
             nm as u32,
             ptr(&reflectance, is_null(1)),
             ptr(&emission, is_null(2)),
@@ -362,11 +324,7 @@ fn run(c: &Case) -> Result<(), TestCaseError> {
             ptr(&face_vertex_counts, is_null(6)),
             ptr(&face_indices, is_null(7)),
             ptr(&face_materials, is_null(8)),
-            if c.with_matrices {
-                ptr(&matrices, is_null(9))
-            } else {
-                null()
-            },
+            if c.with_matrices { ptr(&matrices, is_null(9)) } else { null() },
             vertices_len,
             face_indices_len,
             if is_null(10) { null_mut() } else { &mut out },
@@ -377,11 +335,7 @@ fn run(c: &Case) -> Result<(), TestCaseError> {
         if std::env::var_os("FFI_PROPS_DEBUG").is_some() {
             eprintln!("rejected: {}", last_error());
         }
-        prop_assert_eq!(
-            out,
-            std::ptr::dangling_mut::<GrSession>(),
-            "out written on failure"
-        );
+        prop_assert_eq!(out, std::ptr::dangling_mut::<GrSession>(), "out written on failure");
         return Ok(());
     }
     prop_assert!(!out.is_null() && out != std::ptr::dangling_mut::<GrSession>());
@@ -392,11 +346,7 @@ fn run(c: &Case) -> Result<(), TestCaseError> {
     result
 }
 
-unsafe extern "C" fn stop_after(
-    _f: f64,
-    _stage: *const std::ffi::c_char,
-    user: *mut c_void,
-) -> i32 {
+unsafe extern "C" fn stop_after(_f: f64, _stage: *const std::ffi::c_char, user: *mut c_void) -> i32 {
     let left = unsafe { &mut *(user as *mut u32) };
     if *left == 0 {
         return 0;
@@ -408,14 +358,10 @@ unsafe extern "C" fn stop_after(
 fn run_ops(s: *mut GrSession, c: &Case) -> Result<(), TestCaseError> {
     let mut solved = false;
     let mut n = 0u32;
-    check("gr_session_object_count", unsafe {
-        gr_session_object_count(s, &mut n)
-    })?;
+    check("gr_session_object_count", unsafe { gr_session_object_count(s, &mut n) })?;
     prop_assert_eq!(n as usize, c.objects.len());
     if c.solve_first {
-        let st = check("solve_frame", unsafe {
-            gr_session_solve_frame(s, 1.0, None, null_mut())
-        })?;
+        let st = check("solve_frame", unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) })?;
         prop_assert_eq!(st, GrStatus::Ok);
         SOLVED.fetch_add(1, Ordering::Relaxed);
         solved = true;
@@ -423,9 +369,7 @@ fn run_ops(s: *mut GrSession, c: &Case) -> Result<(), TestCaseError> {
     for op in &c.ops {
         match op {
             Op::SetMatrix(o, m) => {
-                check("set_object_matrix", unsafe {
-                    gr_session_set_object_matrix(s, *o, m.as_ptr())
-                })?;
+                check("set_object_matrix", unsafe { gr_session_set_object_matrix(s, *o, m.as_ptr()) })?;
             }
             Op::SetEmission(m, e) => {
                 check("set_material_emission", unsafe {
@@ -437,10 +381,7 @@ fn run_ops(s: *mut GrSession, c: &Case) -> Result<(), TestCaseError> {
                 let st = check("solve_frame", unsafe {
                     gr_session_solve_frame(s, *frame, Some(stop_after), (&raw mut left).cast())
                 })?;
-                prop_assert!(matches!(
-                    st,
-                    GrStatus::Ok | GrStatus::Cancelled | GrStatus::InvalidArgument
-                ));
+                prop_assert!(matches!(st, GrStatus::Ok | GrStatus::Cancelled | GrStatus::InvalidArgument));
                 solved |= st == GrStatus::Ok;
                 if st == GrStatus::Ok {
                     SOLVED.fetch_add(1, Ordering::Relaxed);
@@ -522,12 +463,8 @@ fn run_ops(s: *mut GrSession, c: &Case) -> Result<(), TestCaseError> {
             Op::Counts(o) => {
                 let mut f = u32::MAX;
                 let mut k = u32::MAX;
-                let a = check("face_count", unsafe {
-                    gr_session_face_count(s, *o, &mut f)
-                })?;
-                let b = check("corner_count", unsafe {
-                    gr_session_corner_count(s, *o, &mut k)
-                })?;
+                let a = check("face_count", unsafe { gr_session_face_count(s, *o, &mut f) })?;
+                let b = check("corner_count", unsafe { gr_session_corner_count(s, *o, &mut k) })?;
                 prop_assert_eq!(a, b);
                 if a == GrStatus::Ok {
                     prop_assert!(3 * f <= k && k <= 4 * f);
@@ -544,15 +481,8 @@ fn run_ops(s: *mut GrSession, c: &Case) -> Result<(), TestCaseError> {
 }
 
 fn config() -> Config {
-    let cases = std::env::var("PROPTEST_CASES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(256);
-    Config {
-        cases,
-        failure_persistence: None,
-        ..Config::default()
-    }
+    let cases = std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(256);
+    Config { cases, failure_persistence: None, ..Config::default() }
 }
 
 #[test]

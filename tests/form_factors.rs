@@ -12,21 +12,10 @@ use glam::DVec3;
 /// parallelogram receiver `G_ij^00 = F_ij`.
 fn form_factors(pi: &Patch, pj: &Patch, order: usize) -> (f64, f64) {
     let rule = GaussLegendre::new(order);
-    let ctx = PairContext {
-        basis: Basis::new(0),
-        rule: &rule,
-        vis_axis: 1,
-        adaptive: false,
-    };
+    let ctx = PairContext { basis: Basis::new(0), rule: &rule, vis_axis: 1, adaptive: false };
     let si = Samples::new(pi, &Rect::UNIT, &rule, ctx.basis, 1);
     let sj = Samples::new(pj, &Rect::UNIT, &rule, ctx.basis, 1);
-    let c = integrate_pair(
-        &ctx,
-        pi,
-        pj,
-        |second, _| if second { &sj } else { &si },
-        &Visibility::Full,
-    );
+    let c = integrate_pair(&ctx, pi, pj, |second, _| if second { &sj } else { &si }, &Visibility::Full);
     (c.ij[0], c.ji[0])
 }
 
@@ -38,9 +27,7 @@ fn howell_parallel(a: f64, b: f64, c: f64) -> f64 {
     let (x, y) = (a / c, b / c);
     let pi = std::f64::consts::PI;
     2.0 / (pi * x * y)
-        * ((((1.0 + x * x) * (1.0 + y * y)) / (1.0 + x * x + y * y))
-            .sqrt()
-            .ln()
+        * ((((1.0 + x * x) * (1.0 + y * y)) / (1.0 + x * x + y * y)).sqrt().ln()
             + x * (1.0 + y * y).sqrt() * (x / (1.0 + y * y).sqrt()).atan()
             + y * (1.0 + x * x).sqrt() * (y / (1.0 + x * x).sqrt()).atan()
             - x * x.atan()
@@ -49,11 +36,8 @@ fn howell_parallel(a: f64, b: f64, c: f64) -> f64 {
 
 #[test]
 fn parallel_opposed_rectangles_match_howell_c11() {
-    for &(a, b, c, want) in &[
-        (1.0, 1.0, 1.0, 0.199825),
-        (1.0, 1.5, 0.5, 0.475576),
-        (2.0, 1.0, 3.0, 0.060331),
-    ] {
+    for &(a, b, c, want) in &[(1.0, 1.0, 1.0, 0.199825), (1.0, 1.5, 0.5, 0.475576), (2.0, 1.0, 3.0, 0.060331)]
+    {
         assert!((howell_parallel(a, b, c) - want).abs() < 1e-6);
         // Receiver at z = 0 facing +z, source at z = c facing -z.
         let lo = quad([[0.0, 0.0, 0.0], [a, 0.0, 0.0], [a, b, 0.0], [0.0, b, 0.0]]);

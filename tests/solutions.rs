@@ -12,11 +12,7 @@ use galerkin_radiosity::visibility::Visibility;
 use glam::DVec3;
 
 fn settings(order: usize) -> Settings {
-    Settings {
-        basis_order: order,
-        tolerance: 1e-7,
-        ..Settings::default()
-    }
+    Settings { basis_order: order, tolerance: 1e-7, ..Settings::default() }
 }
 
 fn solved(scene: &Scene) -> System {
@@ -52,10 +48,7 @@ fn progressive_equals_direct_solve() {
     let scene = scenes::cornell_box(3, settings(2));
     let sys = solved(&scene);
     let direct = solver::gauss_seidel(&sys.links, &sys.reflectance, &sys.emission, 1e-12);
-    let peak = direct
-        .iter()
-        .flat_map(|c| c.iter())
-        .fold(0.0f64, |m, x| m.max(x.abs()));
+    let peak = direct.iter().flat_map(|c| c.iter()).fold(0.0f64, |m, x| m.max(x.abs()));
     let worst = sys
         .solution
         .b
@@ -73,20 +66,12 @@ fn progressive_equals_direct_solve() {
 /// `A_i F_ij = sum_k m_i^k G_ij^{k0}`.
 #[test]
 fn kernel_is_reciprocal() {
-    let scene = scenes::cornell_box(
-        4,
-        Settings {
-            basis_order: 1,
-            ..Settings::default()
-        },
-    );
+    let scene = scenes::cornell_box(4, Settings { basis_order: 1, ..Settings::default() });
     let sys = System::build(&scene, 1.0, &no_progress).unwrap();
     let nb = sys.basis.len();
     let area_ff = |recv: u32, p: u32| -> f64 {
         let g = sys.links.block(p, recv);
-        (0..nb)
-            .map(|k| sys.elements[recv as usize].moments[k] * g[k * nb] as f64)
-            .sum()
+        (0..nb).map(|k| sys.elements[recv as usize].moments[k] * g[k * nb] as f64).sum()
     };
     let mut worst: f64 = 0.0;
     for p in 0..sys.links.len() as u32 {
@@ -107,9 +92,7 @@ fn kernel_is_reciprocal() {
         }
         assert!(rel < tol, "pair {},{}: {fab} vs {fba}", pair.a, pair.b);
     }
-    eprintln!(
-        "reciprocity: worst relative difference {worst:.1e} over separated, fully visible pairs"
-    );
+    eprintln!("reciprocity: worst relative difference {worst:.1e} over separated, fully visible pairs");
 }
 
 /// One bounce: a receiver under an unoccluded emitter has B(x) = rho Be F_point(x); its Galerkin
@@ -141,25 +124,10 @@ fn one_bounce_equals_projection_of_point_form_factor() {
         ];
         let emitter = scenes::subdivided_quad("emitter", e, 1, 1);
         let materials = vec![
-            Material {
-                name: "floor".into(),
-                reflectance: [rho; 3],
-                emission: [0.0; 3],
-            },
-            Material {
-                name: "emitter".into(),
-                reflectance: [0.0; 3],
-                emission: [be; 3],
-            },
+            Material { name: "floor".into(), reflectance: [rho; 3], emission: [0.0; 3] },
+            Material { name: "emitter".into(), reflectance: [0.0; 3], emission: [be; 3] },
         ];
-        let scene = Scene::new(
-            st,
-            (1, 1),
-            materials,
-            vec![vec![], vec![]],
-            vec![floor, emitter],
-        )
-        .unwrap();
+        let scene = Scene::new(st, (1, 1), materials, vec![vec![], vec![]], vec![floor, emitter]).unwrap();
         let sys = solved(&scene);
         // Exact projection by high-order quadrature of rho Be F_point(x) Gamma_k(x).
         let basis = Basis::new(order);
@@ -177,16 +145,8 @@ fn one_bounce_equals_projection_of_point_form_factor() {
         let scale = want[0].abs();
         for k in 0..basis.len() {
             let err = (got[k][0] - want[k]).abs() / scale;
-            eprintln!(
-                "order {order} k {k}: {:.6} vs {:.6} ({err:.1e})",
-                got[k][0], want[k]
-            );
-            assert!(
-                err < 1e-3,
-                "order {order} coefficient {k}: {} vs {}",
-                got[k][0],
-                want[k]
-            );
+            eprintln!("order {order} k {k}: {:.6} vs {:.6} ({err:.1e})", got[k][0], want[k]);
+            assert!(err < 1e-3, "order {order} coefficient {k}: {} vs {}", got[k][0], want[k]);
         }
     }
 }
@@ -195,12 +155,8 @@ fn one_bounce_equals_projection_of_point_form_factor() {
 /// opaque wall exchange nothing.
 #[test]
 fn no_light_through_a_closed_wall() {
-    let floor = scenes::subdivided_quad(
-        "floor",
-        [DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::Y],
-        2,
-        0,
-    );
+    let floor =
+        scenes::subdivided_quad("floor", [DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::Y], 2, 0);
     let e = [
         DVec3::new(0.0, 0.0, 1.0),
         DVec3::new(0.0, 1.0, 1.0),
@@ -217,16 +173,8 @@ fn no_light_through_a_closed_wall() {
     ];
     let wall = scenes::subdivided_quad("wall", w, 3, 0);
     let materials = vec![
-        Material {
-            name: "grey".into(),
-            reflectance: [0.5; 3],
-            emission: [0.0; 3],
-        },
-        Material {
-            name: "emitter".into(),
-            reflectance: [0.0; 3],
-            emission: [1.0; 3],
-        },
+        Material { name: "grey".into(), reflectance: [0.5; 3], emission: [0.0; 3] },
+        Material { name: "emitter".into(), reflectance: [0.0; 3], emission: [1.0; 3] },
     ];
     let with_wall = Scene::new(
         settings(1),
@@ -238,20 +186,10 @@ fn no_light_through_a_closed_wall() {
     .unwrap();
     let sys = solved(&with_wall);
     for e in 0..4 {
-        assert_eq!(
-            sys.mean(e),
-            [0.0; 3],
-            "floor element {e} is lit through the wall"
-        );
+        assert_eq!(sys.mean(e), [0.0; 3], "floor element {e} is lit through the wall");
     }
-    let open = Scene::new(
-        settings(1),
-        (1, 1),
-        materials,
-        vec![vec![], vec![]],
-        vec![floor, emitter],
-    )
-    .unwrap();
+    let open =
+        Scene::new(settings(1), (1, 1), materials, vec![vec![], vec![]], vec![floor, emitter]).unwrap();
     let sys = solved(&open);
     assert!(sys.mean(0)[0] > 0.05, "without the wall the floor is lit");
     let _ = Patch::from_corners(&e);

@@ -79,8 +79,7 @@ fn take_flag(args: &mut Vec<String>, name: &str) -> bool {
 }
 
 fn parse<T: std::str::FromStr>(v: &str, what: &str) -> Result<T, CliError> {
-    v.parse()
-        .map_err(|_| CliError::Usage(format!("{what}: cannot parse {v:?}")))
+    v.parse().map_err(|_| CliError::Usage(format!("{what}: cannot parse {v:?}")))
 }
 
 fn bake(args: &[String]) -> Result<(), CliError> {
@@ -93,14 +92,10 @@ fn bake(args: &[String]) -> Result<(), CliError> {
     let exact = take_flag(&mut args, "--exact");
     let quiet = take_flag(&mut args, "--quiet");
     if full && exact {
-        return Err(CliError::Usage(
-            "--full and --exact exclude each other".into(),
-        ));
+        return Err(CliError::Usage("--full and --exact exclude each other".into()));
     }
     let [input] = args.as_slice() else {
-        return Err(CliError::Usage(format!(
-            "bake takes one scene file, got {args:?}"
-        )));
+        return Err(CliError::Usage(format!("bake takes one scene file, got {args:?}")));
     };
     let mut scene = read_scene(&PathBuf::from(input))?;
     if let Some(t) = threads {
@@ -109,14 +104,11 @@ fn bake(args: &[String]) -> Result<(), CliError> {
     let (first, last) = match frames {
         None => scene.frames,
         Some(r) => {
-            let (a, b) = r
-                .split_once(':')
-                .ok_or_else(|| CliError::Usage(format!("--frames wants A:B, got {r:?}")))?;
+            let (a, b) =
+                r.split_once(':').ok_or_else(|| CliError::Usage(format!("--frames wants A:B, got {r:?}")))?;
             let (a, b): (i64, i64) = (parse(a, "--frames")?, parse(b, "--frames")?);
             if a > b {
-                return Err(CliError::Usage(format!(
-                    "--frames {a}:{b}: the first frame is after the last"
-                )));
+                return Err(CliError::Usage(format!("--frames {a}:{b}: the first frame is after the last")));
             }
             (a, b)
         }
@@ -146,11 +138,7 @@ fn bake(args: &[String]) -> Result<(), CliError> {
             let mut t = last_print.lock().unwrap();
             if !quiet && t.elapsed().as_secs_f64() > 1.0 {
                 *t = Instant::now();
-                eprintln!(
-                    "frame {frame} ({}/{total}): {stage} {:.0}%",
-                    k + 1,
-                    100.0 * fraction
-                );
+                eprintln!("frame {frame} ({}/{total}): {stage} {:.0}%", k + 1, 100.0 * fraction);
             }
             true
         };
@@ -180,14 +168,11 @@ fn bake(args: &[String]) -> Result<(), CliError> {
             "method": method,
         }),
     };
-    let text = serde_json::to_string(&result)
-        .map_err(|e| CliError::Failed(format!("writing result: {e}")))?;
+    let text =
+        serde_json::to_string(&result).map_err(|e| CliError::Failed(format!("writing result: {e}")))?;
     std::fs::write(&out, text).map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
     if !quiet {
-        eprintln!(
-            "wrote {out}: {total} frame(s) in {:.2} s",
-            start.elapsed().as_secs_f64()
-        );
+        eprintln!("wrote {out}: {total} frame(s) in {:.2} s", start.elapsed().as_secs_f64());
     }
     Ok(())
 }
@@ -196,33 +181,21 @@ fn demo_scene(args: &[String]) -> Result<(), CliError> {
     let mut args = args.to_vec();
     let out = take_value(&mut args, &["-o", "--output"])?
         .ok_or_else(|| CliError::Usage("demo-scene needs -o SCENE.json".into()))?;
-    let frames: i64 = take_value(&mut args, &["--frames"])?
-        .map(|v| parse(&v, "--frames"))
-        .transpose()?
-        .unwrap_or(48);
-    let subdiv: usize = take_value(&mut args, &["--subdiv"])?
-        .map(|v| parse(&v, "--subdiv"))
-        .transpose()?
-        .unwrap_or(8);
-    let order: usize = take_value(&mut args, &["--order"])?
-        .map(|v| parse(&v, "--order"))
-        .transpose()?
-        .unwrap_or(2);
+    let frames: i64 =
+        take_value(&mut args, &["--frames"])?.map(|v| parse(&v, "--frames")).transpose()?.unwrap_or(48);
+    let subdiv: usize =
+        take_value(&mut args, &["--subdiv"])?.map(|v| parse(&v, "--subdiv")).transpose()?.unwrap_or(8);
+    let order: usize =
+        take_value(&mut args, &["--order"])?.map(|v| parse(&v, "--order")).transpose()?.unwrap_or(2);
     if !args.is_empty() {
         return Err(CliError::Usage(format!("unexpected arguments {args:?}")));
     }
     if frames < 1 || !(1..=64).contains(&subdiv) || order > 3 {
-        return Err(CliError::Usage(
-            "--frames >= 1, --subdiv in 1..=64, --order in 0..=3".into(),
-        ));
+        return Err(CliError::Usage("--frames >= 1, --subdiv in 1..=64, --order in 0..=3".into()));
     }
-    let settings = Settings {
-        basis_order: order,
-        ..Settings::default()
-    };
+    let settings = Settings { basis_order: order, ..Settings::default() };
     let scene = scenes::cornell_box_animated(subdiv, frames, settings);
-    std::fs::write(&out, scene_to_json(&scene))
-        .map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
+    std::fs::write(&out, scene_to_json(&scene)).map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
     eprintln!("wrote {out}: {} faces, {frames} frames", scene.face_count());
     Ok(())
 }

@@ -40,10 +40,7 @@ pub(crate) struct Failure {
 
 impl Failure {
     pub fn new(status: GrStatus, message: impl Into<String>) -> Self {
-        Self {
-            status,
-            message: message.into(),
-        }
+        Self { status, message: message.into() }
     }
 
     pub fn null(what: &str) -> Self {

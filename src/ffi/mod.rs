@@ -18,10 +18,10 @@ use std::ffi::{CStr, c_char};
 pub use error::{GrStatus, gr_last_error};
 pub use panic::run_in_boundary;
 pub use session::{
-    GrProgressFn, GrSession, gr_session_cancel, gr_session_corner_count,
-    gr_session_corner_radiosity, gr_session_eval, gr_session_face_count, gr_session_face_radiosity,
-    gr_session_frame_stats_json, gr_session_free, gr_session_new, gr_session_object_count,
-    gr_session_set_material_emission, gr_session_set_object_matrix, gr_session_solve_frame,
+    GrProgressFn, GrSession, gr_session_cancel, gr_session_corner_count, gr_session_corner_radiosity,
+    gr_session_eval, gr_session_face_count, gr_session_face_radiosity, gr_session_frame_stats_json,
+    gr_session_free, gr_session_new, gr_session_object_count, gr_session_set_material_emission,
+    gr_session_set_object_matrix, gr_session_solve_frame,
 };
 pub use settings::{GrMethod, GrSettings, gr_settings_default};
 
@@ -29,11 +29,10 @@ pub use settings::{GrMethod, GrSettings, gr_settings_default};
 /// incompatibly; check it after loading the library.
 pub const GR_ABI_VERSION: u32 = 1;
 
-const VERSION: &CStr =
-    match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {
-        Ok(v) => v,
-        Err(_) => panic!("the crate version contains a NUL"),
-    };
+const VERSION: &CStr = match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {
+    Ok(v) => v,
+    Err(_) => panic!("the crate version contains a NUL"),
+};
 
 /// Returns the ABI version, `GR_ABI_VERSION` (1).
 #[unsafe(no_mangle)]

@@ -75,10 +75,7 @@ impl GrSession {
     fn object(&self, object: u32) -> Result<usize, Failure> {
         let o = object as usize;
         if o >= self.faces.len() {
-            return Err(Failure::invalid(format!(
-                "object {object} out of range (0..{})",
-                self.faces.len()
-            )));
+            return Err(Failure::invalid(format!("object {object} out of range (0..{})", self.faces.len())));
         }
         Ok(o)
     }
@@ -87,10 +84,7 @@ impl GrSession {
 impl State {
     fn results(&self) -> Result<&[ObjectResult], Failure> {
         if self.session.frame().is_none() {
-            return Err(Failure::new(
-                GrStatus::NotSolved,
-                "no frame has been solved yet",
-            ));
+            return Err(Failure::new(GrStatus::NotSolved, "no frame has been solved yet"));
         }
         if let Some(r) = self.results.get() {
             return Ok(r);
@@ -121,17 +115,10 @@ fn check_array<T>(p: *const T, len: usize, what: &str) -> Result<(), Failure> {
         return Err(Failure::null(what));
     }
     if !p.is_aligned() {
-        return Err(Failure::invalid(format!(
-            "{what} is not aligned for its element type"
-        )));
+        return Err(Failure::invalid(format!("{what} is not aligned for its element type")));
     }
-    if len
-        .checked_mul(size_of::<T>())
-        .is_none_or(|bytes| bytes > isize::MAX as usize)
-    {
-        return Err(Failure::invalid(format!(
-            "{what}: {len} elements is more than any buffer can hold"
-        )));
+    if len.checked_mul(size_of::<T>()).is_none_or(|bytes| bytes > isize::MAX as usize) {
+        return Err(Failure::invalid(format!("{what}: {len} elements is more than any buffer can hold")));
     }
     Ok(())
 }
@@ -153,17 +140,9 @@ unsafe fn array<'a, T>(p: *const T, len: usize, what: &str) -> Result<&'a [T], F
 ///
 /// # Safety
 /// When `len > 0`, `out` points to `len` writable values.
-unsafe fn write_out<T: Copy>(
-    out: *mut T,
-    len: usize,
-    values: &[T],
-    what: &str,
-) -> Result<(), Failure> {
+unsafe fn write_out<T: Copy>(out: *mut T, len: usize, values: &[T], what: &str) -> Result<(), Failure> {
     if len < values.len() {
-        return Err(Failure::invalid(format!(
-            "{what} holds {len} values, {} are needed",
-            values.len()
-        )));
+        return Err(Failure::invalid(format!("{what} holds {len} values, {} are needed", values.len())));
     }
     check_array(out.cast_const(), values.len(), what)?;
     if !values.is_empty() {
@@ -222,9 +201,8 @@ impl Mesh<'_> {
                 faces.push(self.face_indices[i0..i0 + k].to_vec());
                 i0 += k;
             }
-            let matrix = self.matrices.map_or(DMat4::IDENTITY, |m| {
-                matrix_from_row_major(&m[16 * o..16 * o + 16])
-            });
+            let matrix =
+                self.matrices.map_or(DMat4::IDENTITY, |m| matrix_from_row_major(&m[16 * o..16 * o + 16]));
             objects.push(Object {
                 name: format!("object {o}"),
                 vertices,
@@ -331,11 +309,8 @@ pub unsafe extern "C" fn gr_session_new(
         }
         let face_indices = unsafe { array(face_indices, face_indices_len, "face_indices") }?;
         let face_materials = unsafe { array(face_materials, nf, "face_materials") }?;
-        let matrices = if matrices.is_null() {
-            None
-        } else {
-            Some(unsafe { array(matrices, 16 * no, "matrices") }?)
-        };
+        let matrices =
+            if matrices.is_null() { None } else { Some(unsafe { array(matrices, 16 * no, "matrices") }?) };
         let materials = (0..nm)
             .map(|m| Material {
                 name: format!("material {m}"),
@@ -358,19 +333,17 @@ pub unsafe extern "C" fn gr_session_new(
         let mut f0 = 0usize;
         for (o, &n) in face_counts.iter().enumerate() {
             let c = total(&fvc[f0..f0 + n as usize]);
-            corners.push(u32::try_from(c).map_err(|_| {
-                Failure::invalid(format!("object {o} has {c} face corners, above 2^32 - 1"))
-            })?);
+            corners.push(
+                u32::try_from(c).map_err(|_| {
+                    Failure::invalid(format!("object {o} has {c} face corners, above 2^32 - 1"))
+                })?,
+            );
             f0 += n as usize;
         }
         let scene = Scene::new(settings, (1, 1), materials, vec![Vec::new(); nm], objects)?;
         let session = Session::new(scene, method)?;
         let boxed = Box::new(GrSession {
-            state: RwLock::new(State {
-                session,
-                stats: None,
-                results: OnceLock::new(),
-            }),
+            state: RwLock::new(State { session, stats: None, results: OnceLock::new() }),
             cancel: Arc::new(AtomicBool::new(false)),
             faces,
             corners,
@@ -423,9 +396,7 @@ pub unsafe extern "C" fn gr_session_set_material_emission(
             return Err(Failure::null("rgb"));
         }
         let e = unsafe { array(rgb, 3, "rgb") }?;
-        s.write()?
-            .session
-            .set_material_emission(material as usize, self::rgb(e))?;
+        s.write()?.session.set_material_emission(material as usize, self::rgb(e))?;
         Ok(())
     })
 }
@@ -482,12 +453,7 @@ pub unsafe extern "C" fn gr_session_solve_frame(
         let s = unsafe { session(s) }?;
         let mut state = s.write()?;
         s.cancel.store(false, Ordering::SeqCst);
-        let callback = Callback {
-            f: progress,
-            user,
-            lock: Mutex::new(()),
-            stopped: AtomicBool::new(false),
-        };
+        let callback = Callback { f: progress, user, lock: Mutex::new(()), stopped: AtomicBool::new(false) };
         let cancel = &*s.cancel;
         let go_on = |fraction: f64, stage: &str| -> bool {
             !cancel.load(Ordering::Relaxed)
@@ -545,10 +511,7 @@ pub unsafe extern "C" fn gr_session_frame_stats_json(
         let json = {
             let state = s.read()?;
             let Some(stats) = &state.stats else {
-                return Err(Failure::new(
-                    GrStatus::NotSolved,
-                    "no frame has been solved yet",
-                ));
+                return Err(Failure::new(GrStatus::NotSolved, "no frame has been solved yet"));
             };
             serde_json::to_string(stats)
                 .map_err(|e| Failure::new(GrStatus::Internal, format!("stats JSON: {e}")))?
@@ -578,11 +541,7 @@ pub unsafe extern "C" fn gr_session_object_count(s: *const GrSession, out: *mut 
 /// # Safety
 /// `s` is NULL or a live session; `out` is NULL or points to a writable `uint32_t`.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn gr_session_face_count(
-    s: *const GrSession,
-    object: u32,
-    out: *mut u32,
-) -> GrStatus {
+pub unsafe extern "C" fn gr_session_face_count(s: *const GrSession, object: u32, out: *mut u32) -> GrStatus {
     boundary("gr_session_face_count", || {
         let s = unsafe { session(s) }?;
         let o = s.object(object)?;
@@ -693,12 +652,8 @@ pub unsafe extern "C" fn gr_session_eval(
 ) -> GrStatus {
     boundary("gr_session_eval", || {
         let s = unsafe { session(s) }?;
-        let n2 = count
-            .checked_mul(2)
-            .ok_or_else(|| Failure::invalid("count is too large"))?;
-        let n3 = count
-            .checked_mul(3)
-            .ok_or_else(|| Failure::invalid("count is too large"))?;
+        let n2 = count.checked_mul(2).ok_or_else(|| Failure::invalid("count is too large"))?;
+        let n3 = count.checked_mul(3).ok_or_else(|| Failure::invalid("count is too large"))?;
         check_array(out.cast_const(), n3, "out")?;
         let values = {
             let objects = unsafe { array(objects, count, "objects") }?;
@@ -706,10 +661,7 @@ pub unsafe extern "C" fn gr_session_eval(
             let st = unsafe { array(st, n2, "st") }?;
             let state = s.read()?;
             if state.session.frame().is_none() {
-                return Err(Failure::new(
-                    GrStatus::NotSolved,
-                    "no frame has been solved yet",
-                ));
+                return Err(Failure::new(GrStatus::NotSolved, "no frame has been solved yet"));
             }
             let mut values = Vec::with_capacity(n3);
             for i in 0..count {

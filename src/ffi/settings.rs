@@ -92,18 +92,14 @@ pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Me
         1 => Method::Exact,
         2 => Method::Full,
         m => {
-            return Err(Failure::invalid(format!(
-                "settings.method {m} is not a GrMethod (0, 1 or 2)"
-            )));
+            return Err(Failure::invalid(format!("settings.method {m} is not a GrMethod (0, 1 or 2)")));
         }
     };
     let visibility = match visibility {
         0 => false,
         1 => true,
         v => {
-            return Err(Failure::invalid(format!(
-                "settings.visibility {v} is neither 0 nor 1"
-            )));
+            return Err(Failure::invalid(format!("settings.visibility {v} is neither 0 nor 1")));
         }
     };
     let settings = Settings {

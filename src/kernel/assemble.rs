@@ -21,11 +21,8 @@ pub struct ElementGeometry<'a> {
 
 impl<'a> ElementGeometry<'a> {
     pub fn new(patches: &'a [Patch], ctx: &PairContext) -> Self {
-        let mut rules = vec![
-            ctx.points_for(f64::INFINITY),
-            ctx.points_for(0.5 * (MID + FAR)),
-            ctx.rule.len(),
-        ];
+        let mut rules =
+            vec![ctx.points_for(f64::INFINITY), ctx.points_for(0.5 * (MID + FAR)), ctx.rule.len()];
         rules.dedup();
         let samples = rules
             .iter()
@@ -37,20 +34,12 @@ impl<'a> ElementGeometry<'a> {
                     .collect()
             })
             .collect();
-        Self {
-            patches,
-            samples,
-            rules,
-        }
+        Self { patches, samples, rules }
     }
 
     /// Element `e`'s whole-domain samples with `n` points per axis.
     pub fn samples(&self, e: usize, n: usize) -> &Samples {
-        let r = self
-            .rules
-            .iter()
-            .position(|&m| m == n)
-            .expect("rule prepared");
+        let r = self.rules.iter().position(|&m| m == n).expect("rule prepared");
         &self.samples[r][e]
     }
 }
@@ -85,13 +74,7 @@ pub fn compute_pair(
     if vis == Visibility::Blocked {
         return None;
     }
-    let c = integrate_pair(
-        ctx,
-        pi,
-        pj,
-        |second, n| geom.samples(if second { j } else { i }, n),
-        &vis,
-    );
+    let c = integrate_pair(ctx, pi, pj, |second, n| geom.samples(if second { j } else { i }, n), &vis);
     (!c.is_zero()).then_some((c, vis))
 }
 
@@ -114,9 +97,7 @@ pub fn assemble(
                 return Vec::new();
             }
             let row: Vec<_> = ((i + 1)..n)
-                .filter_map(|j| {
-                    compute_pair(ctx, geom, occluders, i, j).map(|(c, v)| (j as u32, c, v))
-                })
+                .filter_map(|j| compute_pair(ctx, geom, occluders, i, j).map(|(c, v)| (j as u32, c, v)))
                 .collect();
             let d = done.fetch_add(n - 1 - i, std::sync::atomic::Ordering::Relaxed) + n - 1 - i;
             if !progress(d, n * (n - 1) / 2) {

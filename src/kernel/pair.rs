@@ -76,10 +76,7 @@ pub struct PairCoefficients {
 
 impl PairCoefficients {
     pub fn zeros(nb: usize) -> Self {
-        Self {
-            ij: vec![0.0; nb * nb],
-            ji: vec![0.0; nb * nb],
-        }
+        Self { ij: vec![0.0; nb * nb], ji: vec![0.0; nb * nb] }
     }
 
     pub fn is_zero(&self) -> bool {
@@ -138,16 +135,8 @@ fn split(
     // Split the larger side; split both when they are of a size, so the recursion stays balanced.
     let split_i = ri >= 0.5 * rj;
     let split_j = rj >= 0.5 * ri;
-    let parts_i: Vec<Rect> = if split_i {
-        rect_i.quadrants().to_vec()
-    } else {
-        vec![*rect_i]
-    };
-    let parts_j: Vec<Rect> = if split_j {
-        rect_j.quadrants().to_vec()
-    } else {
-        vec![*rect_j]
-    };
+    let parts_i: Vec<Rect> = if split_i { rect_i.quadrants().to_vec() } else { vec![*rect_i] };
+    let parts_j: Vec<Rect> = if split_j { rect_j.quadrants().to_vec() } else { vec![*rect_j] };
     for a in &parts_i {
         for b in &parts_j {
             split(ctx, pi, a, pj, b, vis, depth + 1, out);
@@ -158,13 +147,7 @@ fn split(
 /// Tensor Gauss over both sub-domains, as two small matrix products per direction:
 /// `G_ij += Phi_i^T (M diag(wA_j) Phi_j)` and `G_ji += Phi_j^T (M^T diag(wA_i) Phi_i)`,
 /// with `M_ab = g(x_a, y_b) VIS_ab w_a w_b / (w_a w_b)` folded into the weights below.
-fn gauss_leaf(
-    ctx: &PairContext,
-    si: &Samples,
-    sj: &Samples,
-    vis: &Visibility,
-    out: &mut PairCoefficients,
-) {
+fn gauss_leaf(ctx: &PairContext, si: &Samples, sj: &Samples, vis: &Visibility, out: &mut PairCoefficients) {
     let nb = ctx.basis.len();
     let cells = ctx.vis_axis * ctx.vis_axis;
     let (na, nbp) = (si.len(), sj.len());
@@ -238,44 +221,35 @@ fn analytic_leaf(
 ) {
     let nb = ctx.basis.len();
     let m = ctx.vis_axis;
-    let one_way = |recv: &Patch,
-                   rect_r: &Rect,
-                   src: &Patch,
-                   rect_s: &Rect,
-                   block: &mut [f64],
-                   transpose_vis: bool| {
-        let samples = Samples::new(recv, rect_r, ctx.rule, ctx.basis, m);
-        let poly = src.sub_patch(rect_s);
-        let poly_normal = poly.centre_normal();
-        let (cs, ct) = rect_s.map(0.5, 0.5);
-        let phi_src = ctx.basis.eval(cs, ct);
-        let src_cell = crate::visibility::cell_of(cs, ct, m);
-        let mut corners = poly.corners.to_vec();
-        corners.dedup();
-        for a in 0..samples.len() {
-            let f = point_to_polygon(
-                samples.position[a],
-                samples.normal[a],
-                &corners,
-                poly_normal,
-            );
-            if f == 0.0 {
-                continue;
-            }
-            let v = if transpose_vis {
-                vis.at(src_cell, samples.cell[a], m * m)
-            } else {
-                vis.at(samples.cell[a], src_cell, m * m)
-            };
-            let w = samples.weight[a] * f * v;
-            let phi_a = &samples.basis[a * nb..(a + 1) * nb];
-            for k in 0..nb {
-                for l in 0..nb {
-                    block[k * nb + l] += w * phi_a[k] * phi_src[l];
+    let one_way =
+        |recv: &Patch, rect_r: &Rect, src: &Patch, rect_s: &Rect, block: &mut [f64], transpose_vis: bool| {
+            let samples = Samples::new(recv, rect_r, ctx.rule, ctx.basis, m);
+            let poly = src.sub_patch(rect_s);
+            let poly_normal = poly.centre_normal();
+            let (cs, ct) = rect_s.map(0.5, 0.5);
+            let phi_src = ctx.basis.eval(cs, ct);
+            let src_cell = crate::visibility::cell_of(cs, ct, m);
+            let mut corners = poly.corners.to_vec();
+            corners.dedup();
+            for a in 0..samples.len() {
+                let f = point_to_polygon(samples.position[a], samples.normal[a], &corners, poly_normal);
+                if f == 0.0 {
+                    continue;
+                }
+                let v = if transpose_vis {
+                    vis.at(src_cell, samples.cell[a], m * m)
+                } else {
+                    vis.at(samples.cell[a], src_cell, m * m)
+                };
+                let w = samples.weight[a] * f * v;
+                let phi_a = &samples.basis[a * nb..(a + 1) * nb];
+                for k in 0..nb {
+                    for l in 0..nb {
+                        block[k * nb + l] += w * phi_a[k] * phi_src[l];
+                    }
                 }
             }
-        }
-    };
+        };
     // G_ij: receiver i's samples, inner integral F(x_a -> S_j) = integral g A_j du dv over rect_j.
     one_way(pi, rect_i, pj, rect_j, &mut out.ij, false);
     one_way(pj, rect_j, pi, rect_i, &mut out.ji, true);

@@ -80,10 +80,7 @@ mod tests {
         let f = point_to_polygon(DVec3::ZERO, DVec3::Z, &sq, -DVec3::Z);
         assert!((f - 0.138532).abs() < 1e-6, "{f}");
         // From behind the polygon nothing is seen.
-        assert_eq!(
-            point_to_polygon(DVec3::new(0.0, 0.0, 2.0), -DVec3::Z, &sq, -DVec3::Z),
-            0.0
-        );
+        assert_eq!(point_to_polygon(DVec3::new(0.0, 0.0, 2.0), -DVec3::Z, &sq, -DVec3::Z), 0.0);
     }
 
     #[test]

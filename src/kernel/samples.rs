@@ -23,13 +23,7 @@ pub struct Samples {
 }
 
 impl Samples {
-    pub fn new(
-        patch: &Patch,
-        rect: &Rect,
-        rule: &GaussLegendre,
-        basis: Basis,
-        vis_cells: usize,
-    ) -> Self {
+    pub fn new(patch: &Patch, rect: &Rect, rule: &GaussLegendre, basis: Basis, vis_cells: usize) -> Self {
         let n = rule.len() * rule.len();
         let nb = basis.len();
         let mut s = Samples {

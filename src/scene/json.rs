@@ -75,17 +75,14 @@ fn matrix_from_row_major(m: &[f64; 16]) -> DMat4 {
 
 fn index(value: i64, what: &str, len: usize, place: &str) -> Result<u32> {
     if value < 0 || value as usize >= len {
-        return Err(invalid_scene!(
-            "{place}: {what} {value} out of range (0..{len})"
-        ));
+        return Err(invalid_scene!("{place}: {what} {value} out of range (0..{len})"));
     }
     Ok(value as u32)
 }
 
 /// Parses and validates a version-1 scene file.
 pub fn parse_scene(text: &str) -> Result<Scene> {
-    let file: SceneFile =
-        serde_json::from_str(text).map_err(|e| Error::Input(format!("scene JSON: {e}")))?;
+    let file: SceneFile = serde_json::from_str(text).map_err(|e| Error::Input(format!("scene JSON: {e}")))?;
     if file.version != 1 {
         return Err(invalid_scene!(
             "unsupported scene version {} (this build reads version 1)",
@@ -114,10 +111,7 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
         let mut keys: Vec<EmissionKey> = mat
             .emission_keys
             .into_iter()
-            .map(|k| EmissionKey {
-                frame: k.frame,
-                emission: k.emission,
-            })
+            .map(|k| EmissionKey { frame: k.frame, emission: k.emission })
             .collect();
         keys.sort_by(|a, b| a.frame.total_cmp(&b.frame));
         emission_keys.push(keys);
@@ -165,10 +159,7 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
                     ));
                 }
             };
-            animation.push(Key {
-                frame: key.frame,
-                transform,
-            });
+            animation.push(Key { frame: key.frame, transform });
         }
         animation.sort_by(|a, b| a.frame.total_cmp(&b.frame));
         objects.push(Object {
@@ -176,10 +167,7 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
             vertices,
             faces,
             face_materials,
-            matrix: obj
-                .matrix
-                .map(|m| matrix_from_row_major(&m))
-                .unwrap_or(DMat4::IDENTITY),
+            matrix: obj.matrix.map(|m| matrix_from_row_major(&m)).unwrap_or(DMat4::IDENTITY),
             animation,
         });
     }
@@ -192,8 +180,7 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
 
 /// Reads and parses a scene file.
 pub fn read_scene(path: &std::path::Path) -> Result<Scene> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::Input(format!("{}: {e}", path.display())))?;
+    let text = std::fs::read_to_string(path).map_err(|e| Error::Input(format!("{}: {e}", path.display())))?;
     parse_scene(&text)
 }
 

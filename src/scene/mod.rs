@@ -113,14 +113,8 @@ impl Scene {
         emission_keys: Vec<Vec<EmissionKey>>,
         objects: Vec<Object>,
     ) -> crate::Result<Self> {
-        let mut scene = Scene {
-            settings,
-            frames,
-            materials,
-            emission_keys,
-            objects,
-            degenerate_faces: Vec::new(),
-        };
+        let mut scene =
+            Scene { settings, frames, materials, emission_keys, objects, degenerate_faces: Vec::new() };
         validate::validate(&mut scene)?;
         Ok(scene)
     }

@@ -32,11 +32,7 @@ impl Key {
 }
 
 /// Finds the keys around `frame` and the blend weight of the second.
-fn bracket<T>(
-    keys: &[T],
-    frame: f64,
-    key_frame: impl Fn(&T) -> f64,
-) -> Option<(usize, usize, f64)> {
+fn bracket<T>(keys: &[T], frame: f64, key_frame: impl Fn(&T) -> f64) -> Option<(usize, usize, f64)> {
     let first = keys.first()?;
     let last = keys.last()?;
     if frame <= key_frame(first) {
@@ -83,14 +79,8 @@ mod tests {
     #[test]
     fn translation_keys_interpolate_and_hold() {
         let keys = vec![
-            Key {
-                frame: 1.0,
-                transform: KeyTransform::Translation(DVec3::ZERO),
-            },
-            Key {
-                frame: 11.0,
-                transform: KeyTransform::Translation(DVec3::new(10.0, 0.0, 0.0)),
-            },
+            Key { frame: 1.0, transform: KeyTransform::Translation(DVec3::ZERO) },
+            Key { frame: 11.0, transform: KeyTransform::Translation(DVec3::new(10.0, 0.0, 0.0)) },
         ];
         let base = DMat4::from_scale(DVec3::splat(2.0));
         let at = |f| world_from_object(base, &keys, f).w_axis.truncate();

@@ -11,34 +11,19 @@ const DEGENERATE_AREA_FRACTION: f64 = 1e-12;
 pub(super) fn validate(scene: &mut Scene) -> Result<()> {
     let s = &scene.settings;
     if s.basis_order > MAX_ORDER {
-        return Err(invalid_scene!(
-            "settings.basis_order {} is above {MAX_ORDER}",
-            s.basis_order
-        ));
+        return Err(invalid_scene!("settings.basis_order {} is above {MAX_ORDER}", s.basis_order));
     }
     if !(1..=16).contains(&s.quadrature_order) {
-        return Err(invalid_scene!(
-            "settings.quadrature_order {} is outside 1..=16",
-            s.quadrature_order
-        ));
+        return Err(invalid_scene!("settings.quadrature_order {} is outside 1..=16", s.quadrature_order));
     }
     if !(s.tolerance.is_finite() && s.tolerance > 0.0 && s.tolerance < 1.0) {
-        return Err(invalid_scene!(
-            "settings.tolerance {} is outside (0,1)",
-            s.tolerance
-        ));
+        return Err(invalid_scene!("settings.tolerance {} is outside (0,1)", s.tolerance));
     }
     if !(1..=4).contains(&s.visibility_samples) {
-        return Err(invalid_scene!(
-            "settings.visibility_samples {} is outside 1..=4",
-            s.visibility_samples
-        ));
+        return Err(invalid_scene!("settings.visibility_samples {} is outside 1..=4", s.visibility_samples));
     }
     if s.threads > 1024 {
-        return Err(invalid_scene!(
-            "settings.threads {} is above 1024",
-            s.threads
-        ));
+        return Err(invalid_scene!("settings.threads {} is above 1024", s.threads));
     }
     if scene.frames.0 > scene.frames.1 {
         return Err(invalid_scene!(
@@ -60,15 +45,9 @@ pub(super) fn validate(scene: &mut Scene) -> Result<()> {
         check_emission(&place, mat.emission)?;
         for key in &scene.emission_keys[m] {
             if !key.frame.is_finite() {
-                return Err(invalid_scene!(
-                    "{place}: emission key frame {} is not finite",
-                    key.frame
-                ));
+                return Err(invalid_scene!("{place}: emission key frame {} is not finite", key.frame));
             }
-            check_emission(
-                &format!("{place} emission key at frame {}", key.frame),
-                key.emission,
-            )?;
+            check_emission(&format!("{place} emission key at frame {}", key.frame), key.emission)?;
         }
     }
     let n_materials = scene.materials.len();
@@ -77,9 +56,7 @@ pub(super) fn validate(scene: &mut Scene) -> Result<()> {
         let place = format!("object {o} \"{}\"", obj.name);
         for (v, p) in obj.vertices.iter().enumerate() {
             if !p.is_finite() {
-                return Err(invalid_scene!(
-                    "{place} vertex {v}: coordinate {p} is not finite"
-                ));
+                return Err(invalid_scene!("{place} vertex {v}: coordinate {p} is not finite"));
             }
         }
         if !obj.matrix.is_finite() {
@@ -99,24 +76,20 @@ pub(super) fn validate(scene: &mut Scene) -> Result<()> {
                     super::KeyTransform::Matrix(m) => m.is_finite(),
                 };
             if !finite {
-                return Err(invalid_scene!(
-                    "{place}: animation key at frame {} is not finite",
-                    key.frame
-                ));
+                return Err(invalid_scene!("{place}: animation key at frame {} is not finite", key.frame));
             }
         }
-        let (lo, hi) = obj.vertices.iter().fold(
-            (glam::DVec3::splat(f64::MAX), glam::DVec3::splat(f64::MIN)),
-            |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-        );
+        let (lo, hi) = obj
+            .vertices
+            .iter()
+            .fold((glam::DVec3::splat(f64::MAX), glam::DVec3::splat(f64::MIN)), |(lo, hi), p| {
+                (lo.min(*p), hi.max(*p))
+            });
         let diag2 = (hi - lo).length_squared();
         for (f, face) in obj.faces.iter().enumerate() {
             let fplace = format!("{place} face {f}");
             if face.len() < 3 {
-                return Err(invalid_scene!(
-                    "{fplace}: {} vertices; a face needs 3 or 4",
-                    face.len()
-                ));
+                return Err(invalid_scene!("{fplace}: {} vertices; a face needs 3 or 4", face.len()));
             }
             if face.len() > 4 {
                 return Err(invalid_scene!(
@@ -132,9 +105,7 @@ pub(super) fn validate(scene: &mut Scene) -> Result<()> {
             }
             let m = obj.face_materials[f];
             if m as usize >= n_materials {
-                return Err(invalid_scene!(
-                    "{fplace}: material {m} out of range (0..{n_materials})"
-                ));
+                return Err(invalid_scene!("{fplace}: material {m} out of range (0..{n_materials})"));
             }
             let corners: Vec<_> = face.iter().map(|&v| obj.vertices[v as usize]).collect();
             let area = crate::geometry::Patch::from_corners(&corners).area();
@@ -150,9 +121,7 @@ pub(super) fn validate(scene: &mut Scene) -> Result<()> {
 fn check_reflectance(place: &str, rho: [f64; 3]) -> Result<()> {
     for (c, &r) in rho.iter().enumerate() {
         if !(r.is_finite() && (0.0..1.0).contains(&r)) {
-            return Err(invalid_scene!(
-                "{place}: reflectance[{c}] = {r} is outside [0,1)"
-            ));
+            return Err(invalid_scene!("{place}: reflectance[{c}] = {r} is outside [0,1)"));
         }
     }
     Ok(())
@@ -161,9 +130,7 @@ fn check_reflectance(place: &str, rho: [f64; 3]) -> Result<()> {
 fn check_emission(place: &str, e: [f64; 3]) -> Result<()> {
     for (c, &x) in e.iter().enumerate() {
         if !(x.is_finite() && x >= 0.0) {
-            return Err(invalid_scene!(
-                "{place}: emission[{c}] = {x} must be finite and >= 0"
-            ));
+            return Err(invalid_scene!("{place}: emission[{c}] = {x} must be finite and >= 0"));
         }
     }
     Ok(())

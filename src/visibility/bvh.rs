@@ -40,23 +40,13 @@ impl Bvh {
         if triangles.is_empty() {
             return Bvh { nodes, triangles };
         }
-        nodes.push(Node {
-            bounds: Aabb::EMPTY,
-            start: 0,
-            count: 0,
-        });
+        nodes.push(Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
         let mut stack = vec![(0usize, 0usize, triangles.len())];
         while let Some((node, lo, hi)) = stack.pop() {
             let tris = &mut triangles[lo..hi];
-            let bounds = tris
-                .iter()
-                .fold(Aabb::EMPTY, |b, t| b.union(Aabb::from_points(&t.v)));
+            let bounds = tris.iter().fold(Aabb::EMPTY, |b, t| b.union(Aabb::from_points(&t.v)));
             if tris.len() <= LEAF_SIZE {
-                nodes[node] = Node {
-                    bounds,
-                    start: lo as u32,
-                    count: (hi - lo) as u32,
-                };
+                nodes[node] = Node { bounds, start: lo as u32, count: (hi - lo) as u32 };
                 continue;
             }
             let cb = tris.iter().fold(Aabb::EMPTY, |b, t| b.grow(centroid(t)));
@@ -69,25 +59,11 @@ impl Bvh {
                 2
             };
             let mid = tris.len() / 2;
-            tris.select_nth_unstable_by(mid, |a, b| {
-                centroid(a)[axis].total_cmp(&centroid(b)[axis])
-            });
+            tris.select_nth_unstable_by(mid, |a, b| centroid(a)[axis].total_cmp(&centroid(b)[axis]));
             let left = nodes.len();
-            nodes.push(Node {
-                bounds: Aabb::EMPTY,
-                start: 0,
-                count: 0,
-            });
-            nodes.push(Node {
-                bounds: Aabb::EMPTY,
-                start: 0,
-                count: 0,
-            });
-            nodes[node] = Node {
-                bounds,
-                start: left as u32,
-                count: 0,
-            };
+            nodes.push(Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
+            nodes.push(Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
+            nodes[node] = Node { bounds, start: left as u32, count: 0 };
             stack.push((left, lo, lo + mid));
             stack.push((left + 1, lo + mid, hi));
         }
@@ -214,15 +190,8 @@ mod tests {
         for i in 0..n {
             for j in 0..n {
                 let (x, y) = (i as f64, j as f64);
-                let v = [
-                    DVec3::new(x, y, 0.0),
-                    DVec3::new(x + 1.0, y, 0.0),
-                    DVec3::new(x, y + 1.0, 0.0),
-                ];
-                tris.push(Triangle {
-                    v,
-                    element: (i * n + j) as u32,
-                });
+                let v = [DVec3::new(x, y, 0.0), DVec3::new(x + 1.0, y, 0.0), DVec3::new(x, y + 1.0, 0.0)];
+                tris.push(Triangle { v, element: (i * n + j) as u32 });
             }
         }
         tris
@@ -232,18 +201,12 @@ mod tests {
     fn queries_agree_with_brute_force() {
         let tris = grid(20);
         let bvh = Bvh::build(tris.clone());
-        let q = Aabb {
-            min: DVec3::new(3.5, 4.5, -1.0),
-            max: DVec3::new(7.2, 5.1, 1.0),
-        };
+        let q = Aabb { min: DVec3::new(3.5, 4.5, -1.0), max: DVec3::new(7.2, 5.1, 1.0) };
         let mut got: Vec<u32> = Vec::new();
         bvh.for_each_overlapping(&q, |i| got.push(bvh.triangles()[i].element));
         got.sort();
-        let mut want: Vec<u32> = tris
-            .iter()
-            .filter(|t| Aabb::from_points(&t.v).overlaps(&q))
-            .map(|t| t.element)
-            .collect();
+        let mut want: Vec<u32> =
+            tris.iter().filter(|t| Aabb::from_points(&t.v).overlaps(&q)).map(|t| t.element).collect();
         want.sort();
         assert_eq!(got, want);
         for k in 0..200 {
@@ -252,11 +215,7 @@ mod tests {
             let o = DVec3::new(x, y, 1.0);
             let d = DVec3::new(0.0, 0.0, -2.0);
             let brute = tris.iter().any(|t| segment_hits(t, o, d, 0.0, 1.0));
-            assert_eq!(
-                bvh.occluded(o, d, 0.0, 1.0, u32::MAX, u32::MAX),
-                brute,
-                "ray {k}"
-            );
+            assert_eq!(bvh.occluded(o, d, 0.0, 1.0, u32::MAX, u32::MAX), brute, "ray {k}");
             // Stopping short of the plane never hits.
             assert!(!bvh.occluded(o, d, 0.0, 0.4, u32::MAX, u32::MAX));
         }

@@ -80,10 +80,7 @@ fn on_hull(elements: &[Patch], planes: &[Option<(DVec3, f64)>], eps: f64) -> Vec
     type Key = ([i64; 3], i64);
     let quantize = |(n, d): (DVec3, f64)| -> Key {
         let q = |x: f64| (x * 1e9).round() as i64;
-        (
-            [q(n.x), q(n.y), q(n.z)],
-            (d / eps.max(1e-300) / 1e3).round() as i64,
-        )
+        ([q(n.x), q(n.y), q(n.z)], (d / eps.max(1e-300) / 1e3).round() as i64)
     };
     let mut unique: HashMap<Key, (DVec3, f64)> = HashMap::new();
     for p in planes.iter().flatten() {
@@ -92,19 +89,9 @@ fn on_hull(elements: &[Patch], planes: &[Option<(DVec3, f64)>], eps: f64) -> Vec
     let keys: Vec<_> = unique.into_iter().collect();
     let verdict: HashMap<Key, bool> = keys
         .par_iter()
-        .map(|(k, (n, d))| {
-            (
-                *k,
-                elements
-                    .iter()
-                    .all(|p| p.corners.iter().all(|c| n.dot(*c) - d >= -eps)),
-            )
-        })
+        .map(|(k, (n, d))| (*k, elements.iter().all(|p| p.corners.iter().all(|c| n.dot(*c) - d >= -eps))))
         .collect();
-    planes
-        .iter()
-        .map(|p| p.map(|p| verdict[&quantize(p)]).unwrap_or(false))
-        .collect()
+    planes.iter().map(|p| p.map(|p| verdict[&quantize(p)]).unwrap_or(false)).collect()
 }
 
 /// All occluders of one frame: the triangles of every element, and each element's plane.
@@ -119,9 +106,7 @@ pub struct Occluders {
 
 impl Occluders {
     pub fn new(elements: &[Patch], samples_per_axis: usize) -> Self {
-        let bounds = elements
-            .iter()
-            .fold(crate::geometry::Aabb::EMPTY, |b, p| b.union(p.bounds()));
+        let bounds = elements.iter().fold(crate::geometry::Aabb::EMPTY, |b, p| b.union(p.bounds()));
         let scale = bounds.diagonal().length().max(1e-300);
         let planes: Vec<Option<(DVec3, f64)>> = elements
             .iter()
@@ -139,18 +124,10 @@ impl Occluders {
                 continue;
             }
             for v in p.triangles() {
-                tris.push(Triangle {
-                    v,
-                    element: e as u32,
-                });
+                tris.push(Triangle { v, element: e as u32 });
             }
         }
-        Occluders {
-            bvh: Bvh::build(tris),
-            planes,
-            scale,
-            samples_per_axis,
-        }
+        Occluders { bvh: Bvh::build(tris), planes, scale, samples_per_axis }
     }
 
     /// Triangles that can occlude anything (elements on the scene's hull are left out).
@@ -190,12 +167,7 @@ impl Occluders {
         let cells = m * m;
         let samples = |p: &Patch| -> Vec<DVec3> {
             (0..cells)
-                .map(|c| {
-                    p.point(
-                        ((c / m) as f64 + 0.5) / m as f64,
-                        ((c % m) as f64 + 0.5) / m as f64,
-                    )
-                })
+                .map(|c| p.point(((c / m) as f64 + 0.5) / m as f64, ((c % m) as f64 + 0.5) / m as f64))
                 .collect()
         };
         let (xi, xj) = (samples(pi), samples(pj));
@@ -205,12 +177,11 @@ impl Occluders {
             for (s, b) in xj.iter().enumerate() {
                 let d = *b - *a;
                 let blocked = if candidates.len() <= BRUTE_FORCE_CANDIDATES {
-                    candidates.iter().any(|&t| {
-                        bvh::segment_hits(&self.bvh.triangles()[t], *a, d, 1e-9, 1.0 - 1e-9)
-                    })
+                    candidates
+                        .iter()
+                        .any(|&t| bvh::segment_hits(&self.bvh.triangles()[t], *a, d, 1e-9, 1.0 - 1e-9))
                 } else {
-                    self.bvh
-                        .occluded(*a, d, 1e-9, 1.0 - 1e-9, i as u32, j as u32)
+                    self.bvh.occluded(*a, d, 1e-9, 1.0 - 1e-9, i as u32, j as u32)
                 };
                 if !blocked {
                     let k = r * cells + s;

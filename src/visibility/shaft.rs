@@ -36,10 +36,7 @@ impl Shaft {
                         let pa = (ea_u, ea_v);
                         let pb = (eb_u, eb_v);
                         // Outward direction of this corner of the union box.
-                        let out = (
-                            if su == 1 { 1.0 } else { -1.0 },
-                            if sv == 1 { 1.0 } else { -1.0 },
-                        );
+                        let out = (if su == 1 { 1.0 } else { -1.0 }, if sv == 1 { 1.0 } else { -1.0 });
                         let line = (pb.0 - pa.0, pb.1 - pa.1);
                         let mut n2 = (line.1, -line.0);
                         if n2.0 * out.0 + n2.1 * out.1 < 0.0 {
@@ -78,10 +75,7 @@ impl Shaft {
                 return false;
             }
         }
-        !self
-            .planes
-            .iter()
-            .any(|(n, d)| v.iter().all(|p| n.dot(*p) > d + eps))
+        !self.planes.iter().any(|(n, d)| v.iter().all(|p| n.dot(*p) > d + eps))
     }
 
     /// False only if the box lies wholly outside the shaft.
@@ -112,14 +106,8 @@ mod tests {
 
     #[test]
     fn segment_points_between_boxes_are_inside_and_far_points_outside() {
-        let a = Aabb {
-            min: DVec3::new(0.0, 0.0, 0.0),
-            max: DVec3::new(1.0, 1.0, 0.0),
-        };
-        let b = Aabb {
-            min: DVec3::new(3.0, 2.0, 4.0),
-            max: DVec3::new(4.0, 3.0, 4.0),
-        };
+        let a = Aabb { min: DVec3::new(0.0, 0.0, 0.0), max: DVec3::new(1.0, 1.0, 0.0) };
+        let b = Aabb { min: DVec3::new(3.0, 2.0, 4.0), max: DVec3::new(4.0, 3.0, 4.0) };
         let shaft = Shaft::new(&a, &b);
         // Points on segments between the boxes are inside.
         for k in 0..50 {
