@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use glam::DMat4;
 
-use crate::animation::{self, Outcome};
+use crate::animation::{self, AnimationState, Outcome};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use crate::scene::json::ObjectResult;
@@ -40,6 +40,10 @@ pub struct FrameStats {
     pub links_series: usize,
     pub links_recomputed: usize,
     pub recomputed_bound: usize,
+    /// Series abandoned because the motion left the expansion direction (a curved path).
+    pub recomputed_direction: usize,
+    /// Pairs (re-)expanded into a series this frame.
+    pub series_expanded: usize,
     pub recomputed_half_space: usize,
     pub recomputed_visibility: usize,
     pub recomputed_non_translation: usize,
@@ -59,8 +63,8 @@ pub struct Session {
     /// Host overrides of emission, per material.
     emission: Vec<Option<[f64; 3]>>,
     system: Option<System>,
-    /// The scene as placed for the solved frame.
-    placed: Option<Scene>,
+    /// What the incremental update keeps between frames (series, shape epochs).
+    animation: Option<AnimationState>,
     /// The links belong to a cancelled update: the next frame rebuilds from scratch.
     stale: bool,
     frame: Option<f64>,
@@ -81,7 +85,7 @@ impl Session {
             placement,
             emission,
             system: None,
-            placed: None,
+            animation: None,
             stale: false,
             frame: None,
         })
@@ -154,11 +158,11 @@ impl Session {
         let start = Instant::now();
         let placed = self.scene_at(frame);
         let incremental = self.method != Method::Full && !self.stale;
-        if let (true, Some(sys), Some(prev)) = (incremental, self.system.as_mut(), self.placed.as_ref()) {
+        if let (true, Some(sys), Some(state)) = (incremental, self.system.as_mut(), self.animation.as_mut()) {
             // Keep what reads need, so a cancelled update leaves the last frame readable.
             let saved =
                 (sys.solution.clone(), sys.elements.clone(), sys.emission.clone(), sys.reflectance.clone());
-            let outcome = self.pool.install(|| animation::advance(sys, prev, &placed, frame, progress));
+            let outcome = self.pool.install(|| animation::advance(sys, state, &placed, frame, progress));
             match outcome {
                 Ok(Outcome::Updated(u)) => {
                     let stats = FrameStats {
@@ -170,12 +174,16 @@ impl Session {
                         pairs: sys.links.len(),
                         links_recomputed: u.links_recomputed,
                         recomputed_visibility: u.recomputed_visibility,
+                        recomputed_bound: u.recomputed_bound,
+                        recomputed_direction: u.recomputed_direction,
+                        recomputed_half_space: u.recomputed_half_space,
+                        links_series: u.links_series,
+                        series_expanded: u.series_expanded,
                         recomputed_non_translation: u.recomputed_non_translation,
                         recomputed_translation: u.recomputed_translation,
                         shots: u.shots,
                         ..Default::default()
                     };
-                    self.placed = Some(placed);
                     self.frame = Some(frame);
                     return Ok(stats);
                 }
@@ -205,8 +213,8 @@ impl Session {
             full_rebuild: true,
             ..Default::default()
         };
+        self.animation = Some(AnimationState::new(system.elements.len(), self.method == Method::Incremental));
         self.system = Some(system);
-        self.placed = Some(placed);
         self.stale = false;
         self.frame = Some(frame);
         Ok(stats)

@@ -24,8 +24,10 @@ fn bake(scene: &Scene, method: Method) -> Vec<(Vec<[f32; 3]>, galerkin_radiosity
         .collect()
 }
 
-fn assert_matches_full(scene: &Scene, what: &str) {
+/// Returns the number of links the incremental method took from the series.
+fn assert_matches_full(scene: &Scene, what: &str) -> usize {
     let full = bake(scene, Method::Full);
+    let mut series = 0;
     for method in [Method::Incremental, Method::Exact] {
         let inc = bake(scene, method);
         for (f, ((a, stats), (b, _))) in inc.iter().zip(&full).enumerate() {
@@ -41,8 +43,14 @@ fn assert_matches_full(scene: &Scene, what: &str) {
                 stats.links_recomputed
             );
             assert!(worst <= 0.01 * peak, "{what}, {method:?}, frame {f}: {worst} vs peak {peak}");
+            if method == Method::Incremental {
+                series += stats.links_series;
+            } else {
+                assert_eq!(stats.links_series, 0, "--exact never uses the series");
+            }
         }
     }
+    series
 }
 
 fn translation_keys(points: &[(f64, DVec3)]) -> Vec<Key> {
@@ -56,7 +64,8 @@ fn moving_ceiling_light_matches_full() {
     let light = scene.objects.iter_mut().find(|o| o.name == "Light").unwrap();
     light.animation = translation_keys(&[(1.0, DVec3::ZERO), (4.0, DVec3::new(-0.15, 0.0, 0.1))]);
     scene.frames = (1, 4);
-    assert_matches_full(&scene, "ceiling light");
+    let series = assert_matches_full(&scene, "ceiling light");
+    assert!(series > 0, "a straight translation of the light uses the series");
 }
 
 /// The seed's Fig. 5a case: an occluder passing in front of a wall lamp.

@@ -71,11 +71,23 @@ pub fn compute_pair(
         Some(o) => o.link_visibility(i, pi, j, pj),
         None => Visibility::Full,
     };
-    if vis == Visibility::Blocked {
+    integrate_visible(ctx, geom, i, j, &vis).map(|c| (c, vis))
+}
+
+/// The coefficients of a pair whose visibility is known, or `None` when it exchanges nothing.
+pub fn integrate_visible(
+    ctx: &PairContext,
+    geom: &ElementGeometry,
+    i: usize,
+    j: usize,
+    vis: &Visibility,
+) -> Option<PairCoefficients> {
+    let (pi, pj) = (&geom.patches[i], &geom.patches[j]);
+    if *vis == Visibility::Blocked || !may_face(pi, pj) || !may_face(pj, pi) {
         return None;
     }
-    let c = integrate_pair(ctx, pi, pj, |second, n| geom.samples(if second { j } else { i }, n), &vis);
-    (!c.is_zero()).then_some((c, vis))
+    let c = integrate_pair(ctx, pi, pj, |second, n| geom.samples(if second { j } else { i }, n), vis);
+    (!c.is_zero()).then_some(c)
 }
 
 /// Builds the link store of all interacting pairs. `progress(done, total)` is called from worker

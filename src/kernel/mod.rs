@@ -7,5 +7,6 @@ pub mod assemble;
 pub mod pair;
 pub mod point;
 pub mod samples;
+pub mod series;
 
 pub use pair::{PairCoefficients, PairContext, integrate_pair};

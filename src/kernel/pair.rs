@@ -19,7 +19,7 @@ use super::point::{point_kernel, point_to_polygon};
 use super::samples::Samples;
 
 /// Bounding spheres farther apart than this many radii-sums are integrated directly.
-const SEPARATION: f64 = 1.5;
+pub const SEPARATION: f64 = 1.5;
 /// Deepest split of a near pair before the analytic inner integral takes over.
 const MAX_DEPTH: usize = 3;
 
