@@ -240,21 +240,19 @@ pub fn advance(
                         let both_translated = translated[iu] && translated[ju];
                         let mut reason =
                             if both_translated { Reason::Translation } else { Reason::NonTranslation };
-                        if state.use_series {
-                            if let Some(ser) = existing_series {
-                                match series_check(ser, state, &patches, iu, ju, &vis, &old_vis) {
-                                    Ok(p) => {
-                                        let (ab, ba) = ser.eval(p, nb);
-                                        return Ok(Some(PairUpdate {
-                                            i,
-                                            j,
-                                            coefficients: Some((ab, ba, vis)),
-                                            series: SeriesAction::Keep,
-                                            reason: Reason::Series,
-                                        }));
-                                    }
-                                    Err(why) => reason = why,
+                        if let (true, Some(ser)) = (state.use_series, existing_series) {
+                            match series_check(ser, state, &patches, iu, ju, &vis, &old_vis) {
+                                Ok(p) => {
+                                    let (ab, ba) = ser.eval(p, nb);
+                                    return Ok(Some(PairUpdate {
+                                        i,
+                                        j,
+                                        coefficients: Some((ab, ba, vis)),
+                                        series: SeriesAction::Keep,
+                                        reason: Reason::Series,
+                                    }));
                                 }
+                                Err(why) => reason = why,
                             }
                         }
                         // Exact (eq. 6), re-expanded along this frame's motion when the series applies.
