@@ -1,9 +1,10 @@
 //! Solving eq. (5), `b_i^k = e_i^k + sum_{j,l} rho_i G_ij^kl b_j^l`, per RGB channel.
 //!
 //! [`shoot`]: progressive refinement (Cohen et al. 1988, in Galerkin form as in the seed's 3.4):
-//! repeatedly shoot the element whose unshot coefficient vector carries the most power, until
-//! the unshot power is below a threshold. The animation update uses the same routine on the
-//! differences `Delta b` (eq. 9). [`gauss_seidel`]: a direct iteration, the cross-check in tests.
+//! repeatedly shoot the elements whose unshot coefficient vectors carry the most power (a batch
+//! at a time, in parallel), until the unshot power is below a threshold. The animation update
+//! uses the same routine on the differences `Delta b` (eq. 9). [`gauss_seidel`]: a direct
+//! iteration, the cross-check in tests.
 
 use crate::error::{Error, Result};
 use crate::links::{ElementId, LinkStore};
@@ -44,8 +45,13 @@ pub struct ShootStats {
     pub residual: f64,
 }
 
-/// Progressive refinement until the unshot power is below `stop_power`. `cancel` is polled every
-/// few hundred shots.
+/// Shooters of one batch: every element whose unshot power is at least this fraction of the
+/// largest. Shooting them together (Jacobi-style) instead of one at a time (Southwell) keeps the
+/// progressive order of magnitude and gives the threads enough work per batch.
+const BATCH_FRACTION: f64 = 0.25;
+
+/// Progressive refinement until the unshot power is below `stop_power`, shooting in parallel
+/// batches. `cancel` is polled between batches.
 pub fn shoot(
     links: &LinkStore,
     reflectance: &[[f64; 3]],
@@ -54,58 +60,94 @@ pub fn shoot(
     stop_power: f64,
     cancel: &dyn Fn() -> bool,
 ) -> Result<ShootStats> {
+    use rayon::prelude::*;
     let nb = x.nb;
     let n = area.len();
     let mut priority: Vec<f64> = (0..n).map(|e| power(&x.unshot[e * nb..(e + 1) * nb], area[e])).collect();
     let mut shots = 0;
-    let mut shooter = vec![[0.0f64; 3]; nb];
+    let threads = rayon::current_num_threads().max(1);
     loop {
-        let (mut best, mut best_p, mut total) = (0, -1.0, 0.0);
-        for (e, &p) in priority.iter().enumerate() {
-            total += p;
-            if p > best_p {
-                best = e;
-                best_p = p;
-            }
-        }
-        if total <= stop_power || best_p <= 0.0 {
+        let total: f64 = priority.iter().sum();
+        let best = priority.iter().copied().fold(0.0, f64::max);
+        if total <= stop_power || best <= 0.0 {
             return Ok(ShootStats { shots, residual: total });
         }
-        if shots % 256 == 0 && cancel() {
+        if cancel() {
             return Err(Error::Cancelled);
         }
-        let j = best as ElementId;
-        shooter.copy_from_slice(&x.unshot[best * nb..(best + 1) * nb]);
-        x.unshot[best * nb..(best + 1) * nb].fill([0.0; 3]);
-        priority[best] = 0.0;
-        for &p in links.pairs_of(j) {
-            let i = links.other(p, j) as usize;
-            let g = links.block(p, i as ElementId);
-            let rho = reflectance[i];
-            let mut changed = false;
-            for k in 0..nb {
-                let row = &g[k * nb..(k + 1) * nb];
-                let mut acc = [0.0; 3];
-                for l in 0..nb {
-                    let gkl = row[l] as f64;
-                    acc[0] += gkl * shooter[l][0];
-                    acc[1] += gkl * shooter[l][1];
-                    acc[2] += gkl * shooter[l][2];
-                }
-                for c in 0..3 {
-                    let d = rho[c] * acc[c];
-                    if d != 0.0 {
-                        x.b[i * nb + k][c] += d;
-                        x.unshot[i * nb + k][c] += d;
-                        changed = true;
-                    }
-                }
-            }
-            if changed {
-                priority[i] = power(&x.unshot[i * nb..(i + 1) * nb], area[i]);
+        // Take the batch's unshot coefficients.
+        let mut shooters: Vec<(usize, Vec<[f64; 3]>)> = Vec::new();
+        for e in 0..n {
+            if priority[e] >= BATCH_FRACTION * best && priority[e] > 0.0 {
+                shooters.push((e, x.unshot[e * nb..(e + 1) * nb].to_vec()));
+                x.unshot[e * nb..(e + 1) * nb].fill([0.0; 3]);
+                priority[e] = 0.0;
             }
         }
-        shots += 1;
+        shots += shooters.len();
+        // Each chunk of shooters accumulates into its own buffer; buffers are summed.
+        let chunk = shooters.len().div_ceil(2 * threads).max(1);
+        let delta = shooters
+            .par_chunks(chunk)
+            .map(|batch| {
+                let mut buf = vec![[0.0f64; 3]; n * nb];
+                for (j, u) in batch {
+                    shoot_one(links, reflectance, *j as ElementId, u, nb, &mut buf);
+                }
+                buf
+            })
+            .reduce_with(|mut a, b| {
+                for (x, y) in a.iter_mut().zip(&b) {
+                    for c in 0..3 {
+                        x[c] += y[c];
+                    }
+                }
+                a
+            })
+            .unwrap_or_default();
+        for e in 0..n {
+            let d = &delta[e * nb..(e + 1) * nb];
+            if d.iter().all(|v| *v == [0.0; 3]) {
+                continue;
+            }
+            for k in 0..nb {
+                for c in 0..3 {
+                    x.b[e * nb + k][c] += d[k][c];
+                    x.unshot[e * nb + k][c] += d[k][c];
+                }
+            }
+            priority[e] = power(&x.unshot[e * nb..(e + 1) * nb], area[e]);
+        }
+    }
+}
+
+/// Adds what element `j` with unshot coefficients `u` gives every receiver, `rho_i G_ij u`, to `out`.
+fn shoot_one(
+    links: &LinkStore,
+    reflectance: &[[f64; 3]],
+    j: ElementId,
+    u: &[[f64; 3]],
+    nb: usize,
+    out: &mut [[f64; 3]],
+) {
+    for &p in links.pairs_of(j) {
+        let i = links.other(p, j) as usize;
+        let g = links.block(p, i as ElementId);
+        let rho = reflectance[i];
+        for k in 0..nb {
+            let row = &g[k * nb..(k + 1) * nb];
+            let mut acc = [0.0; 3];
+            for l in 0..nb {
+                let gkl = row[l] as f64;
+                acc[0] += gkl * u[l][0];
+                acc[1] += gkl * u[l][1];
+                acc[2] += gkl * u[l][2];
+            }
+            let o = &mut out[i * nb + k];
+            for c in 0..3 {
+                o[c] += rho[c] * acc[c];
+            }
+        }
     }
 }
 

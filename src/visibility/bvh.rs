@@ -32,13 +32,15 @@ const LEAF_SIZE: usize = 4;
 pub struct Bvh {
     nodes: Vec<Node>,
     triangles: Vec<Triangle>,
+    /// Bounds of each triangle, in `triangles` order.
+    bounds: Vec<Aabb>,
 }
 
 impl Bvh {
     pub fn build(mut triangles: Vec<Triangle>) -> Self {
         let mut nodes = Vec::with_capacity(2 * triangles.len() / LEAF_SIZE + 1);
         if triangles.is_empty() {
-            return Bvh { nodes, triangles };
+            return Bvh { nodes, triangles, bounds: Vec::new() };
         }
         nodes.push(Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
         let mut stack = vec![(0usize, 0usize, triangles.len())];
@@ -67,7 +69,8 @@ impl Bvh {
             stack.push((left, lo, lo + mid));
             stack.push((left + 1, lo + mid, hi));
         }
-        Bvh { nodes, triangles }
+        let bounds = triangles.iter().map(|t| Aabb::from_points(&t.v)).collect();
+        Bvh { nodes, triangles, bounds }
     }
 
     pub fn triangles(&self) -> &[Triangle] {
@@ -75,7 +78,13 @@ impl Bvh {
     }
 
     /// Calls `f` with the index of every triangle whose bounds overlap `query`.
-    pub fn for_each_overlapping(&self, query: &Aabb, mut f: impl FnMut(usize)) {
+    pub fn for_each_overlapping(&self, query: &Aabb, f: impl FnMut(usize)) {
+        self.for_each_accepted(|b| b.overlaps(query), f);
+    }
+
+    /// Calls `f` with the index of every triangle in a leaf reached through nodes (and with
+    /// triangle bounds) that `accept` keeps: `accept` must be conservative.
+    pub fn for_each_accepted(&self, accept: impl Fn(&Aabb) -> bool, mut f: impl FnMut(usize)) {
         if self.nodes.is_empty() {
             return;
         }
@@ -84,13 +93,12 @@ impl Bvh {
         while sp > 0 {
             sp -= 1;
             let node = &self.nodes[stack[sp] as usize];
-            if !node.bounds.overlaps(query) {
+            if !accept(&node.bounds) {
                 continue;
             }
             if node.count > 0 {
                 for i in node.start..node.start + node.count {
-                    let t = &self.triangles[i as usize];
-                    if Aabb::from_points(&t.v).overlaps(query) {
+                    if accept(&self.bounds[i as usize]) {
                         f(i as usize);
                     }
                 }

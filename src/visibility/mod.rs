@@ -144,7 +144,8 @@ impl Occluders {
         let shaft = Shaft::new(&pi.bounds(), &pj.bounds());
         let eps = 1e-9 * self.scale;
         let mut candidates: Vec<usize> = Vec::new();
-        self.bvh.for_each_overlapping(&shaft.bounds, |t| {
+        let in_shaft = |b: &crate::geometry::Aabb| b.overlaps(&shaft.bounds) && shaft.may_contain_box(b, eps);
+        self.bvh.for_each_accepted(in_shaft, |t| {
             let tri = &self.bvh.triangles()[t];
             let e = tri.element as usize;
             if e == i || e == j {
@@ -159,6 +160,7 @@ impl Occluders {
             if shaft.may_contain_triangle(&tri.v, eps) {
                 candidates.push(t);
             }
+            // (the traversal already kept only nodes and triangle boxes the shaft may contain)
         });
         if candidates.is_empty() {
             return Visibility::Full;

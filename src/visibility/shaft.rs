@@ -78,16 +78,15 @@ impl Shaft {
         !self.planes.iter().any(|(n, d)| v.iter().all(|p| n.dot(*p) > d + eps))
     }
 
-    /// False only if the box lies wholly outside the shaft.
+    /// False only if the box lies wholly outside the shaft: outside the union box, or wholly on
+    /// the outer side of a plane (tested at the box's corner nearest the shaft, `n.c - |n|.h`).
     pub fn may_contain_box(&self, b: &Aabb, eps: f64) -> bool {
-        let corners: [DVec3; 8] = std::array::from_fn(|k| {
-            DVec3::new(
-                if k & 1 == 0 { b.min.x } else { b.max.x },
-                if k & 2 == 0 { b.min.y } else { b.max.y },
-                if k & 4 == 0 { b.min.z } else { b.max.z },
-            )
-        });
-        self.may_contain_points(&corners, eps)
+        if !b.overlaps(&self.bounds) {
+            return false;
+        }
+        let c = b.centre();
+        let h = b.diagonal() * 0.5;
+        !self.planes.iter().any(|(n, d)| n.dot(c) - n.abs().dot(h) > d + eps)
     }
 }
 
