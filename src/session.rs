@@ -225,12 +225,23 @@ impl Session {
     }
 
     /// Per object: mean radiosity per face and radiosity per face corner.
+    ///
+    /// Point values of the polynomial are clamped at 0: a low-order polynomial across a shadow
+    /// edge or a contact (a block standing on a floor patch) undershoots, and negative light is
+    /// never what a host should display. Face means are exact integrals and are not clamped.
     pub fn face_results(&self) -> Result<Vec<ObjectResult>> {
         let frame = self.frame.unwrap_or(0.0);
-        Ok(self.solved()?.face_results(&self.scene_at(frame), frame))
+        let mut results = self.solved()?.face_results(&self.scene_at(frame), frame);
+        for r in &mut results {
+            for c in &mut r.corner_radiosity {
+                *c = c.map(|x| x.max(0.0));
+            }
+        }
+        Ok(results)
     }
 
-    /// `B` at `(s,t)` of face `f` of object `o`; a skipped zero-area face reports its exitance.
+    /// `B` at `(s,t)` of face `f` of object `o`, clamped at 0 like the corners; a skipped
+    /// zero-area face reports its exitance.
     pub fn eval(&self, o: usize, f: usize, s: f64, t: f64) -> Result<[f64; 3]> {
         let sys = self.solved()?;
         let obj = self
@@ -248,7 +259,7 @@ impl Session {
             return Err(Error::InvalidArgument(format!("(s, t) = ({s}, {t}) is outside [0,1]^2")));
         }
         match sys.element_of_face(o, f, s, t) {
-            Some((e, ls, lt)) => Ok(sys.eval(e, ls, lt)),
+            Some((e, ls, lt)) => Ok(sys.eval(e, ls, lt).map(|x| x.max(0.0))),
             None => Ok(self.scene.emission_at(obj.face_materials[f] as usize, self.frame.unwrap_or(0.0))),
         }
     }

@@ -1,0 +1,1 @@
+"""Validation, demo and plotting tools that drive Blender (bpy) and the add-on."""

@@ -1,0 +1,81 @@
+"""Pictures of baked colour attributes: each attribute rendered as emission (Cycles, a few
+samples, view transform Standard, so pixels show the stored radiance), then stitched side by
+side into one PNG with numpy."""
+
+from pathlib import Path
+
+import numpy as np
+
+
+def _show_material(bpy, attr):
+    mat = bpy.data.materials.new(f"Show {attr}")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    em = nt.nodes.new("ShaderNodeEmission")
+    col = nt.nodes.new("ShaderNodeVertexColor")
+    col.layer_name = attr
+    nt.links.new(col.outputs["Color"], em.inputs["Color"])
+    em.inputs["Strength"].default_value = 1.0
+    nt.links.new(em.outputs["Emission"], out.inputs["Surface"])
+    return mat
+
+
+def render_attribute(bpy, objects, attr, path, size=256, skip=()):
+    """Renders the scene's camera view with every object (but those in `skip`) showing `attr`."""
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.cycles.samples = 16
+    sc.cycles.use_denoising = False
+    sc.cycles.max_bounces = 0
+    sc.render.resolution_x = sc.render.resolution_y = size
+    sc.render.resolution_percentage = 100
+    sc.view_settings.view_transform = "Standard"
+    sc.render.image_settings.file_format = "PNG"
+    show = _show_material(bpy, attr)
+    saved = {}
+    for ob in objects.values():
+        if ob.name in skip:
+            continue
+        saved[ob.name] = [s.material for s in ob.material_slots]
+        for s in ob.material_slots:
+            s.material = show
+    sc.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    for name, mats in saved.items():
+        for s, m in zip(objects[name].material_slots, mats):
+            s.material = m
+    return Path(path)
+
+
+def stitch(bpy, paths, out, gap=4):
+    """Places PNGs of equal size side by side (white gaps) into one PNG."""
+    tiles = []
+    for p in paths:
+        img = bpy.data.images.load(str(p))
+        w, h = img.size
+        px = np.array(img.pixels[:], dtype=np.float32).reshape(h, w, 4)
+        tiles.append(px)
+        bpy.data.images.remove(img)
+    h = tiles[0].shape[0]
+    sep = np.ones((h, gap, 4), np.float32)
+    row = np.concatenate(sum(([t, sep] for t in tiles), [])[:-1], axis=1)
+    H, W = row.shape[:2]
+    img = bpy.data.images.new("stitched", W, H, alpha=True)
+    img.pixels.foreach_set(row.ravel())
+    img.filepath_raw = str(out)
+    img.file_format = "PNG"
+    img.save()
+    bpy.data.images.remove(img)
+    return Path(out)
+
+
+def side_by_side(bpy, objects, attrs, out, emitters=()):
+    """Renders each attribute and stitches them left to right. Emitter objects keep their own
+    material (their light shows in every tile)."""
+    out = Path(out)
+    skip = {ob.name for ob in objects.values() if any(s.material and s.material.name in emitters
+                                                       for s in ob.material_slots)}
+    tiles = [render_attribute(bpy, objects, a, out.with_name(f"{out.stem}_{a}.png"), skip=skip) for a in attrs]
+    return stitch(bpy, tiles, out)

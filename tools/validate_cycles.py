@@ -1,0 +1,159 @@
+"""Validation against Cycles (issue 6): the Cornell box baked by Cycles (ground truth) and by
+galerkin-radiosity at basis orders 0-3, per-corner relative RMSE and time per frame, plus one
+frame of the moving-light animation baked both ways.
+
+    .venv/bin/python -m tools.validate_cycles [--subdiv 6] [--samples 4096] [--out out/validation]
+
+Ground truth: Cycles DIFFUSE bake (direct + indirect + colour) = reflected radiance = B / pi on
+non-emitting faces, Lambertian Diffuse BSDFs, one-sided emission, 64 bounces, no clamping, no
+denoising. "Cycles time of equal error": Cycles' own error at `samples / 64` against the
+reference, scaled as noise ~ 1 / sqrt(samples) and time ~ samples.
+"""
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def parse(argv):
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--subdiv", type=int, default=6, help="Cornell walls split n x n")
+    p.add_argument("--samples", type=int, default=4096, help="Cycles samples of the reference")
+    p.add_argument("--orders", type=int, nargs="+", default=[0, 1, 2, 3])
+    p.add_argument("--anim-frame", type=int, default=12, help="frame of the moving-light check")
+    p.add_argument("--frames", type=int, default=24, help="length of the animation")
+    p.add_argument("--out", default=str(REPO / "out" / "validation"))
+    p.add_argument("--pictures", action="store_true", help="render ours beside Cycles as PNG")
+    return p.parse_args(argv)
+
+
+def cli():
+    exe = REPO / "target" / "release" / "galerkin-radiosity"
+    if not exe.exists():
+        raise SystemExit(f"{exe} is missing: run `cargo build --release` first")
+    return exe
+
+
+def setup_blender():
+    os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="blender-user-"))
+    import bpy
+
+    sys.path.insert(0, str(REPO))
+    import addon
+
+    if not hasattr(bpy.types.Scene, "radiosity"):
+        addon.register()
+    return bpy
+
+
+def run(args):
+    from . import bakes, blender_scene
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    scene_file = out / "scene.json"
+    subprocess.run([str(cli()), "demo-scene", "-o", str(scene_file), "--frames", str(args.frames),
+                    "--subdiv", str(args.subdiv)], check=True, capture_output=True)
+    bpy = setup_blender()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    objects, emitters = blender_scene.build(bpy, scene_file)
+    receivers = [ob for ob in objects.values() if not any(s.material.name in emitters for s in ob.material_slots)]
+    corners = sum(len(ob.data.loops) for ob in receivers)
+    faces = sum(len(ob.data.polygons) for ob in objects.values())
+    report = {"faces": faces, "receiver_corners": corners, "reference_samples": args.samples, "static": [], "animated": {}}
+    sc = bpy.context.scene
+
+    def cycles(frame, samples, seed=0, attr="Cycles"):
+        sc.frame_set(frame)
+        blender_scene.use_materials(objects, emitters)
+        seconds = bakes.cycles_bake(bpy, receivers, samples, attr=attr, seed=seed)
+        blender_scene.use_materials(objects, {v.name: bpy.data.materials[k] for k, v in emitters.items()})
+        return seconds, bakes.values(receivers, attr)
+
+    # Static frame 1: the reference, a cheap Cycles bake to scale Cycles' noise, ours per order.
+    t_ref, ref = cycles(1, args.samples, seed=1)
+    low = max(args.samples // 64, 16)
+    t_low, cyc_low = cycles(1, low, seed=2, attr="CyclesLow")
+    err_low = bakes.relative_rmse(cyc_low, ref)
+    # The reference has noise too: its own error is err_low * sqrt(low / samples).
+    ref_noise = err_low * np.sqrt(low / args.samples)
+    print(f"Cycles reference: {args.samples} spp in {t_ref:.1f} s; {low} spp in {t_low:.2f} s, error {err_low:.3f}; "
+          f"reference noise ~{ref_noise:.4f}", flush=True)
+    for order in args.orders:
+        seconds = bakes.ours_bake(bpy, (1, 1), order, method="FULL")
+        ours = bakes.values(receivers, "Rad_0001")
+        err = bakes.relative_rmse(ours, ref)
+        # Cycles samples (and time) for the same error, noise ~ 1/sqrt(samples).
+        equal_time = t_low * (err_low / max(err, 1e-9)) ** 2
+        per_object = {ob.name: bakes.relative_rmse(blender_scene.corner_values(ob, "Rad_0001"),
+                                                   blender_scene.corner_values(ob, "Cycles")) for ob in receivers}
+        row = {"order": order, "rmse": err, "seconds": seconds, "cycles_equal_error_seconds": equal_time,
+               "speedup_vs_cycles_equal_error": equal_time / seconds, "rmse_per_object": per_object}
+        report["static"].append(row)
+        print(f"order {order}: relative RMSE {err:.4f}, {seconds:.2f} s per frame, Cycles of equal error "
+              f"~{equal_time:.1f} s ({equal_time / seconds:.2f}x); per object "
+              + ", ".join(f"{k} {100 * v:.1f}%" for k, v in per_object.items()), flush=True)
+
+    # One frame of the moving-light animation: ours incrementally from frame 1, Cycles at that frame.
+    f = args.anim_frame
+    for ob in objects.values():
+        for a in [a for a in ob.data.color_attributes if a.name.startswith("Rad_")]:
+            ob.data.color_attributes.remove(a)
+    bpy.ops.radiosity.clear()
+    start = time.perf_counter()
+    seconds = bakes.ours_bake(bpy, (1, f), 2, method="INCREMENTAL")
+    ours = bakes.values(receivers, f"Rad_{f:04d}")
+    t_anim, ref_anim = cycles(f, args.samples, seed=3)
+    err = bakes.relative_rmse(ours, ref_anim)
+    report["animated"] = {"frame": f, "order": 2, "rmse": err, "seconds_per_frame": seconds / f,
+                          "cycles_seconds": t_anim, "wall_seconds": time.perf_counter() - start}
+    print(f"animated frame {f} (order 2, incremental from frame 1): relative RMSE {err:.4f}, "
+          f"{seconds / f:.2f} s per frame; Cycles {args.samples} spp {t_anim:.1f} s", flush=True)
+    report["cycles_reference_seconds"] = t_ref
+    report["cycles_low"] = {"samples": low, "seconds": t_low, "rmse": err_low}
+    report["reference_noise"] = ref_noise
+    (out / "validation.json").write_text(json.dumps(report, indent=2))
+    print(table(report))
+    if args.pictures:
+        from . import pictures
+
+        sc.frame_set(f)
+        path = pictures.side_by_side(bpy, objects, [f"Rad_{f:04d}", "Cycles"], out / f"ours_vs_cycles_frame{f}.png",
+                                     emitters=emitters)
+        print(f"picture: {path}")
+    return report
+
+
+def table(report):
+    rows = [
+        f"Cornell box, {report['faces']} faces, {report['receiver_corners']} receiver corners; "
+        f"Cycles reference {report['reference_samples']} spp ({report['cycles_reference_seconds']:.1f} s), "
+        f"its noise ~{100 * report['reference_noise']:.2f}%",
+        "",
+        "| basis order | relative RMSE vs Cycles | ours s/frame | Cycles s for equal error | ratio |",
+        "|---|---|---|---|---|",
+    ]
+    for r in report["static"]:
+        rows.append(f"| {r['order']} | {100 * r['rmse']:.2f}% | {r['seconds']:.2f} | "
+                    f"{r['cycles_equal_error_seconds']:.2f} | {r['speedup_vs_cycles_equal_error']:.2f}x |")
+    a = report["animated"]
+    rows.append(f"| 2, animated frame {a['frame']} (incremental) | {100 * a['rmse']:.2f}% | "
+                f"{a['seconds_per_frame']:.2f} | | |")
+    return "\n".join(rows)
+
+
+def main(argv=None):
+    run(parse(sys.argv[1:] if argv is None else argv))
+
+
+if __name__ == "__main__":
+    main()
