@@ -33,8 +33,13 @@ def cycles_bake(bpy, objects, samples, attr="Cycles", seed=0):
         ob.select_set(True)
     bpy.context.view_layer.objects.active = objects[0]
     start = time.perf_counter()
-    bpy.ops.object.bake(type="DIFFUSE", pass_filter={"DIRECT", "INDIRECT", "COLOR"},
-                        target="VERTEX_COLORS", use_clear=True, margin=0)
+    bpy.ops.object.bake(
+        type="DIFFUSE",
+        pass_filter={"DIRECT", "INDIRECT", "COLOR"},
+        target="VERTEX_COLORS",
+        use_clear=True,
+        margin=0,
+    )
     return time.perf_counter() - start
 
 

@@ -44,7 +44,7 @@ def render_attribute(bpy, objects, attr, path, size=256, skip=()):
     sc.render.filepath = str(path)
     bpy.ops.render.render(write_still=True)
     for name, mats in saved.items():
-        for s, m in zip(objects[name].material_slots, mats):
+        for s, m in zip(objects[name].material_slots, mats, strict=True):
             s.material = m
     return Path(path)
 
@@ -75,7 +75,12 @@ def side_by_side(bpy, objects, attrs, out, emitters=()):
     """Renders each attribute and stitches them left to right. Emitter objects keep their own
     material (their light shows in every tile)."""
     out = Path(out)
-    skip = {ob.name for ob in objects.values() if any(s.material and s.material.name in emitters
-                                                       for s in ob.material_slots)}
-    tiles = [render_attribute(bpy, objects, a, out.with_name(f"{out.stem}_{a}.png"), skip=skip) for a in attrs]
+    skip = {
+        ob.name
+        for ob in objects.values()
+        if any(s.material and s.material.name in emitters for s in ob.material_slots)
+    }
+    tiles = [
+        render_attribute(bpy, objects, a, out.with_name(f"{out.stem}_{a}.png"), skip=skip) for a in attrs
+    ]
     return stitch(bpy, tiles, out)

@@ -61,15 +61,35 @@ def run(args):
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     scene_file = out / "scene.json"
-    subprocess.run([str(cli()), "demo-scene", "-o", str(scene_file), "--frames", str(args.frames),
-                    "--subdiv", str(args.subdiv)], check=True, capture_output=True)
+    subprocess.run(
+        [
+            str(cli()),
+            "demo-scene",
+            "-o",
+            str(scene_file),
+            "--frames",
+            str(args.frames),
+            "--subdiv",
+            str(args.subdiv),
+        ],
+        check=True,
+        capture_output=True,
+    )
     bpy = setup_blender()
     bpy.ops.wm.read_factory_settings(use_empty=True)
     objects, emitters = blender_scene.build(bpy, scene_file)
-    receivers = [ob for ob in objects.values() if not any(s.material.name in emitters for s in ob.material_slots)]
+    receivers = [
+        ob for ob in objects.values() if not any(s.material.name in emitters for s in ob.material_slots)
+    ]
     corners = sum(len(ob.data.loops) for ob in receivers)
     faces = sum(len(ob.data.polygons) for ob in objects.values())
-    report = {"faces": faces, "receiver_corners": corners, "reference_samples": args.samples, "static": [], "animated": {}}
+    report = {
+        "faces": faces,
+        "receiver_corners": corners,
+        "reference_samples": args.samples,
+        "static": [],
+        "animated": {},
+    }
     sc = bpy.context.scene
 
     def cycles(frame, samples, seed=0, attr="Cycles"):
@@ -86,22 +106,38 @@ def run(args):
     err_low = bakes.relative_rmse(cyc_low, ref)
     # The reference has noise too: its own error is err_low * sqrt(low / samples).
     ref_noise = err_low * np.sqrt(low / args.samples)
-    print(f"Cycles reference: {args.samples} spp in {t_ref:.1f} s; {low} spp in {t_low:.2f} s, error {err_low:.3f}; "
-          f"reference noise ~{ref_noise:.4f}", flush=True)
+    print(
+        f"Cycles reference: {args.samples} spp in {t_ref:.1f} s; {low} spp in {t_low:.2f} s, "
+        f"error {err_low:.3f}; reference noise ~{ref_noise:.4f}",
+        flush=True,
+    )
     for order in args.orders:
         seconds = bakes.ours_bake(bpy, (1, 1), order, method="FULL")
         ours = bakes.values(receivers, "Rad_0001")
         err = bakes.relative_rmse(ours, ref)
         # Cycles samples (and time) for the same error, noise ~ 1/sqrt(samples).
         equal_time = t_low * (err_low / max(err, 1e-9)) ** 2
-        per_object = {ob.name: bakes.relative_rmse(blender_scene.corner_values(ob, "Rad_0001"),
-                                                   blender_scene.corner_values(ob, "Cycles")) for ob in receivers}
-        row = {"order": order, "rmse": err, "seconds": seconds, "cycles_equal_error_seconds": equal_time,
-               "speedup_vs_cycles_equal_error": equal_time / seconds, "rmse_per_object": per_object}
+        per_object = {
+            ob.name: bakes.relative_rmse(
+                blender_scene.corner_values(ob, "Rad_0001"), blender_scene.corner_values(ob, "Cycles")
+            )
+            for ob in receivers
+        }
+        row = {
+            "order": order,
+            "rmse": err,
+            "seconds": seconds,
+            "cycles_equal_error_seconds": equal_time,
+            "speedup_vs_cycles_equal_error": equal_time / seconds,
+            "rmse_per_object": per_object,
+        }
         report["static"].append(row)
-        print(f"order {order}: relative RMSE {err:.4f}, {seconds:.2f} s per frame, Cycles of equal error "
-              f"~{equal_time:.1f} s ({equal_time / seconds:.2f}x); per object "
-              + ", ".join(f"{k} {100 * v:.1f}%" for k, v in per_object.items()), flush=True)
+        print(
+            f"order {order}: relative RMSE {err:.4f}, {seconds:.2f} s per frame, Cycles of equal error "
+            f"~{equal_time:.1f} s ({equal_time / seconds:.2f}x); per object "
+            + ", ".join(f"{k} {100 * v:.1f}%" for k, v in per_object.items()),
+            flush=True,
+        )
 
     # One frame of the moving-light animation: ours incrementally from frame 1, Cycles at that frame.
     f = args.anim_frame
@@ -114,10 +150,19 @@ def run(args):
     ours = bakes.values(receivers, f"Rad_{f:04d}")
     t_anim, ref_anim = cycles(f, args.samples, seed=3)
     err = bakes.relative_rmse(ours, ref_anim)
-    report["animated"] = {"frame": f, "order": 2, "rmse": err, "seconds_per_frame": seconds / f,
-                          "cycles_seconds": t_anim, "wall_seconds": time.perf_counter() - start}
-    print(f"animated frame {f} (order 2, incremental from frame 1): relative RMSE {err:.4f}, "
-          f"{seconds / f:.2f} s per frame; Cycles {args.samples} spp {t_anim:.1f} s", flush=True)
+    report["animated"] = {
+        "frame": f,
+        "order": 2,
+        "rmse": err,
+        "seconds_per_frame": seconds / f,
+        "cycles_seconds": t_anim,
+        "wall_seconds": time.perf_counter() - start,
+    }
+    print(
+        f"animated frame {f} (order 2, incremental from frame 1): relative RMSE {err:.4f}, "
+        f"{seconds / f:.2f} s per frame; Cycles {args.samples} spp {t_anim:.1f} s",
+        flush=True,
+    )
     report["cycles_reference_seconds"] = t_ref
     report["cycles_low"] = {"samples": low, "seconds": t_low, "rmse": err_low}
     report["reference_noise"] = ref_noise
@@ -127,8 +172,9 @@ def run(args):
         from . import pictures
 
         sc.frame_set(f)
-        path = pictures.side_by_side(bpy, objects, [f"Rad_{f:04d}", "Cycles"], out / f"ours_vs_cycles_frame{f}.png",
-                                     emitters=emitters)
+        path = pictures.side_by_side(
+            bpy, objects, [f"Rad_{f:04d}", "Cycles"], out / f"ours_vs_cycles_frame{f}.png", emitters=emitters
+        )
         print(f"picture: {path}")
     return report
 
@@ -143,11 +189,15 @@ def table(report):
         "|---|---|---|---|---|",
     ]
     for r in report["static"]:
-        rows.append(f"| {r['order']} | {100 * r['rmse']:.2f}% | {r['seconds']:.2f} | "
-                    f"{r['cycles_equal_error_seconds']:.2f} | {r['speedup_vs_cycles_equal_error']:.2f}x |")
+        rows.append(
+            f"| {r['order']} | {100 * r['rmse']:.2f}% | {r['seconds']:.2f} | "
+            f"{r['cycles_equal_error_seconds']:.2f} | {r['speedup_vs_cycles_equal_error']:.2f}x |"
+        )
     a = report["animated"]
-    rows.append(f"| 2, animated frame {a['frame']} (incremental) | {100 * a['rmse']:.2f}% | "
-                f"{a['seconds_per_frame']:.2f} | | |")
+    rows.append(
+        f"| 2, animated frame {a['frame']} (incremental) | {100 * a['rmse']:.2f}% | "
+        f"{a['seconds_per_frame']:.2f} | | |"
+    )
     return "\n".join(rows)
 
 
