@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A virtual environment with Blender as a Python module (bpy from PyPI needs CPython 3.11),
-# pytest and ruff. Idempotent.
+# pytest, ruff and matplotlib (plots). Idempotent.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3.11}
@@ -9,8 +9,8 @@ command -v "$PY" >/dev/null || PY=python3
 if [ ! -x .venv/bin/python ]; then
     "$PY" -m venv .venv
 fi
-if ! .venv/bin/python -c 'import bpy, pytest' >/dev/null 2>&1; then
-    .venv/bin/pip install -q bpy==5.0.1 pytest ruff
+if ! .venv/bin/python -c 'import bpy, pytest, matplotlib' >/dev/null 2>&1; then
+    .venv/bin/pip install -q bpy==5.0.1 pytest ruff matplotlib
 fi
 # Shared libraries bpy loads; present on these machines, installed on a bare Debian.
 if ! .venv/bin/python -c 'import bpy' >/dev/null 2>&1 && command -v apt-get >/dev/null; then
