@@ -170,9 +170,11 @@ pub fn cornell_box_animated(n: usize, frames: i64, settings: Settings) -> Scene 
     let last = frames as f64;
     for obj in &mut scene.objects {
         let keys: Option<Vec<(f64, DVec3)>> = match obj.name.as_str() {
-            "Light" => {
-                Some(vec![(1.0, DVec3::ZERO), (last * 0.5, DVec3::new(-0.15, 0.0, 0.1)), (last, DVec3::ZERO)])
-            }
+            "Light" => Some(vec![
+                (1.0, DVec3::ZERO),
+                ((1.0 + last) * 0.5, DVec3::new(-0.15, 0.0, 0.1)),
+                (last, DVec3::ZERO),
+            ]),
             "ShortBlock" => Some(vec![(1.0, DVec3::ZERO), (last, DVec3::new(0.0, 0.0, 0.15))]),
             _ => None,
         };
@@ -185,6 +187,128 @@ pub fn cornell_box_animated(n: usize, frames: i64, settings: Settings) -> Scene 
     }
     scene.frames = (1, frames);
     scene
+}
+
+/// The Cornell box with only its light moving, in a straight line along the ceiling (x), over
+/// `frames` frames: the "moving light in the 1,000-patch box" (n = 14).
+pub fn cornell_box_moving_light(n: usize, frames: i64, settings: Settings) -> Scene {
+    let mut scene = cornell_box(n, settings);
+    let light = scene.objects.iter_mut().find(|o| o.name == "Light").expect("Cornell box has a light");
+    light.animation =
+        translation_keys(&[(1.0, DVec3::new(0.08, 0.0, 0.0)), (frames as f64, DVec3::new(-0.08, 0.0, 0.0))]);
+    scene.frames = (1, frames);
+    scene
+}
+
+fn translation_keys(keys: &[(f64, DVec3)]) -> Vec<Key> {
+    keys.iter().map(|&(frame, t)| Key { frame, transform: KeyTransform::Translation(t) }).collect()
+}
+
+/// An axis-aligned room `w x h x d` (x, y up, z), walls split `n` per metre, faces inward.
+fn room(w: f64, h: f64, d: f64, n: f64, materials: [u32; 6]) -> Vec<Object> {
+    let c = DVec3::new(0.0, h / 2.0, 0.0);
+    let (x, z) = (w / 2.0, d / 2.0);
+    let p = DVec3::new;
+    let walls = [
+        ("Floor", [p(-x, 0., -z), p(x, 0., -z), p(x, 0., z), p(-x, 0., z)], w.max(d)),
+        ("Ceiling", [p(-x, h, -z), p(x, h, -z), p(x, h, z), p(-x, h, z)], w.max(d)),
+        ("WallLeft", [p(-x, 0., -z), p(-x, h, -z), p(-x, h, z), p(-x, 0., z)], d.max(h)),
+        ("WallRight", [p(x, 0., -z), p(x, h, -z), p(x, h, z), p(x, 0., z)], d.max(h)),
+        ("WallBack", [p(-x, 0., z), p(x, 0., z), p(x, h, z), p(-x, h, z)], w.max(h)),
+        ("WallFront", [p(-x, 0., -z), p(x, 0., -z), p(x, h, -z), p(-x, h, -z)], w.max(h)),
+    ];
+    walls
+        .iter()
+        .zip(materials)
+        .map(|((name, q, size), m)| {
+            subdivided_quad(name, facing(*q, c, false), (size * n).ceil() as usize, m)
+        })
+        .collect()
+}
+
+/// A panel `u x v` centred at `centre` facing `normal` (one quad split `k x k`).
+fn panel(name: &str, centre: DVec3, u: DVec3, v: DVec3, normal: DVec3, k: usize, material: u32) -> Object {
+    let q = [centre - u - v, centre + u - v, centre + u + v, centre - u + v];
+    subdivided_quad(name, facing(q, centre + normal, false), k, material)
+}
+
+/// The seed's Fig. 5a scene: a room, a ceiling light moving left and right, and a blue panel
+/// passing in front of a wall light. `n` patches per metre of wall.
+pub fn seed_room(n: f64, frames: i64, settings: Settings) -> Scene {
+    const WHITE: u32 = 0;
+    const RED: u32 = 1;
+    const BLUE: u32 = 2;
+    const LAMP: u32 = 3;
+    let mut objects = room(4.0, 2.5, 4.0, n, [WHITE, WHITE, RED, WHITE, WHITE, WHITE]);
+    let last = frames as f64;
+    let mut ceiling_light =
+        panel("CeilingLight", DVec3::new(0.0, 2.49, 0.0), DVec3::X * 0.3, DVec3::Z * 0.3, -DVec3::Y, 2, LAMP);
+    ceiling_light.animation = translation_keys(&[
+        (1.0, DVec3::new(-1.0, 0.0, 0.0)),
+        ((1.0 + last) * 0.5, DVec3::new(1.0, 0.0, 0.0)),
+        (last, DVec3::new(-1.0, 0.0, 0.0)),
+    ]);
+    objects.push(ceiling_light);
+    objects.push(panel(
+        "WallLight",
+        DVec3::new(1.99, 1.2, 0.0),
+        DVec3::Z * 0.25,
+        DVec3::Y * 0.25,
+        -DVec3::X,
+        2,
+        LAMP,
+    ));
+    let mut blue =
+        panel("BluePanel", DVec3::new(1.6, 1.2, 0.0), DVec3::Z * 0.3, DVec3::Y * 0.4, DVec3::X, 2, BLUE);
+    blue.animation =
+        translation_keys(&[(1.0, DVec3::new(0.0, 0.0, -1.5)), (last, DVec3::new(0.0, 0.0, 1.5))]);
+    objects.push(blue);
+    let materials = vec![
+        Material { name: "white".into(), reflectance: [0.7, 0.7, 0.7], emission: [0.0; 3] },
+        Material { name: "red".into(), reflectance: [0.6, 0.1, 0.1], emission: [0.0; 3] },
+        Material { name: "blue".into(), reflectance: [0.1, 0.15, 0.7], emission: [0.0; 3] },
+        Material { name: "lamp".into(), reflectance: [0.0; 3], emission: [30.0, 30.0, 28.0] },
+    ];
+    let mut scene =
+        Scene::new(settings, (1, frames), materials, vec![Vec::new(); 4], objects).expect("valid");
+    scene.frames = (1, frames);
+    scene
+}
+
+/// The seed's Fig. 5b scene: a billiard table in a room with a light moving above it.
+pub fn billiard(n: f64, frames: i64, settings: Settings) -> Scene {
+    const WHITE: u32 = 0;
+    const GREEN: u32 = 1;
+    const WOOD: u32 = 2;
+    const LAMP: u32 = 3;
+    let mut objects = room(6.0, 3.0, 4.0, n, [WOOD, WHITE, WHITE, WHITE, WHITE, WHITE]);
+    // The table: a green top 2.6 x 1.4 at 0.8 m and four wooden sides down to the floor.
+    let (x, z, h) = (1.3, 0.7, 0.8);
+    let k = ((2.6 * n).ceil() as usize).max(2);
+    let mut parts =
+        vec![panel("top", DVec3::new(0.0, h, 0.0), DVec3::X * x, DVec3::Z * z, DVec3::Y, k, GREEN)];
+    for (c, u, nrm) in [
+        (DVec3::new(0.0, h / 2.0, z), DVec3::X * x, DVec3::Z),
+        (DVec3::new(0.0, h / 2.0, -z), DVec3::X * x, -DVec3::Z),
+        (DVec3::new(x, h / 2.0, 0.0), DVec3::Z * z, DVec3::X),
+        (DVec3::new(-x, h / 2.0, 0.0), DVec3::Z * z, -DVec3::X),
+    ] {
+        parts.push(panel("side", c, u, DVec3::Y * (h / 2.0), nrm, (k / 2).max(1), WOOD));
+    }
+    objects.push(merge("Table", parts));
+    let last = frames as f64;
+    let mut light =
+        panel("Light", DVec3::new(0.0, 2.2, 0.0), DVec3::X * 0.25, DVec3::Z * 0.25, -DVec3::Y, 2, LAMP);
+    light.animation =
+        translation_keys(&[(1.0, DVec3::new(-1.2, 0.0, 0.0)), (last, DVec3::new(1.2, 0.0, 0.0))]);
+    objects.push(light);
+    let materials = vec![
+        Material { name: "white".into(), reflectance: [0.7, 0.7, 0.7], emission: [0.0; 3] },
+        Material { name: "green".into(), reflectance: [0.1, 0.5, 0.15], emission: [0.0; 3] },
+        Material { name: "wood".into(), reflectance: [0.45, 0.3, 0.15], emission: [0.0; 3] },
+        Material { name: "lamp".into(), reflectance: [0.0; 3], emission: [40.0, 38.0, 33.0] },
+    ];
+    Scene::new(settings, (1, frames), materials, vec![Vec::new(); 4], objects).expect("valid")
 }
 
 /// An emission key list for tests: material `m` ramps from `from` to `to` between two frames.

@@ -18,7 +18,7 @@ use galerkin_radiosity::session::{Method, Session};
 
 const USAGE: &str = "usage:
   galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--quiet]
-  galerkin-radiosity demo-scene -o SCENE.json [--frames N] [--subdiv N] [--order N]";
+  galerkin-radiosity demo-scene -o SCENE.json [--kind cornell|cornell-light|room|billiard] [--frames N] [--subdiv N] [--order N]";
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -187,6 +187,7 @@ fn demo_scene(args: &[String]) -> Result<(), CliError> {
         take_value(&mut args, &["--subdiv"])?.map(|v| parse(&v, "--subdiv")).transpose()?.unwrap_or(8);
     let order: usize =
         take_value(&mut args, &["--order"])?.map(|v| parse(&v, "--order")).transpose()?.unwrap_or(2);
+    let kind = take_value(&mut args, &["--kind"])?.unwrap_or_else(|| "cornell".into());
     if !args.is_empty() {
         return Err(CliError::Usage(format!("unexpected arguments {args:?}")));
     }
@@ -194,7 +195,14 @@ fn demo_scene(args: &[String]) -> Result<(), CliError> {
         return Err(CliError::Usage("--frames >= 1, --subdiv in 1..=64, --order in 0..=3".into()));
     }
     let settings = Settings { basis_order: order, ..Settings::default() };
-    let scene = scenes::cornell_box_animated(subdiv, frames, settings);
+    // For room and billiard, --subdiv is patches per metre of wall.
+    let scene = match kind.as_str() {
+        "cornell" => scenes::cornell_box_animated(subdiv, frames, settings),
+        "cornell-light" => scenes::cornell_box_moving_light(subdiv, frames, settings),
+        "room" => scenes::seed_room(subdiv as f64, frames, settings),
+        "billiard" => scenes::billiard(subdiv as f64, frames, settings),
+        k => return Err(CliError::Usage(format!("--kind {k:?}: cornell, cornell-light, room or billiard"))),
+    };
     std::fs::write(&out, scene_to_json(&scene)).map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
     eprintln!("wrote {out}: {} faces, {frames} frames", scene.face_count());
     Ok(())
