@@ -75,6 +75,23 @@ impl LinkStore {
         id
     }
 
+    /// Adds a pair whose blocks are already f32, `[G_ab | G_ba]` (`2 nb^2`).
+    pub fn push_f32(&mut self, a: ElementId, b: ElementId, coeffs: &[f32], visibility: Visibility) -> PairId {
+        debug_assert_eq!(coeffs.len(), 2 * self.nb * self.nb);
+        let id = self.pairs.len() as PairId;
+        self.pairs.push(Pair { a, b, visibility });
+        self.coeffs.extend_from_slice(coeffs);
+        self.adjacency[a as usize].push(id);
+        self.adjacency[b as usize].push(id);
+        id
+    }
+
+    /// Room for `pairs` more pairs.
+    pub fn reserve(&mut self, pairs: usize) {
+        self.pairs.reserve(pairs);
+        self.coeffs.reserve(pairs * 2 * self.nb * self.nb);
+    }
+
     /// Replaces a pair's coefficients and visibility.
     pub fn set(&mut self, p: PairId, ab: &[f64], ba: &[f64], visibility: Visibility) {
         let n2 = self.nb * self.nb;

@@ -3,7 +3,9 @@
 
 use rayon::prelude::*;
 
-use super::pair::{FAR, MID, PairCoefficients, PairContext, integrate_pair};
+use glam::DVec3;
+
+use super::pair::{FAR, MID, PairCoefficients, PairContext, integrate_pair, integrate_pair_into};
 use super::samples::Samples;
 use crate::geometry::{Patch, Rect};
 use crate::links::LinkStore;
@@ -17,6 +19,31 @@ pub struct ElementGeometry<'a> {
     /// `samples[r][e]`: element `e` with `rules[r]` points per axis.
     samples: Vec<Vec<Samples>>,
     rules: Vec<usize>,
+    /// Per element, what [`may_face`] and the pair integrator ask of it, computed once.
+    info: Vec<ElementInfo>,
+}
+
+/// Per-element geometry that every pair of the element needs.
+struct ElementInfo {
+    /// Bounding sphere (centre, radius).
+    sphere: (DVec3, f64),
+    /// Centre normal; `None` when the element is not planar (then it may face anything).
+    normal: Option<DVec3>,
+}
+
+impl ElementInfo {
+    fn new(p: &Patch) -> Self {
+        let sphere = p.bounding_sphere();
+        let normal = if p.non_planarity() > 1e-9 { None } else { Some(p.centre_normal()) };
+        Self { sphere, normal }
+    }
+
+    /// [`may_face`] with `a` = this element: the same tests on the same numbers.
+    fn may_face(&self, b: &Patch) -> bool {
+        let Some(n) = self.normal else { return true };
+        let (c, r) = self.sphere;
+        b.corners.iter().any(|p| n.dot(*p - c) > 1e-9 * r)
+    }
 }
 
 impl<'a> ElementGeometry<'a> {
@@ -34,13 +61,19 @@ impl<'a> ElementGeometry<'a> {
                     .collect()
             })
             .collect();
-        Self { patches, samples, rules }
+        let info = patches.par_iter().map(ElementInfo::new).collect();
+        Self { patches, samples, rules, info }
     }
 
     /// Element `e`'s whole-domain samples with `n` points per axis.
     pub fn samples(&self, e: usize, n: usize) -> &Samples {
         let r = self.rules.iter().position(|&m| m == n).expect("rule prepared");
         &self.samples[r][e]
+    }
+
+    /// `may_face(i, j) && may_face(j, i)` for elements `i` and `j`.
+    fn face_each_other(&self, i: usize, j: usize) -> bool {
+        self.info[i].may_face(&self.patches[j]) && self.info[j].may_face(&self.patches[i])
     }
 }
 
@@ -90,6 +123,45 @@ pub fn integrate_visible(
     (!c.is_zero()).then_some(c)
 }
 
+/// One pair for [`assemble`]: its visibility, with both blocks written to `ij` and `ji` (zeroed
+/// here), or `None` when it exchanges nothing. The same decisions as [`compute_pair`].
+fn assemble_pair(
+    ctx: &PairContext,
+    geom: &ElementGeometry,
+    occluders: Option<&Occluders>,
+    i: usize,
+    j: usize,
+    ij: &mut [f64],
+    ji: &mut [f64],
+) -> Option<Visibility> {
+    if !geom.face_each_other(i, j) {
+        return None;
+    }
+    let (pi, pj) = (&geom.patches[i], &geom.patches[j]);
+    let vis = match occluders {
+        Some(o) => o.link_visibility(i, pi, j, pj),
+        None => Visibility::Full,
+    };
+    if vis == Visibility::Blocked {
+        return None;
+    }
+    ij.fill(0.0);
+    ji.fill(0.0);
+    let spheres = (geom.info[i].sphere, geom.info[j].sphere);
+    let whole = |second: bool, n| geom.samples(if second { j } else { i }, n);
+    integrate_pair_into(ctx, pi, pj, spheres, whole, &vis, ij, ji);
+    let zero = ij.iter().chain(ji.iter()).all(|&x| x == 0.0);
+    (!zero).then_some(vis)
+}
+
+/// One receiver row of [`assemble`]: sources, `[G_ij | G_ji]` as f32, visibility.
+#[derive(Default)]
+struct Row {
+    sources: Vec<u32>,
+    coeffs: Vec<f32>,
+    visibility: Vec<Visibility>,
+}
+
 /// Builds the link store of all interacting pairs. `progress(done, total)` is called from worker
 /// threads now and then and returns false to cancel (then `None` is returned).
 pub fn assemble(
@@ -99,18 +171,26 @@ pub fn assemble(
     progress: &(dyn Fn(usize, usize) -> bool + Sync),
 ) -> Option<LinkStore> {
     let n = geom.patches.len();
+    let nb = ctx.basis.len();
     let done = std::sync::atomic::AtomicUsize::new(0);
     let cancelled = std::sync::atomic::AtomicBool::new(false);
     // One task per receiver row i, pairs (i, j > i); rows are uneven, rayon balances them.
-    let rows: Vec<Vec<(u32, PairCoefficients, Visibility)>> = (0..n)
+    let rows: Vec<Row> = (0..n)
         .into_par_iter()
         .map(|i| {
+            let mut row = Row::default();
             if cancelled.load(std::sync::atomic::Ordering::Relaxed) {
-                return Vec::new();
+                return row;
             }
-            let row: Vec<_> = ((i + 1)..n)
-                .filter_map(|j| compute_pair(ctx, geom, occluders, i, j).map(|(c, v)| (j as u32, c, v)))
-                .collect();
+            let (mut ij, mut ji) = ([0.0f64; 256], [0.0f64; 256]);
+            let (ij, ji) = (&mut ij[..nb * nb], &mut ji[..nb * nb]);
+            for j in (i + 1)..n {
+                if let Some(v) = assemble_pair(ctx, geom, occluders, i, j, ij, ji) {
+                    row.sources.push(j as u32);
+                    row.coeffs.extend(ij.iter().chain(ji.iter()).map(|&x| x as f32));
+                    row.visibility.push(v);
+                }
+            }
             let d = done.fetch_add(n - 1 - i, std::sync::atomic::Ordering::Relaxed) + n - 1 - i;
             if !progress(d, n * (n - 1) / 2) {
                 cancelled.store(true, std::sync::atomic::Ordering::Relaxed);
@@ -121,10 +201,12 @@ pub fn assemble(
     if cancelled.load(std::sync::atomic::Ordering::Relaxed) {
         return None;
     }
-    let mut store = LinkStore::new(n, ctx.basis.len());
+    let mut store = LinkStore::new(n, nb);
+    store.reserve(rows.iter().map(|r| r.sources.len()).sum());
     for (i, row) in rows.into_iter().enumerate() {
-        for (j, c, v) in row {
-            store.push(i as u32, j, &c.ij, &c.ji, v);
+        let block = 2 * nb * nb;
+        for ((j, c), v) in row.sources.into_iter().zip(row.coeffs.chunks_exact(block)).zip(row.visibility) {
+            store.push_f32(i as u32, j, c, v);
         }
     }
     Some(store)

@@ -10,12 +10,14 @@
 //! quadrants, down to `MAX_DEPTH`, where the inner integral becomes the analytic point-to-polygon
 //! form factor (Lambert's contour formula), which carries the `1/r^2` singularity exactly.
 
+use glam::DVec3;
+
 use crate::basis::Basis;
 use crate::geometry::{Patch, Rect};
 use crate::quadrature::GaussLegendre;
 use crate::visibility::Visibility;
 
-use super::point::{point_kernel, point_to_polygon};
+use super::point::point_to_polygon;
 use super::samples::Samples;
 
 /// Bounding spheres farther apart than this many radii-sums are integrated directly.
@@ -94,113 +96,229 @@ pub fn integrate_pair<'s>(
     vis: &Visibility,
 ) -> PairCoefficients {
     let mut out = PairCoefficients::zeros(ctx.basis.len());
-    let (ci, ri) = pi.bounding_sphere();
-    let (cj, rj) = pj.bounding_sphere();
+    let spheres = (pi.bounding_sphere(), pj.bounding_sphere());
+    integrate_pair_into(ctx, pi, pj, spheres, whole, vis, &mut out.ij, &mut out.ji);
+    out
+}
+
+/// [`integrate_pair`] with the elements' bounding spheres given, accumulating into `ij` and `ji`
+/// (`nb x nb` each, zeroed by the caller).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn integrate_pair_into<'s>(
+    ctx: &PairContext,
+    pi: &Patch,
+    pj: &Patch,
+    ((ci, ri), (cj, rj)): ((DVec3, f64), (DVec3, f64)),
+    whole: impl Fn(bool, usize) -> &'s Samples,
+    vis: &Visibility,
+    ij: &mut [f64],
+    ji: &mut [f64],
+) {
     let ratio = ci.distance(cj) / (ri + rj);
     if ratio > SEPARATION {
         let n = ctx.points_for(ratio);
-        gauss_leaf(ctx, whole(false, n), whole(true, n), vis, &mut out);
+        gauss_leaf(ctx, whole(false, n), whole(true, n), vis, ij, ji);
     } else {
-        split(ctx, pi, &Rect::UNIT, pj, &Rect::UNIT, vis, 0, &mut out);
+        let mut cache_i = SubSamples::new(pi);
+        let mut cache_j = SubSamples::new(pj);
+        let mut out = (ij, ji);
+        split(ctx, &mut cache_i, &Rect::UNIT, &mut cache_j, &Rect::UNIT, vis, 0, &mut out);
     }
-    out
+}
+
+/// The samples of one element's sub-rectangles met while splitting a near pair, made once each:
+/// the quadtree nodes down to [`MAX_DEPTH`] (1 + 4 + 16 + 64 of them).
+struct SubSamples<'p> {
+    patch: &'p Patch,
+    slots: Vec<Option<Samples>>,
+    /// Rectangles that are not quadtree nodes (never met today), made on demand.
+    other: Option<Samples>,
+}
+
+impl<'p> SubSamples<'p> {
+    fn new(patch: &'p Patch) -> Self {
+        Self { patch, slots: Vec::new(), other: None }
+    }
+
+    /// Slot of a quadtree node: level `L` (side `2^-L`), then `s0 2^L`, `t0 2^L`.
+    fn slot(r: &Rect) -> Option<usize> {
+        let mut base = 0;
+        for level in 0..=MAX_DEPTH as i32 {
+            let n = 1usize << level;
+            let side = 0.5f64.powi(level);
+            if r.s1 - r.s0 == side && r.t1 - r.t0 == side {
+                let (a, b) = (r.s0 * n as f64, r.t0 * n as f64);
+                if a.fract() != 0.0 || b.fract() != 0.0 || a < 0.0 || b < 0.0 {
+                    return None;
+                }
+                let (a, b) = (a as usize, b as usize);
+                return (a < n && b < n).then_some(base + a * n + b);
+            }
+            base += n * n;
+        }
+        None
+    }
+
+    fn get(&mut self, ctx: &PairContext, r: &Rect) -> &Samples {
+        let make = || Samples::new(self.patch, r, ctx.rule, ctx.basis, ctx.vis_axis);
+        match Self::slot(r) {
+            Some(k) => {
+                if self.slots.is_empty() {
+                    self.slots.resize_with(85, || None);
+                }
+                if self.slots[k].is_none() {
+                    self.slots[k] = Some(make());
+                }
+                self.slots[k].as_ref().unwrap()
+            }
+            None => self.other.insert(make()),
+        }
+    }
 }
 
 #[allow(clippy::too_many_arguments)]
 fn split(
     ctx: &PairContext,
-    pi: &Patch,
+    cache_i: &mut SubSamples,
     rect_i: &Rect,
-    pj: &Patch,
+    cache_j: &mut SubSamples,
     rect_j: &Rect,
     vis: &Visibility,
     depth: usize,
-    out: &mut PairCoefficients,
+    out: &mut (&mut [f64], &mut [f64]),
 ) {
-    let sub_i = pi.sub_patch(rect_i);
-    let sub_j = pj.sub_patch(rect_j);
+    let sub_i = cache_i.patch.sub_patch(rect_i);
+    let sub_j = cache_j.patch.sub_patch(rect_j);
     let (ci, ri) = sub_i.bounding_sphere();
     let (cj, rj) = sub_j.bounding_sphere();
-    let cells = ctx.vis_axis;
     if ci.distance(cj) > SEPARATION * (ri + rj) {
-        let si = Samples::new(pi, rect_i, ctx.rule, ctx.basis, cells);
-        let sj = Samples::new(pj, rect_j, ctx.rule, ctx.basis, cells);
-        gauss_leaf(ctx, &si, &sj, vis, out);
+        let si = cache_i.get(ctx, rect_i);
+        let sj = cache_j.get(ctx, rect_j);
+        gauss_leaf(ctx, si, sj, vis, out.0, out.1);
         return;
     }
     if depth >= MAX_DEPTH {
-        analytic_leaf(ctx, pi, rect_i, pj, rect_j, vis, out);
+        analytic_leaf(ctx, cache_i, rect_i, cache_j, rect_j, vis, out);
         return;
     }
     // Split the larger side; split both when they are of a size, so the recursion stays balanced.
     let split_i = ri >= 0.5 * rj;
     let split_j = rj >= 0.5 * ri;
-    let parts_i: Vec<Rect> = if split_i { rect_i.quadrants().to_vec() } else { vec![*rect_i] };
-    let parts_j: Vec<Rect> = if split_j { rect_j.quadrants().to_vec() } else { vec![*rect_j] };
-    for a in &parts_i {
-        for b in &parts_j {
-            split(ctx, pi, a, pj, b, vis, depth + 1, out);
+    let (quad_i, quad_j) = (rect_i.quadrants(), rect_j.quadrants());
+    let parts_i: &[Rect] = if split_i { &quad_i } else { std::slice::from_ref(rect_i) };
+    let parts_j: &[Rect] = if split_j { &quad_j } else { std::slice::from_ref(rect_j) };
+    for a in parts_i {
+        for b in parts_j {
+            split(ctx, cache_i, a, cache_j, b, vis, depth + 1, out);
         }
     }
 }
 
+/// Sample counts up to this use stack buffers in [`gauss_leaf`].
+const STACK_SAMPLES: usize = 64;
+
 /// Tensor Gauss over both sub-domains, as two small matrix products per direction:
-/// `G_ij += Phi_i^T (M diag(wA_j) Phi_j)` and `G_ji += Phi_j^T (M^T diag(wA_i) Phi_i)`,
-/// with `M_ab = g(x_a, y_b) VIS_ab w_a w_b / (w_a w_b)` folded into the weights below.
-fn gauss_leaf(ctx: &PairContext, si: &Samples, sj: &Samples, vis: &Visibility, out: &mut PairCoefficients) {
-    let nb = ctx.basis.len();
+/// `G_ij += Phi_i^T diag(w_i) M diag(wA_j) Phi_j` and `G_ji += Phi_j^T diag(w_j) M^T diag(wA_i) Phi_i`
+/// with `M_ab = g(x_a, y_b) VIS_ab`.
+fn gauss_leaf(
+    ctx: &PairContext,
+    si: &Samples,
+    sj: &Samples,
+    vis: &Visibility,
+    ij: &mut [f64],
+    ji: &mut [f64],
+) {
     let cells = ctx.vis_axis * ctx.vis_axis;
+    match ctx.basis.len() {
+        1 => gauss_leaf_nb::<1>(si, sj, vis, cells, ij, ji),
+        4 => gauss_leaf_nb::<4>(si, sj, vis, cells, ij, ji),
+        9 => gauss_leaf_nb::<9>(si, sj, vis, cells, ij, ji),
+        16 => gauss_leaf_nb::<16>(si, sj, vis, cells, ij, ji),
+        nb => unreachable!("{nb} basis functions"),
+    }
+}
+
+/// [`gauss_leaf`] with `NB` basis functions: row `a` of `M` at a time,
+/// `T1 = M diag(wA_j) Phi_j` (one row, used at once) and `T2 = M^T diag(wA_i) Phi_i` (accumulated).
+fn gauss_leaf_nb<const NB: usize>(
+    si: &Samples,
+    sj: &Samples,
+    vis: &Visibility,
+    cells: usize,
+    ij: &mut [f64],
+    ji: &mut [f64],
+) {
     let (na, nbp) = (si.len(), sj.len());
-    // T1[a][l] = sum_b g_ab V_ab wA_b Gamma_l(b);  T2[b][k] = sum_a g_ab V_ab wA_a Gamma_k(a).
-    let mut t1 = vec![0.0; na * nb];
-    let mut t2 = vec![0.0; nbp * nb];
+    let (pi_w, _) = si.weighted_basis.as_chunks::<NB>();
+    let (qi, _) = si.area_weighted_basis.as_chunks::<NB>();
+    let (pj_w, _) = sj.weighted_basis.as_chunks::<NB>();
+    let (qj, _) = sj.area_weighted_basis.as_chunks::<NB>();
+    let (ij, _) = ij.as_chunks_mut::<NB>();
+    let (ji, _) = ji.as_chunks_mut::<NB>();
+    let mut t2_stack = [[0.0f64; NB]; STACK_SAMPLES];
+    let mut m_stack = [0.0f64; STACK_SAMPLES];
+    let (mut t2_heap, mut m_heap);
+    let (t2, m): (&mut [[f64; NB]], &mut [f64]) = if nbp <= STACK_SAMPLES {
+        (&mut t2_stack[..nbp], &mut m_stack[..nbp])
+    } else {
+        t2_heap = vec![[0.0f64; NB]; nbp];
+        m_heap = vec![0.0f64; nbp];
+        (&mut t2_heap, &mut m_heap)
+    };
+    let [yx, yy, yz] = &sj.position_soa;
+    let [mx, my, mz] = &sj.normal_soa;
+    let (yx, yy, yz, mx, my, mz) = (&yx[..nbp], &yy[..nbp], &yz[..nbp], &mx[..nbp], &my[..nbp], &mz[..nbp]);
     for a in 0..na {
+        let x = si.position[a];
+        let nx = si.normal[a];
+        // Row a of M: the point kernel (point::point_kernel, same operations), then visibility.
         for b in 0..nbp {
-            let mut g = point_kernel(si.position[a], si.normal[a], sj.position[b], sj.normal[b]);
-            if g == 0.0 {
-                continue;
-            }
-            g *= vis.at(si.cell[a], sj.cell[b], cells);
-            if g == 0.0 {
-                continue;
-            }
-            let gj = g * sj.area_weight[b];
-            let gi = g * si.area_weight[a];
-            let phi_a = &si.basis[a * nb..(a + 1) * nb];
-            let phi_b = &sj.basis[b * nb..(b + 1) * nb];
-            let row1 = &mut t1[a * nb..(a + 1) * nb];
-            for l in 0..nb {
-                row1[l] += gj * phi_b[l];
-            }
-            let row2 = &mut t2[b * nb..(b + 1) * nb];
-            for k in 0..nb {
-                row2[k] += gi * phi_a[k];
+            let (dx, dy, dz) = (yx[b] - x.x, yy[b] - x.y, yz[b] - x.z);
+            let cx = nx.x * dx + nx.y * dy + nx.z * dz;
+            let cy = -(mx[b] * dx + my[b] * dy + mz[b] * dz);
+            let r2 = dx * dx + dy * dy + dz * dz;
+            let g = cx * cy / (std::f64::consts::PI * r2 * r2);
+            m[b] = if cx <= 0.0 || cy <= 0.0 { 0.0 } else { g };
+        }
+        if let Visibility::Partial(_) | Visibility::Blocked = vis {
+            let ca = si.cell[a];
+            for b in 0..nbp {
+                m[b] *= vis.at(ca, sj.cell[b], cells);
             }
         }
-    }
-    for a in 0..na {
-        let phi_a = &si.basis[a * nb..(a + 1) * nb];
-        let w = si.weight[a];
-        for k in 0..nb {
-            let f = w * phi_a[k];
-            if f == 0.0 {
+        let qa = &qi[a];
+        let mut t1 = [0.0f64; NB];
+        for b in 0..nbp {
+            let g = m[b];
+            if g == 0.0 {
                 continue;
             }
-            for l in 0..nb {
-                out.ij[k * nb + l] += f * t1[a * nb + l];
+            let qb = &qj[b];
+            for l in 0..NB {
+                t1[l] += g * qb[l];
+            }
+            let row2 = &mut t2[b];
+            for k in 0..NB {
+                row2[k] += g * qa[k];
+            }
+        }
+        let pa = &pi_w[a];
+        for k in 0..NB {
+            let f = pa[k];
+            let row = &mut ij[k];
+            for l in 0..NB {
+                row[l] += f * t1[l];
             }
         }
     }
     for b in 0..nbp {
-        let phi_b = &sj.basis[b * nb..(b + 1) * nb];
-        let w = sj.weight[b];
-        for l in 0..nb {
-            let f = w * phi_b[l];
-            if f == 0.0 {
-                continue;
-            }
-            for k in 0..nb {
-                out.ji[l * nb + k] += f * t2[b * nb + k];
+        let pb = &pj_w[b];
+        let row2 = &t2[b];
+        for l in 0..NB {
+            let f = pb[l];
+            let row = &mut ji[l];
+            for k in 0..NB {
+                row[k] += f * row2[k];
             }
         }
     }
@@ -209,48 +327,47 @@ fn gauss_leaf(ctx: &PairContext, si: &Samples, sj: &Samples, vis: &Visibility, o
 /// Deepest level of a near pair: Gauss over one side, the exact form factor to the other side's
 /// polygon as the inner integral, the inner basis function taken at the polygon's centre. Done
 /// both ways round so each direction keeps the exact singular part.
-#[allow(clippy::too_many_arguments)]
 fn analytic_leaf(
     ctx: &PairContext,
-    pi: &Patch,
+    cache_i: &mut SubSamples,
     rect_i: &Rect,
-    pj: &Patch,
+    cache_j: &mut SubSamples,
     rect_j: &Rect,
     vis: &Visibility,
-    out: &mut PairCoefficients,
+    out: &mut (&mut [f64], &mut [f64]),
 ) {
     let nb = ctx.basis.len();
     let m = ctx.vis_axis;
-    let one_way =
-        |recv: &Patch, rect_r: &Rect, src: &Patch, rect_s: &Rect, block: &mut [f64], transpose_vis: bool| {
-            let samples = Samples::new(recv, rect_r, ctx.rule, ctx.basis, m);
-            let poly = src.sub_patch(rect_s);
-            let poly_normal = poly.centre_normal();
-            let (cs, ct) = rect_s.map(0.5, 0.5);
-            let phi_src = ctx.basis.eval(cs, ct);
-            let src_cell = crate::visibility::cell_of(cs, ct, m);
-            let mut corners = poly.corners.to_vec();
-            corners.dedup();
-            for a in 0..samples.len() {
-                let f = point_to_polygon(samples.position[a], samples.normal[a], &corners, poly_normal);
-                if f == 0.0 {
-                    continue;
-                }
-                let v = if transpose_vis {
-                    vis.at(src_cell, samples.cell[a], m * m)
-                } else {
-                    vis.at(samples.cell[a], src_cell, m * m)
-                };
-                let w = samples.weight[a] * f * v;
-                let phi_a = &samples.basis[a * nb..(a + 1) * nb];
-                for k in 0..nb {
-                    for l in 0..nb {
-                        block[k * nb + l] += w * phi_a[k] * phi_src[l];
-                    }
+    let one_way = |samples: &Samples, src: &Patch, rect_s: &Rect, block: &mut [f64], transpose_vis: bool| {
+        let poly = src.sub_patch(rect_s);
+        let poly_normal = poly.centre_normal();
+        let (cs, ct) = rect_s.map(0.5, 0.5);
+        let mut phi_src = [0.0; 16];
+        ctx.basis.eval_into(cs, ct, &mut phi_src[..nb]);
+        let src_cell = crate::visibility::cell_of(cs, ct, m);
+        let mut corners = poly.corners.to_vec();
+        corners.dedup();
+        for a in 0..samples.len() {
+            let f = point_to_polygon(samples.position[a], samples.normal[a], &corners, poly_normal);
+            if f == 0.0 {
+                continue;
+            }
+            let v = if transpose_vis {
+                vis.at(src_cell, samples.cell[a], m * m)
+            } else {
+                vis.at(samples.cell[a], src_cell, m * m)
+            };
+            let w = samples.weight[a] * f * v;
+            let phi_a = &samples.basis[a * nb..(a + 1) * nb];
+            for k in 0..nb {
+                for l in 0..nb {
+                    block[k * nb + l] += w * phi_a[k] * phi_src[l];
                 }
             }
-        };
+        }
+    };
     // G_ij: receiver i's samples, inner integral F(x_a -> S_j) = integral g A_j du dv over rect_j.
-    one_way(pi, rect_i, pj, rect_j, &mut out.ij, false);
-    one_way(pj, rect_j, pi, rect_i, &mut out.ji, true);
+    let (pi, pj) = (cache_i.patch, cache_j.patch);
+    one_way(cache_i.get(ctx, rect_i), pj, rect_j, out.0, false);
+    one_way(cache_j.get(ctx, rect_j), pi, rect_i, out.1, true);
 }

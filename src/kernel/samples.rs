@@ -20,6 +20,13 @@ pub struct Samples {
     pub basis: Vec<f64>,
     /// Visibility cell of each sample.
     pub cell: Vec<usize>,
+    /// `weight * Gamma_k`, `len x nb`: the outer (receiver) side of a Gauss product.
+    pub weighted_basis: Vec<f64>,
+    /// `area_weight * Gamma_k`, `len x nb`: the inner (source) side of a Gauss product.
+    pub area_weighted_basis: Vec<f64>,
+    /// Positions and normals by coordinate (`[x, y, z]`), for loops over samples that vectorise.
+    pub(crate) position_soa: [Vec<f64>; 3],
+    pub(crate) normal_soa: [Vec<f64>; 3],
 }
 
 impl Samples {
@@ -33,6 +40,10 @@ impl Samples {
             area_weight: Vec::with_capacity(n),
             basis: vec![0.0; n * nb],
             cell: Vec::with_capacity(n),
+            weighted_basis: vec![0.0; n * nb],
+            area_weighted_basis: vec![0.0; n * nb],
+            position_soa: Default::default(),
+            normal_soa: Default::default(),
         };
         let measure = rect.measure();
         let mut k = 0;
@@ -50,6 +61,16 @@ impl Samples {
                 s.cell.push(cell_of(ps, pt, vis_cells));
                 k += 1;
             }
+        }
+        for k in 0..n {
+            for l in 0..nb {
+                s.weighted_basis[k * nb + l] = s.weight[k] * s.basis[k * nb + l];
+                s.area_weighted_basis[k * nb + l] = s.area_weight[k] * s.basis[k * nb + l];
+            }
+        }
+        for c in 0..3 {
+            s.position_soa[c] = s.position.iter().map(|p| p[c]).collect();
+            s.normal_soa[c] = s.normal.iter().map(|p| p[c]).collect();
         }
         s
     }
