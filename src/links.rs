@@ -25,11 +25,29 @@ pub struct LinkStore {
     coeffs: Vec<f32>,
     /// Per element: the pairs it belongs to.
     adjacency: Vec<Vec<PairId>>,
+    /// Per element, in `adjacency` order: the other element and the block it receives from this
+    /// one, so that shooting reads neither the pair records nor the other block.
+    sources: Vec<Vec<Neighbour>>,
+}
+
+/// An element's partner in a pair, as seen by a shooter: who receives, and from which block.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Neighbour {
+    /// The receiving element.
+    pub receiver: ElementId,
+    /// Index of the `nb x nb` block `G_receiver,shooter` (offset `block * nb^2` in the store).
+    pub block: u32,
 }
 
 impl LinkStore {
     pub fn new(n_elements: usize, nb: usize) -> Self {
-        Self { nb, pairs: Vec::new(), coeffs: Vec::new(), adjacency: vec![Vec::new(); n_elements] }
+        Self {
+            nb,
+            pairs: Vec::new(),
+            coeffs: Vec::new(),
+            adjacency: vec![Vec::new(); n_elements],
+            sources: vec![Vec::new(); n_elements],
+        }
     }
 
     /// Basis functions per element.
@@ -70,8 +88,7 @@ impl LinkStore {
         let id = self.pairs.len() as PairId;
         self.pairs.push(Pair { a, b, visibility });
         self.coeffs.extend(ab.iter().chain(ba).map(|&x| x as f32));
-        self.adjacency[a as usize].push(id);
-        self.adjacency[b as usize].push(id);
+        self.link(a, b, id);
         id
     }
 
@@ -81,10 +98,31 @@ impl LinkStore {
         let id = self.pairs.len() as PairId;
         self.pairs.push(Pair { a, b, visibility });
         self.coeffs.extend_from_slice(coeffs);
-        self.adjacency[a as usize].push(id);
-        self.adjacency[b as usize].push(id);
+        self.link(a, b, id);
         id
     }
+
+    fn link(&mut self, a: ElementId, b: ElementId, id: PairId) {
+        self.adjacency[a as usize].push(id);
+        self.adjacency[b as usize].push(id);
+        // G_ab (block 2 id) is received by a from b; G_ba (2 id + 1) by b from a.
+        self.sources[b as usize].push(Neighbour { receiver: a, block: 2 * id });
+        self.sources[a as usize].push(Neighbour { receiver: b, block: 2 * id + 1 });
+    }
+
+    /// What element `e` shoots to: each partner with the block it receives through, in
+    /// [`LinkStore::pairs_of`] order.
+    pub fn receivers_of(&self, e: ElementId) -> &[Neighbour] {
+        &self.sources[e as usize]
+    }
+
+    /// Block number `block` (see [`Neighbour::block`]), `nb x nb`, row = receiver function.
+    #[inline]
+    pub fn block_at(&self, block: u32) -> &[f32] {
+        let n2 = self.nb * self.nb;
+        &self.coeffs[block as usize * n2..(block as usize + 1) * n2]
+    }
+
 
     /// Room for `pairs` more pairs.
     pub fn reserve(&mut self, pairs: usize) {
@@ -123,7 +161,9 @@ impl LinkStore {
 
     /// Bytes held by coefficients and pair records.
     pub fn memory_bytes(&self) -> usize {
-        self.coeffs.len() * 4 + self.pairs.len() * std::mem::size_of::<Pair>()
+        self.coeffs.len() * 4
+            + self.pairs.len() * std::mem::size_of::<Pair>()
+            + 2 * self.pairs.len() * std::mem::size_of::<Neighbour>()
     }
 }
 

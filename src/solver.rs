@@ -130,22 +130,61 @@ fn shoot_one(
     nb: usize,
     out: &mut [[f64; 3]],
 ) {
-    for &p in links.pairs_of(j) {
-        let i = links.other(p, j) as usize;
-        let g = links.block(p, i as ElementId);
+    match nb {
+        1 => shoot_one_nb::<1>(links, reflectance, j, u, out),
+        4 => shoot_one_nb::<4>(links, reflectance, j, u, out),
+        9 => shoot_one_nb::<9>(links, reflectance, j, u, out),
+        16 => shoot_one_nb::<16>(links, reflectance, j, u, out),
+        nb => unreachable!("{nb} basis functions"),
+    }
+}
+
+/// Blocks this many receivers ahead are prefetched: they are scattered over the whole store.
+const PREFETCH_AHEAD: usize = 4;
+
+#[inline]
+fn prefetch(block: &[f32]) {
+    #[cfg(target_arch = "x86_64")]
+    for line in block.chunks(16) {
+        // SAFETY: prefetching is a hint; the address is that of a live slice element.
+        unsafe {
+            std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(line.as_ptr().cast())
+        };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = block;
+}
+
+/// [`shoot_one`] with `NB` basis functions; the same operations in the same order.
+fn shoot_one_nb<const NB: usize>(
+    links: &LinkStore,
+    reflectance: &[[f64; 3]],
+    j: ElementId,
+    u: &[[f64; 3]],
+    out: &mut [[f64; 3]],
+) {
+    let u: &[[f64; 3]; NB] = u.try_into().expect("nb coefficients");
+    let (out, _) = out.as_chunks_mut::<NB>();
+    let receivers = links.receivers_of(j);
+    for (r, n) in receivers.iter().enumerate() {
+        if let Some(ahead) = receivers.get(r + PREFETCH_AHEAD) {
+            prefetch(links.block_at(ahead.block));
+        }
+        let (g, _) = links.block_at(n.block).as_chunks::<NB>();
+        let i = n.receiver as usize;
         let rho = reflectance[i];
-        for k in 0..nb {
-            let row = &g[k * nb..(k + 1) * nb];
+        let o = &mut out[i];
+        for k in 0..NB {
+            let row = &g[k];
             let mut acc = [0.0; 3];
-            for l in 0..nb {
+            for l in 0..NB {
                 let gkl = row[l] as f64;
                 acc[0] += gkl * u[l][0];
                 acc[1] += gkl * u[l][1];
                 acc[2] += gkl * u[l][2];
             }
-            let o = &mut out[i * nb + k];
             for c in 0..3 {
-                o[c] += rho[c] * acc[c];
+                o[k][c] += rho[c] * acc[c];
             }
         }
     }
