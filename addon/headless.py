@@ -46,16 +46,18 @@ def script_args(argv):
 
 
 def load_package():
-    """The add-on package this script belongs to (``addon`` in a checkout), registered."""
+    """The add-on package this script belongs to (``addon`` in a checkout), registered; and
+    whether this call registered it."""
     here = Path(__file__).resolve().parent
     if str(here.parent) not in sys.path:
         sys.path.insert(0, str(here.parent))
     pkg = importlib.import_module(here.name)
     import bpy
 
-    if not hasattr(bpy.types.Scene, "radiosity"):
-        pkg.register()
-    return pkg
+    if hasattr(bpy.types.Scene, "radiosity"):
+        return pkg, False
+    pkg.register()
+    return pkg, True
 
 
 def frames_arg(text):
@@ -72,7 +74,15 @@ def main(argv=None):
 
     if args.blend:
         bpy.ops.wm.open_mainfile(filepath=str(Path(args.blend).resolve()))
-    pkg = load_package()
+    pkg, registered = load_package()
+    try:
+        return _main(args, bpy, pkg)
+    finally:
+        if registered:
+            pkg.unregister()  # the bpy 4.5 module hangs at exit with add-on classes still registered
+
+
+def _main(args, bpy, pkg):
     bake = importlib.import_module(pkg.__name__ + ".blender.bake")
     scene = bpy.data.scenes.get(args.scene) if args.scene else bpy.context.scene
     if scene is None:

@@ -261,7 +261,13 @@ class BakeJob:
         if copies and any(o.deforms for o in copies):
             self.warnings.append("stored on a bake-time copy, which does not follow deformation: "
                                  + ", ".join(o.obj.name for o in copies if o.deforms))
+        linked = [o.obj.name for o in rest.objects if o.obj.library is not None]
+        if linked:
+            self.warnings.append("linked objects light the scene but cannot store colours (make them local): "
+                                 + ", ".join(linked))
         for i, (o, mode) in enumerate(zip(rest.objects, modes, strict=True)):
+            if o.obj.library is not None:
+                continue
             if mode == "mesh":
                 self.targets.append(Target(i, o.obj, "mesh", o.obj.data))
             else:

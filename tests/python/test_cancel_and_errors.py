@@ -142,6 +142,8 @@ def test_zero_area_faces_non_meshes_and_unreadable_materials_are_reported(blende
                  nt.nodes["Principled BSDF"].inputs["Base Color"])
     objs["Back"].data.materials[0] = tex
     glass = bpy.data.materials.new("Glass")
+    if bpy.app.version < (5, 0, 0):
+        glass.use_nodes = True
     gnt = glass.node_tree
     out = gnt.nodes.get("Material Output") or gnt.nodes.new("ShaderNodeOutputMaterial")
     gnt.links.new(gnt.nodes.new("ShaderNodeBsdfGlass").outputs[0], out.inputs["Surface"])

@@ -126,6 +126,9 @@ binding = importlib.import_module(pkg + ".native.binding")
 binding.load()
 print("LIB", binding._lib._name)
 print("OP", hasattr(bpy.types, "RADIOSITY_OT_bake"), hasattr(bpy.types.Scene, "radiosity"))
+sys.stdout.flush()
+import addon_utils
+addon_utils.disable(pkg, default_set=True)  # the bpy 4.5 module hangs at exit with add-ons enabled
 '''
 
 
