@@ -123,7 +123,6 @@ impl LinkStore {
         &self.coeffs[block as usize * n2..(block as usize + 1) * n2]
     }
 
-
     /// Room for `pairs` more pairs.
     pub fn reserve(&mut self, pairs: usize) {
         self.pairs.reserve(pairs);
