@@ -103,8 +103,8 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
         if event.type == "ESC" and event.value == "PRESS":
             job.cancel()
             return {"RUNNING_MODAL"}
-        if event.type != "TIMER" or event.timer is not self._timer:
-            return {"RUNNING_MODAL"}
+        if event.type != "TIMER":
+            return {"RUNNING_MODAL"}  # the UI is blocked while baking (the viewport still redraws)
         total = max(job.total, 1)
         done = job.done + job.fraction
         context.window_manager.progress_update(int(1000 * done / total))

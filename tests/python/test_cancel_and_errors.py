@@ -210,3 +210,112 @@ def test_worker_thread_solve_and_cancel_from_the_main_thread(blender):
     expected = [1] if outcome else [1, 2]
     assert scenes.rad_frames(objs["Floor"].data) == expected
     assert "cancelled" in job.summary
+
+
+class _FakeWM:
+    def progress_begin(self, *a):
+        pass
+
+    def progress_update(self, value):
+        self.last = value
+
+    def progress_end(self):
+        pass
+
+    def event_timer_remove(self, timer):
+        pass
+
+
+class _FakeWorkspace:
+    def __init__(self):
+        self.texts = []
+
+    def status_text_set(self, text):
+        self.texts.append(text)
+
+
+def _modal_harness(bpy):
+    """The modal operator's methods on a stand-in instance (an event loop cannot run headless)."""
+    from addon.operators import RADIOSITY_OT_bake as Op
+
+    class Harness:
+        _begin_frame = Op._begin_frame
+        _solve = Op._solve
+        _end = Op._end
+        _report_end = Op._report_end
+        _make_job = Op._make_job
+        modal = Op.modal
+        _timer = None
+        _thread = None
+
+        def __init__(self):
+            self.reports = []
+
+        def report(self, kind, text):
+            self.reports.append((set(kind), text))
+
+    class Ctx:
+        scene = bpy.context.scene
+        view_layer = bpy.context.view_layer
+        window_manager = _FakeWM()
+        workspace = _FakeWorkspace()
+
+        def evaluated_depsgraph_get(self):
+            return bpy.context.evaluated_depsgraph_get()
+
+    return Harness(), Ctx()
+
+
+class _Event:
+    def __init__(self, type, value="NOTHING"):
+        self.type, self.value = type, value
+
+
+def test_modal_operator_polls_the_worker_and_esc_keeps_complete_frames(blender):
+    import time
+
+    bpy = blender
+    objs = scenes.cornell_box(bpy, n=4, light_frames=(1, 4), box=True)
+    bpy.context.scene.radiosity.basis_order = 1
+    op, ctx = _modal_harness(bpy)
+    op._job = op._make_job(ctx, verbose=False)
+    op._job.start()
+    assert op._begin_frame(ctx)
+    result = {"RUNNING_MODAL"}
+    sent_esc = False
+    deadline = time.time() + 60
+    while result == {"RUNNING_MODAL"} and time.time() < deadline:
+        if op._job.done == 2 and not sent_esc:
+            result = op.modal(ctx, _Event("ESC", "PRESS"))
+            sent_esc = True
+            continue
+        result = op.modal(ctx, _Event("TIMER"))
+        time.sleep(0.01)
+    assert result == {"FINISHED"}
+    # Esc came while frame 3 was solving: it is cancelled, or kept if it completed first.
+    frames = scenes.rad_frames(objs["Floor"].data)
+    assert frames in ([1, 2], [1, 2, 3])
+    assert _switch_range(objs["Floor"]) == (1, frames[-1])
+    assert any("Esc: cancel" in (t or "") for t in ctx.workspace.texts)
+    assert ctx.workspace.texts[-1] is None  # the status line is cleared
+    assert any("cancelled" in text for kinds, text in op.reports if "INFO" in kinds)
+
+
+def test_modal_operator_runs_to_the_end(blender):
+    import time
+
+    bpy = blender
+    objs = scenes.cornell_box(bpy, n=2, light_frames=(1, 3), box=False)
+    bpy.context.scene.radiosity.basis_order = 0
+    op, ctx = _modal_harness(bpy)
+    op._job = op._make_job(ctx, verbose=False)
+    op._job.start()
+    assert op._begin_frame(ctx)
+    result = {"RUNNING_MODAL"}
+    deadline = time.time() + 60
+    while result == {"RUNNING_MODAL"} and time.time() < deadline:
+        result = op.modal(ctx, _Event("TIMER"))
+        time.sleep(0.01)
+    assert result == {"FINISHED"}
+    assert scenes.rad_frames(objs["Floor"].data) == [1, 2, 3]
+    assert ctx.window_manager.last > 0
