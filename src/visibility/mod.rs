@@ -97,6 +97,8 @@ fn on_hull(elements: &[Patch], planes: &[Option<(DVec3, f64)>], eps: f64) -> Vec
 /// All occluders of one frame: the triangles of every element, and each element's plane.
 pub struct Occluders {
     bvh: Bvh,
+    /// Per BVH triangle: `v0`, `v1 - v0`, `v2 - v0` (the edges [`bvh::segment_hits`] forms).
+    edges: Vec<[DVec3; 3]>,
     /// Per element: unit normal and offset of its plane, `None` when the element is not planar.
     planes: Vec<Option<(DVec3, f64)>>,
     /// Scene size, for tolerances.
@@ -127,7 +129,9 @@ impl Occluders {
                 tris.push(Triangle { v, element: e as u32 });
             }
         }
-        Occluders { bvh: Bvh::build(tris), planes, scale, samples_per_axis }
+        let bvh = Bvh::build(tris);
+        let edges = bvh.triangles().iter().map(|t| [t.v[0], t.v[1] - t.v[0], t.v[2] - t.v[0]]).collect();
+        Occluders { bvh, edges, planes, scale, samples_per_axis }
     }
 
     /// Triangles that can occlude anything (elements on the scene's hull are left out).
@@ -143,52 +147,76 @@ impl Occluders {
     pub fn link_visibility(&self, i: usize, pi: &Patch, j: usize, pj: &Patch) -> Visibility {
         let shaft = Shaft::new(&pi.bounds(), &pj.bounds());
         let eps = 1e-9 * self.scale;
-        let mut candidates: Vec<usize> = Vec::new();
-        let in_shaft = |b: &crate::geometry::Aabb| b.overlaps(&shaft.bounds) && shaft.may_contain_box(b, eps);
-        self.bvh.for_each_accepted(in_shaft, |t| {
-            let tri = &self.bvh.triangles()[t];
-            let e = tri.element as usize;
-            if e == i || e == j {
-                return;
-            }
-            // Segments between the fronts of two planar elements stay in front of both planes.
-            for plane in [self.planes[i], self.planes[j]].into_iter().flatten() {
-                if tri.v.iter().all(|v| plane.0.dot(*v) - plane.1 <= eps) {
+        let planes = [self.planes[i], self.planes[j]];
+        // A box wholly behind one of the two planes holds only triangles the plane test below
+        // drops (half of eps covers the rounding of the box form), so the traversal skips it.
+        let behind = |b: &crate::geometry::Aabb| {
+            let (c, h) = (b.centre(), b.diagonal() * 0.5);
+            planes.iter().flatten().any(|(n, d)| n.dot(c) + n.abs().dot(h) - d <= 0.5 * eps)
+        };
+        let in_shaft = |b: &crate::geometry::Aabb| {
+            b.overlaps(&shaft.bounds) && shaft.may_contain_overlapping_box(b, eps) && !behind(b)
+        };
+        CANDIDATES.with_borrow_mut(|candidates| {
+            candidates.clear();
+            self.bvh.for_each_accepted(in_shaft, |t| {
+                let tri = &self.bvh.triangles()[t];
+                let e = tri.element as usize;
+                if e == i || e == j {
                     return;
                 }
+                // Segments between the fronts of two planar elements stay in front of both planes.
+                for plane in planes.into_iter().flatten() {
+                    if tri.v.iter().all(|v| plane.0.dot(*v) - plane.1 <= eps) {
+                        return;
+                    }
+                }
+                if shaft.may_contain_triangle(&tri.v, eps) {
+                    candidates.push(t);
+                }
+                // (the traversal already kept only nodes and triangle boxes the shaft may contain)
+            });
+            if candidates.is_empty() {
+                return Visibility::Full;
             }
-            if shaft.may_contain_triangle(&tri.v, eps) {
-                candidates.push(t);
-            }
-            // (the traversal already kept only nodes and triangle boxes the shaft may contain)
-        });
-        if candidates.is_empty() {
-            return Visibility::Full;
-        }
+            self.cast(i, pi, j, pj, candidates)
+        })
+    }
+
+    /// The rays of a link whose shaft holds `candidates`.
+    fn cast(&self, i: usize, pi: &Patch, j: usize, pj: &Patch, candidates: &[usize]) -> Visibility {
         let m = self.samples_per_axis;
         let cells = m * m;
-        let samples = |p: &Patch| -> Vec<DVec3> {
-            (0..cells)
-                .map(|c| p.point(((c / m) as f64 + 0.5) / m as f64, ((c % m) as f64 + 0.5) / m as f64))
-                .collect()
-        };
-        let (xi, xj) = (samples(pi), samples(pj));
+        let mut xi = [DVec3::ZERO; 16];
+        let mut xj = [DVec3::ZERO; 16];
+        for c in 0..cells {
+            let (s, t) = (((c / m) as f64 + 0.5) / m as f64, ((c % m) as f64 + 0.5) / m as f64);
+            xi[c] = pi.point(s, t);
+            xj[c] = pj.point(s, t);
+        }
+        let (xi, xj) = (&xi[..cells], &xj[..cells]);
         let mut bits = [0u64; 4];
         let mut visible = 0;
-        for (r, a) in xi.iter().enumerate() {
-            for (s, b) in xj.iter().enumerate() {
-                let d = *b - *a;
-                let blocked = if candidates.len() <= BRUTE_FORCE_CANDIDATES {
-                    candidates
-                        .iter()
-                        .any(|&t| bvh::segment_hits(&self.bvh.triangles()[t], *a, d, 1e-9, 1.0 - 1e-9))
-                } else {
-                    self.bvh.occluded(*a, d, 1e-9, 1.0 - 1e-9, i as u32, j as u32)
-                };
-                if !blocked {
-                    let k = r * cells + s;
-                    bits[k / 64] |= 1 << (k % 64);
-                    visible += 1;
+        if candidates.len() <= BRUTE_FORCE_CANDIDATES {
+            let tris = CandidateTriangles::gather(&self.edges, candidates);
+            for (r, a) in xi.iter().enumerate() {
+                let from = tris.from(*a);
+                for (s, b) in xj.iter().enumerate() {
+                    if !tris.any_hit(&from, *b - *a, 1e-9, 1.0 - 1e-9) {
+                        let k = r * cells + s;
+                        bits[k / 64] |= 1 << (k % 64);
+                        visible += 1;
+                    }
+                }
+            }
+        } else {
+            for (r, a) in xi.iter().enumerate() {
+                for (s, b) in xj.iter().enumerate() {
+                    if !self.bvh.occluded(*a, *b - *a, 1e-9, 1.0 - 1e-9, i as u32, j as u32) {
+                        let k = r * cells + s;
+                        bits[k / 64] |= 1 << (k % 64);
+                        visible += 1;
+                    }
                 }
             }
         }
@@ -199,5 +227,134 @@ impl Occluders {
         } else {
             Visibility::Partial(Box::new(bits))
         }
+    }
+}
+
+thread_local! {
+    /// Candidate triangles of the link being cast on this thread (reused, no per-link allocation).
+    static CANDIDATES: std::cell::RefCell<Vec<usize>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Up to [`BRUTE_FORCE_CANDIDATES`] triangles by coordinate, for Moeller-Trumbore against many
+/// segments: the same operations as [`bvh::segment_hits`], each triangle's edges formed once and
+/// each origin's `s` and `q` once, all triangles of a segment tested in one branch-free loop.
+struct CandidateTriangles {
+    n: usize,
+    /// `v0`, `e1 = v1 - v0`, `e2 = v2 - v0`, by coordinate.
+    v0: [[f64; BRUTE_FORCE_CANDIDATES]; 3],
+    e1: [[f64; BRUTE_FORCE_CANDIDATES]; 3],
+    e2: [[f64; BRUTE_FORCE_CANDIDATES]; 3],
+}
+
+/// Per-origin terms: `s = o - v0` and `q = s x e1` per triangle.
+struct FromOrigin {
+    s: [[f64; BRUTE_FORCE_CANDIDATES]; 3],
+    q: [[f64; BRUTE_FORCE_CANDIDATES]; 3],
+}
+
+impl CandidateTriangles {
+    fn gather(edges: &[[DVec3; 3]], candidates: &[usize]) -> Self {
+        let zero = [[0.0; BRUTE_FORCE_CANDIDATES]; 3];
+        let mut out = Self { n: candidates.len(), v0: zero, e1: zero, e2: zero };
+        for (k, &t) in candidates.iter().enumerate() {
+            let [v0, e1, e2] = edges[t];
+            for c in 0..3 {
+                out.v0[c][k] = v0[c];
+                out.e1[c][k] = e1[c];
+                out.e2[c][k] = e2[c];
+            }
+        }
+        out
+    }
+
+    fn from(&self, o: DVec3) -> FromOrigin {
+        let zero = [[0.0; BRUTE_FORCE_CANDIDATES]; 3];
+        let mut f = FromOrigin { s: zero, q: zero };
+        let [e1x, e1y, e1z] = &self.e1;
+        for k in 0..self.n {
+            let (sx, sy, sz) = (o.x - self.v0[0][k], o.y - self.v0[1][k], o.z - self.v0[2][k]);
+            f.s[0][k] = sx;
+            f.s[1][k] = sy;
+            f.s[2][k] = sz;
+            // q = s x e1, as glam's cross.
+            f.q[0][k] = sy * e1z[k] - e1y[k] * sz;
+            f.q[1][k] = sz * e1x[k] - e1z[k] * sx;
+            f.q[2][k] = sx * e1y[k] - e1x[k] * sy;
+        }
+        f
+    }
+
+    /// True if the segment `o + t d`, `t in (t_min, t_max)`, hits one of the triangles
+    /// (`f = self.from(o)`): [`bvh::segment_hits`] for each, same operations, same decisions.
+    fn any_hit(&self, f: &FromOrigin, d: DVec3, t_min: f64, t_max: f64) -> bool {
+        let [e1x, e1y, e1z] = &self.e1;
+        let [e2x, e2y, e2z] = &self.e2;
+        let [sx, sy, sz] = &f.s;
+        let [qx, qy, qz] = &f.q;
+        let mut hits = 0u32;
+        for k in 0..self.n {
+            // p = d x e2; det = e1 . p
+            let px = d.y * e2z[k] - e2y[k] * d.z;
+            let py = d.z * e2x[k] - e2z[k] * d.x;
+            let pz = d.x * e2y[k] - e2x[k] * d.y;
+            let det = e1x[k] * px + e1y[k] * py + e1z[k] * pz;
+            let inv_det = 1.0 / det;
+            let u = (sx[k] * px + sy[k] * py + sz[k] * pz) * inv_det;
+            let v = (d.x * qx[k] + d.y * qy[k] + d.z * qz[k]) * inv_det;
+            let h = (e2x[k] * qx[k] + e2y[k] * qy[k] + e2z[k] * qz[k]) * inv_det;
+            // Non-short-circuit `&`, so the loop has no branches. (A NaN `det` fails on `u`.)
+            let hit = (det.abs() >= 1e-300)
+                & (0.0..=1.0).contains(&u)
+                & !(v < 0.0 || u + v > 1.0)
+                & (h > t_min)
+                & (h < t_max);
+            hits |= hit as u32;
+        }
+        hits != 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The batched Moeller-Trumbore gives the decisions of `segment_hits`, including segments
+    /// through vertices and along edges (coordinates on a coarse binary grid).
+    #[test]
+    fn batched_segment_tests_match_segment_hits() {
+        let f = |k: usize, a: f64| ((k as f64 * a).sin() * 43758.5453).fract().abs();
+        let grid = |k: usize, a: f64| (f(k, a) * 4.0).floor() * 0.25;
+        let (mut hits, mut misses) = (0, 0);
+        for round in 0..200 {
+            let tris: Vec<bvh::Triangle> = (0..BRUTE_FORCE_CANDIDATES)
+                .map(|t| {
+                    let k = round * 97 + t * 7;
+                    let z = grid(k, 0.7) - 0.5;
+                    let v = |o: usize| {
+                        DVec3::new(grid(k + o, 1.1), grid(k + o, 2.3), z + 0.25 * grid(k + o, 3.7))
+                    };
+                    bvh::Triangle { v: [v(0), v(1), v(2)], element: t as u32 }
+                })
+                .collect();
+            let edges: Vec<[DVec3; 3]> =
+                tris.iter().map(|t| [t.v[0], t.v[1] - t.v[0], t.v[2] - t.v[0]]).collect();
+            let n = 1 + round % BRUTE_FORCE_CANDIDATES;
+            let ids: Vec<usize> = (0..n).collect();
+            let batch = CandidateTriangles::gather(&edges, &ids);
+            for ray in 0..20 {
+                let k = round * 31 + ray;
+                let o = DVec3::new(grid(k, 5.1), grid(k, 6.3), -1.0);
+                let d = DVec3::new(grid(k, 8.1), grid(k, 9.3), 1.0) - o;
+                let want = tris[..n].iter().any(|t| bvh::segment_hits(t, o, d, 1e-9, 1.0 - 1e-9));
+                let got = batch.any_hit(&batch.from(o), d, 1e-9, 1.0 - 1e-9);
+                assert_eq!(got, want, "round {round} ray {ray}");
+                if want {
+                    hits += 1;
+                } else {
+                    misses += 1;
+                }
+            }
+        }
+        assert!(hits > 500 && misses > 500, "{hits} hits, {misses} misses");
     }
 }

@@ -6,17 +6,25 @@ use glam::DVec3;
 
 use crate::geometry::Aabb;
 
+/// At most one plane per pair of faces on different axes: 3 axis pairs x 2 x 2 sides.
+const MAX_PLANES: usize = 12;
+
 #[derive(Clone, Debug)]
 pub struct Shaft {
     pub bounds: Aabb,
-    /// Planes `n . p > d` is outside.
-    planes: Vec<(DVec3, f64)>,
+    /// Planes `n . p > d` is outside, the first `count` of them (no heap: one shaft per link).
+    planes: [(DVec3, f64); MAX_PLANES],
+    /// `|n|` per plane, for the box test.
+    abs_normals: [DVec3; MAX_PLANES],
+    count: usize,
 }
 
 impl Shaft {
     pub fn new(a: &Aabb, b: &Aabb) -> Self {
         let bounds = a.union(*b);
-        let mut planes = Vec::new();
+        let mut planes = [(DVec3::ZERO, 0.0); MAX_PLANES];
+        let mut abs_normals = [DVec3::ZERO; MAX_PLANES];
+        let mut count = 0;
         // side 0: min face, side 1: max face. For each pair of faces on different axes where A
         // alone defines one and B alone the other, a plane joins A's and B's edges there.
         for u in 0..3 {
@@ -53,12 +61,18 @@ impl Shaft {
                         let mut p = DVec3::ZERO;
                         p[u] = pa.0;
                         p[v] = pa.1;
-                        planes.push((n, n.dot(p)));
+                        planes[count] = (n, n.dot(p));
+                        abs_normals[count] = n.abs();
+                        count += 1;
                     }
                 }
             }
         }
-        Shaft { bounds, planes }
+        Shaft { bounds, planes, abs_normals, count }
+    }
+
+    fn planes(&self) -> &[(DVec3, f64)] {
+        &self.planes[..self.count]
     }
 
     /// False only if the triangle lies wholly outside the shaft (a conservative test).
@@ -75,7 +89,7 @@ impl Shaft {
                 return false;
             }
         }
-        !self.planes.iter().any(|(n, d)| v.iter().all(|p| n.dot(*p) > d + eps))
+        !self.planes().iter().any(|(n, d)| v.iter().all(|p| n.dot(*p) > d + eps))
     }
 
     /// False only if the box lies wholly outside the shaft: outside the union box, or wholly on
@@ -84,9 +98,16 @@ impl Shaft {
         if !b.overlaps(&self.bounds) {
             return false;
         }
+        self.may_contain_overlapping_box(b, eps)
+    }
+
+    /// [`Shaft::may_contain_box`] for a box already known to overlap [`Shaft::bounds`].
+    #[inline]
+    pub fn may_contain_overlapping_box(&self, b: &Aabb, eps: f64) -> bool {
         let c = b.centre();
         let h = b.diagonal() * 0.5;
-        !self.planes.iter().any(|(n, d)| n.dot(c) - n.abs().dot(h) > d + eps)
+        let (planes, abs) = (&self.planes[..self.count], &self.abs_normals[..self.count]);
+        !planes.iter().zip(abs).any(|((n, d), a)| n.dot(c) - a.dot(h) > d + eps)
     }
 }
 
