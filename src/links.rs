@@ -92,16 +92,6 @@ impl LinkStore {
         id
     }
 
-    /// Adds a pair whose blocks are already f32, `[G_ab | G_ba]` (`2 nb^2`).
-    pub fn push_f32(&mut self, a: ElementId, b: ElementId, coeffs: &[f32], visibility: Visibility) -> PairId {
-        debug_assert_eq!(coeffs.len(), 2 * self.nb * self.nb);
-        let id = self.pairs.len() as PairId;
-        self.pairs.push(Pair { a, b, visibility });
-        self.coeffs.extend_from_slice(coeffs);
-        self.link(a, b, id);
-        id
-    }
-
     fn link(&mut self, a: ElementId, b: ElementId, id: PairId) {
         self.adjacency[a as usize].push(id);
         self.adjacency[b as usize].push(id);
@@ -123,10 +113,38 @@ impl LinkStore {
         &self.coeffs[block as usize * n2..(block as usize + 1) * n2]
     }
 
-    /// Room for `pairs` more pairs.
-    pub fn reserve(&mut self, pairs: usize) {
+    /// Adds rows of pairs `(a, b_k)` with their f32 blocks `[G_ab | G_ba]` one pair after the other
+    /// (`2 nb^2` each), in row order then `b` order: as [`LinkStore::push`] one by one, with the
+    /// coefficients copied in parallel.
+    pub fn extend_rows(&mut self, rows: Vec<(ElementId, Vec<ElementId>, Vec<f32>, Vec<Visibility>)>) {
+        use rayon::prelude::*;
+        let block = 2 * self.nb * self.nb;
+        let total: usize = rows.iter().map(|r| r.2.len()).sum();
+        let start = self.coeffs.len();
+        if start == 0 {
+            // Zeroed by the allocator (untouched pages), filled by the threads below.
+            self.coeffs = vec![0.0f32; total];
+        } else {
+            self.coeffs.resize(start + total, 0.0);
+        }
+        let mut dest: Vec<&mut [f32]> = Vec::with_capacity(rows.len());
+        let mut rest = &mut self.coeffs[start..];
+        for r in &rows {
+            let (head, tail) = rest.split_at_mut(r.2.len());
+            dest.push(head);
+            rest = tail;
+        }
+        dest.into_par_iter().zip(&rows).for_each(|(d, r)| d.copy_from_slice(&r.2));
+        let pairs: usize = rows.iter().map(|r| r.1.len()).sum();
         self.pairs.reserve(pairs);
-        self.coeffs.reserve(pairs * 2 * self.nb * self.nb);
+        for (a, bs, coeffs, vis) in rows {
+            debug_assert_eq!(coeffs.len(), bs.len() * block);
+            for (b, v) in bs.into_iter().zip(vis) {
+                let id = self.pairs.len() as PairId;
+                self.pairs.push(Pair { a, b, visibility: v });
+                self.link(a, b, id);
+            }
+        }
     }
 
     /// Replaces a pair's coefficients and visibility.

@@ -202,12 +202,8 @@ pub fn assemble(
         return None;
     }
     let mut store = LinkStore::new(n, nb);
-    store.reserve(rows.iter().map(|r| r.sources.len()).sum());
-    for (i, row) in rows.into_iter().enumerate() {
-        let block = 2 * nb * nb;
-        for ((j, c), v) in row.sources.into_iter().zip(row.coeffs.chunks_exact(block)).zip(row.visibility) {
-            store.push_f32(i as u32, j, c, v);
-        }
-    }
+    store.extend_rows(
+        rows.into_iter().enumerate().map(|(i, r)| (i as u32, r.sources, r.coeffs, r.visibility)).collect(),
+    );
     Some(store)
 }
