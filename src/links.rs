@@ -17,6 +17,16 @@ pub struct Pair {
     pub visibility: Visibility,
 }
 
+/// Pairs `(a, b)` of one element `a`, for [`LinkStore::extend_rows`].
+#[derive(Clone, Debug, Default)]
+pub struct LinkRow {
+    pub a: ElementId,
+    pub sources: Vec<ElementId>,
+    /// `[G_ab | G_ba]` per source, f32, `2 nb^2` each.
+    pub coeffs: Vec<f32>,
+    pub visibility: Vec<Visibility>,
+}
+
 #[derive(Clone, Debug, Default)]
 pub struct LinkStore {
     nb: usize,
@@ -116,10 +126,10 @@ impl LinkStore {
     /// Adds rows of pairs `(a, b_k)` with their f32 blocks `[G_ab | G_ba]` one pair after the other
     /// (`2 nb^2` each), in row order then `b` order: as [`LinkStore::push`] one by one, with the
     /// coefficients copied in parallel.
-    pub fn extend_rows(&mut self, rows: Vec<(ElementId, Vec<ElementId>, Vec<f32>, Vec<Visibility>)>) {
+    pub fn extend_rows(&mut self, rows: Vec<LinkRow>) {
         use rayon::prelude::*;
         let block = 2 * self.nb * self.nb;
-        let total: usize = rows.iter().map(|r| r.2.len()).sum();
+        let total: usize = rows.iter().map(|r| r.coeffs.len()).sum();
         let start = self.coeffs.len();
         if start == 0 {
             // Zeroed by the allocator (untouched pages), filled by the threads below.
@@ -130,14 +140,14 @@ impl LinkStore {
         let mut dest: Vec<&mut [f32]> = Vec::with_capacity(rows.len());
         let mut rest = &mut self.coeffs[start..];
         for r in &rows {
-            let (head, tail) = rest.split_at_mut(r.2.len());
+            let (head, tail) = rest.split_at_mut(r.coeffs.len());
             dest.push(head);
             rest = tail;
         }
-        dest.into_par_iter().zip(&rows).for_each(|(d, r)| d.copy_from_slice(&r.2));
-        let pairs: usize = rows.iter().map(|r| r.1.len()).sum();
+        dest.into_par_iter().zip(&rows).for_each(|(d, r)| d.copy_from_slice(&r.coeffs));
+        let pairs: usize = rows.iter().map(|r| r.sources.len()).sum();
         self.pairs.reserve(pairs);
-        for (a, bs, coeffs, vis) in rows {
+        for LinkRow { a, sources: bs, coeffs, visibility: vis } in rows {
             debug_assert_eq!(coeffs.len(), bs.len() * block);
             for (b, v) in bs.into_iter().zip(vis) {
                 let id = self.pairs.len() as PairId;

@@ -8,7 +8,7 @@ use glam::DVec3;
 use super::pair::{FAR, MID, PairCoefficients, PairContext, integrate_pair, integrate_pair_into};
 use super::samples::Samples;
 use crate::geometry::{Patch, Rect};
-use crate::links::LinkStore;
+use crate::links::{LinkRow, LinkStore};
 use crate::quadrature::GaussLegendre;
 use crate::visibility::{Occluders, Visibility};
 
@@ -154,14 +154,6 @@ fn assemble_pair(
     (!zero).then_some(vis)
 }
 
-/// One receiver row of [`assemble`]: sources, `[G_ij | G_ji]` as f32, visibility.
-#[derive(Default)]
-struct Row {
-    sources: Vec<u32>,
-    coeffs: Vec<f32>,
-    visibility: Vec<Visibility>,
-}
-
 /// Builds the link store of all interacting pairs. `progress(done, total)` is called from worker
 /// threads now and then and returns false to cancel (then `None` is returned).
 pub fn assemble(
@@ -175,10 +167,10 @@ pub fn assemble(
     let done = std::sync::atomic::AtomicUsize::new(0);
     let cancelled = std::sync::atomic::AtomicBool::new(false);
     // One task per receiver row i, pairs (i, j > i); rows are uneven, rayon balances them.
-    let rows: Vec<Row> = (0..n)
+    let rows: Vec<LinkRow> = (0..n)
         .into_par_iter()
         .map(|i| {
-            let mut row = Row::default();
+            let mut row = LinkRow { a: i as u32, ..Default::default() };
             if cancelled.load(std::sync::atomic::Ordering::Relaxed) {
                 return row;
             }
@@ -202,8 +194,6 @@ pub fn assemble(
         return None;
     }
     let mut store = LinkStore::new(n, nb);
-    store.extend_rows(
-        rows.into_iter().enumerate().map(|(i, r)| (i as u32, r.sources, r.coeffs, r.visibility)).collect(),
-    );
+    store.extend_rows(rows);
     Some(store)
 }
