@@ -64,3 +64,25 @@ fn perpendicular_rectangles_sharing_an_edge_match_howell_c14() {
         assert!((w * l * f - h * l * back).abs() < 1e-3 * w * l * f);
     }
 }
+
+/// In a closed cube every patch's form factors sum to 1 (issue 2: within 0.1%), including the
+/// near-singular pairs that share an edge or a corner. Patches are squares, so `G_ij^00 = F_ij`.
+#[test]
+fn closed_cube_form_factors_sum_to_one() {
+    use galerkin_radiosity::scene::Settings;
+    use galerkin_radiosity::scenes;
+    use galerkin_radiosity::system::{System, no_progress};
+    for n in [1, 2, 4] {
+        let scene = scenes::closed_box(n, 0.5, 1.0, Settings { basis_order: 0, ..Settings::default() });
+        let sys = System::build(&scene, 1.0, &no_progress).unwrap();
+        let mut sums = vec![0.0f64; sys.elements.len()];
+        for p in 0..sys.links.len() as u32 {
+            let pair = sys.links.pair(p);
+            sums[pair.a as usize] += sys.links.block(p, pair.a)[0] as f64;
+            sums[pair.b as usize] += sys.links.block(p, pair.b)[0] as f64;
+        }
+        let worst = sums.iter().map(|s| (s - 1.0).abs()).fold(0.0, f64::max);
+        eprintln!("cube {n}x{n} per face: worst |sum F - 1| = {worst:.1e}");
+        assert!(worst < 1e-3, "{n}: {worst}");
+    }
+}
