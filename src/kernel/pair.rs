@@ -214,8 +214,8 @@ fn split(
     }
 }
 
-/// Sample counts up to this use stack buffers in [`gauss_leaf`].
-const STACK_SAMPLES: usize = 64;
+/// Products `na x nbp` up to this use a stack buffer for `M` in [`gauss_leaf`].
+const STACK_PRODUCT: usize = 256;
 
 /// Tensor Gauss over both sub-domains, as two small matrix products per direction:
 /// `G_ij += Phi_i^T diag(w_i) M diag(wA_j) Phi_j` and `G_ji += Phi_j^T diag(w_j) M^T diag(wA_i) Phi_i`
@@ -229,25 +229,55 @@ fn gauss_leaf(
     ji: &mut [f64],
 ) {
     let cells = ctx.vis_axis * ctx.vis_axis;
+    let (na, nbp) = (si.len(), sj.len());
+    let mut stack = [0.0f64; STACK_PRODUCT];
+    let mut heap = Vec::new();
+    let m = if na * nbp <= STACK_PRODUCT {
+        &mut stack[..na * nbp]
+    } else {
+        heap.resize(na * nbp, 0.0);
+        &mut heap[..]
+    };
+    kernel_matrix(si, sj, vis, cells, m);
     match ctx.basis.len() {
-        1 => gauss_leaf_nb::<1>(si, sj, vis, cells, ij, ji),
-        4 => gauss_leaf_nb::<4>(si, sj, vis, cells, ij, ji),
-        9 => gauss_leaf_nb::<9>(si, sj, vis, cells, ij, ji),
-        16 => gauss_leaf_nb::<16>(si, sj, vis, cells, ij, ji),
+        1 => project::<1>(si, sj, m, ij, ji),
+        4 => project::<4>(si, sj, m, ij, ji),
+        9 => project::<9>(si, sj, m, ij, ji),
+        16 => project::<16>(si, sj, m, ij, ji),
         nb => unreachable!("{nb} basis functions"),
     }
 }
 
-/// [`gauss_leaf`] with `NB` basis functions: row `a` of `M` at a time,
-/// `T1 = M diag(wA_j) Phi_j` (one row, used at once) and `T2 = M^T diag(wA_i) Phi_i` (accumulated).
-fn gauss_leaf_nb<const NB: usize>(
-    si: &Samples,
-    sj: &Samples,
-    vis: &Visibility,
-    cells: usize,
-    ij: &mut [f64],
-    ji: &mut [f64],
-) {
+/// `M_ab = g(x_a, y_b) VIS_ab`, row-major `na x nbp`: the point kernel (`point::point_kernel`, the
+/// same operations) over structure-of-arrays samples, so the loop vectorises.
+fn kernel_matrix(si: &Samples, sj: &Samples, vis: &Visibility, cells: usize, m: &mut [f64]) {
+    let nbp = sj.len();
+    let [yx, yy, yz] = &sj.position_soa;
+    let [mx, my, mz] = &sj.normal_soa;
+    let (yx, yy, yz, mx, my, mz) = (&yx[..nbp], &yy[..nbp], &yz[..nbp], &mx[..nbp], &my[..nbp], &mz[..nbp]);
+    for (a, row) in m.chunks_exact_mut(nbp).enumerate() {
+        let x = si.position[a];
+        let nx = si.normal[a];
+        for b in 0..nbp {
+            let (dx, dy, dz) = (yx[b] - x.x, yy[b] - x.y, yz[b] - x.z);
+            let cx = nx.x * dx + nx.y * dy + nx.z * dz;
+            let cy = -(mx[b] * dx + my[b] * dy + mz[b] * dz);
+            let r2 = dx * dx + dy * dy + dz * dz;
+            let g = cx * cy / (std::f64::consts::PI * r2 * r2);
+            row[b] = if cx <= 0.0 || cy <= 0.0 { 0.0 } else { g };
+        }
+        if let Visibility::Partial(_) | Visibility::Blocked = vis {
+            let ca = si.cell[a];
+            for b in 0..nbp {
+                row[b] *= vis.at(ca, sj.cell[b], cells);
+            }
+        }
+    }
+}
+
+/// `G_ij += P_i^T (M Q_j)` and `G_ji += P_j^T (M^T Q_i)` with `P = diag(w) Phi`, `Q = diag(wA) Phi`,
+/// one row of `M Q_j` (one column of `M^T Q_i`) at a time, in registers.
+fn project<const NB: usize>(si: &Samples, sj: &Samples, m: &[f64], ij: &mut [f64], ji: &mut [f64]) {
     let (na, nbp) = (si.len(), sj.len());
     let (pi_w, _) = si.weighted_basis.as_chunks::<NB>();
     let (qi, _) = si.area_weighted_basis.as_chunks::<NB>();
@@ -255,70 +285,34 @@ fn gauss_leaf_nb<const NB: usize>(
     let (qj, _) = sj.area_weighted_basis.as_chunks::<NB>();
     let (ij, _) = ij.as_chunks_mut::<NB>();
     let (ji, _) = ji.as_chunks_mut::<NB>();
-    let mut t2_stack = [[0.0f64; NB]; STACK_SAMPLES];
-    let mut m_stack = [0.0f64; STACK_SAMPLES];
-    let (mut t2_heap, mut m_heap);
-    let (t2, m): (&mut [[f64; NB]], &mut [f64]) = if nbp <= STACK_SAMPLES {
-        (&mut t2_stack[..nbp], &mut m_stack[..nbp])
-    } else {
-        t2_heap = vec![[0.0f64; NB]; nbp];
-        m_heap = vec![0.0f64; nbp];
-        (&mut t2_heap, &mut m_heap)
-    };
-    let [yx, yy, yz] = &sj.position_soa;
-    let [mx, my, mz] = &sj.normal_soa;
-    let (yx, yy, yz, mx, my, mz) = (&yx[..nbp], &yy[..nbp], &yz[..nbp], &mx[..nbp], &my[..nbp], &mz[..nbp]);
-    for a in 0..na {
-        let x = si.position[a];
-        let nx = si.normal[a];
-        // Row a of M: the point kernel (point::point_kernel, same operations), then visibility.
-        for b in 0..nbp {
-            let (dx, dy, dz) = (yx[b] - x.x, yy[b] - x.y, yz[b] - x.z);
-            let cx = nx.x * dx + nx.y * dy + nx.z * dz;
-            let cy = -(mx[b] * dx + my[b] * dy + mz[b] * dz);
-            let r2 = dx * dx + dy * dy + dz * dz;
-            let g = cx * cy / (std::f64::consts::PI * r2 * r2);
-            m[b] = if cx <= 0.0 || cy <= 0.0 { 0.0 } else { g };
-        }
-        if let Visibility::Partial(_) | Visibility::Blocked = vis {
-            let ca = si.cell[a];
-            for b in 0..nbp {
-                m[b] *= vis.at(ca, sj.cell[b], cells);
-            }
-        }
-        let qa = &qi[a];
-        let mut t1 = [0.0f64; NB];
-        for b in 0..nbp {
-            let g = m[b];
-            if g == 0.0 {
-                continue;
-            }
-            let qb = &qj[b];
+    let (qi, qj, pi_w, pj_w) = (&qi[..na], &qj[..nbp], &pi_w[..na], &pj_w[..nbp]);
+    for (a, row) in m.chunks_exact(nbp).enumerate() {
+        let mut t = [0.0f64; NB];
+        for (g, qb) in row.iter().zip(qj) {
             for l in 0..NB {
-                t1[l] += g * qb[l];
-            }
-            let row2 = &mut t2[b];
-            for k in 0..NB {
-                row2[k] += g * qa[k];
+                t[l] += g * qb[l];
             }
         }
         let pa = &pi_w[a];
         for k in 0..NB {
             let f = pa[k];
-            let row = &mut ij[k];
             for l in 0..NB {
-                row[l] += f * t1[l];
+                ij[k][l] += f * t[l];
             }
         }
     }
     for b in 0..nbp {
+        let mut t = [0.0f64; NB];
+        for (g, qa) in m[b..].iter().step_by(nbp).zip(qi) {
+            for k in 0..NB {
+                t[k] += g * qa[k];
+            }
+        }
         let pb = &pj_w[b];
-        let row2 = &t2[b];
         for l in 0..NB {
             let f = pb[l];
-            let row = &mut ji[l];
             for k in 0..NB {
-                row[k] += f * row2[k];
+                ji[l][k] += f * t[k];
             }
         }
     }
