@@ -99,8 +99,9 @@ pub struct Occluders {
     bvh: Bvh,
     /// Per BVH triangle: `v0`, `v1 - v0`, `v2 - v0` (the edges [`bvh::segment_hits`] forms).
     edges: Vec<[DVec3; 3]>,
-    /// Per element: unit normal and offset of its plane, `None` when the element is not planar.
-    planes: Vec<Option<(DVec3, f64)>>,
+    /// Per element: its plane when some occluder triangle lies wholly behind it (the only case
+    /// in which the plane test in [`Occluders::link_visibility`] drops anything).
+    culling_planes: Vec<Option<(DVec3, f64)>>,
     /// Scene size, for tolerances.
     scale: f64,
     samples_per_axis: usize,
@@ -131,7 +132,16 @@ impl Occluders {
         }
         let bvh = Bvh::build(tris);
         let edges = bvh.triangles().iter().map(|t| [t.v[0], t.v[1] - t.v[0], t.v[2] - t.v[0]]).collect();
-        Occluders { bvh, edges, planes, scale, samples_per_axis }
+        let eps = 1e-9 * scale;
+        let culling_planes = {
+            use rayon::prelude::*;
+            let tris = bvh.triangles();
+            planes
+                .par_iter()
+                .map(|p| p.filter(|(n, d)| tris.iter().any(|t| t.v.iter().all(|v| n.dot(*v) - d <= eps))))
+                .collect()
+        };
+        Occluders { bvh, edges, culling_planes, scale, samples_per_axis }
     }
 
     /// Triangles that can occlude anything (elements on the scene's hull are left out).
@@ -147,7 +157,7 @@ impl Occluders {
     pub fn link_visibility(&self, i: usize, pi: &Patch, j: usize, pj: &Patch) -> Visibility {
         let shaft = Shaft::new(&pi.bounds(), &pj.bounds());
         let eps = 1e-9 * self.scale;
-        let planes = [self.planes[i], self.planes[j]];
+        let planes = [self.culling_planes[i], self.culling_planes[j]];
         // A box wholly behind one of the two planes holds only triangles the plane test below
         // drops (half of eps covers the rounding of the box form), so the traversal skips it.
         let behind = |b: &crate::geometry::Aabb| {
@@ -179,12 +189,24 @@ impl Occluders {
             if candidates.is_empty() {
                 return Visibility::Full;
             }
-            self.cast(i, pi, j, pj, candidates)
+            // Without plane culling the candidates are every triangle the shaft may hold, so
+            // testing them all gives what the BVH's any-hit gives, however many there are.
+            let complete = planes == [None, None];
+            self.cast(i, pi, j, pj, candidates, complete)
         })
     }
 
-    /// The rays of a link whose shaft holds `candidates`.
-    fn cast(&self, i: usize, pi: &Patch, j: usize, pj: &Patch, candidates: &[usize]) -> Visibility {
+    /// The rays of a link whose shaft holds `candidates`; `complete` when they are all the
+    /// triangles (other than the link's own) that the shaft may hold.
+    fn cast(
+        &self,
+        i: usize,
+        pi: &Patch,
+        j: usize,
+        pj: &Patch,
+        candidates: &[usize],
+        complete: bool,
+    ) -> Visibility {
         let m = self.samples_per_axis;
         let cells = m * m;
         let mut xi = [DVec3::ZERO; 16];
@@ -197,17 +219,24 @@ impl Occluders {
         let (xi, xj) = (&xi[..cells], &xj[..cells]);
         let mut bits = [0u64; 4];
         let mut visible = 0;
-        if candidates.len() <= BRUTE_FORCE_CANDIDATES {
-            let tris = CandidateTriangles::gather(&self.edges, candidates);
-            for (r, a) in xi.iter().enumerate() {
-                let from = tris.from(*a);
-                for (s, b) in xj.iter().enumerate() {
-                    if !tris.any_hit(&from, *b - *a, 1e-9, 1.0 - 1e-9) {
+        if candidates.len() <= BRUTE_FORCE_CANDIDATES || complete {
+            // Batches of candidates; a ray blocked by one batch is not tested against the next.
+            let mut blocked = [false; 256];
+            for batch in candidates.chunks(BRUTE_FORCE_CANDIDATES) {
+                let tris = CandidateTriangles::gather(&self.edges, batch);
+                for (r, a) in xi.iter().enumerate() {
+                    let from = tris.from(*a);
+                    for (s, b) in xj.iter().enumerate() {
                         let k = r * cells + s;
-                        bits[k / 64] |= 1 << (k % 64);
-                        visible += 1;
+                        if !blocked[k] && tris.any_hit(&from, *b - *a, 1e-9, 1.0 - 1e-9) {
+                            blocked[k] = true;
+                        }
                     }
                 }
+            }
+            for (k, _) in blocked[..cells * cells].iter().enumerate().filter(|(_, b)| !**b) {
+                bits[k / 64] |= 1 << (k % 64);
+                visible += 1;
             }
         } else {
             for (r, a) in xi.iter().enumerate() {
@@ -356,5 +385,50 @@ mod tests {
             }
         }
         assert!(hits > 500 && misses > 500, "{hits} hits, {misses} misses");
+    }
+
+    /// Links whose planes cull nothing take their visibility from the shaft's candidates alone,
+    /// however many there are: the same masks as any-hit rays through the whole BVH (on facing
+    /// pairs; a ray lying in a box face is missed by the BVH's slab test, not by the candidates).
+    #[test]
+    fn shaft_candidates_give_the_bvh_any_hit_masks() {
+        let scene = crate::scenes::cornell_box(5, crate::scene::Settings::default());
+        let elements = crate::system::build_elements(&scene, 1.0, crate::basis::Basis::new(0));
+        let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
+        let occ = Occluders::new(&patches, 2);
+        let (m, cells) = (2, 4);
+        let (mut partial, mut blocked) = (0, 0);
+        for i in 0..patches.len() {
+            for j in (i + 1)..patches.len() {
+                let facing = crate::kernel::assemble::may_face(&patches[i], &patches[j])
+                    && crate::kernel::assemble::may_face(&patches[j], &patches[i]);
+                if !facing || occ.culling_planes[i].is_some() || occ.culling_planes[j].is_some() {
+                    continue;
+                }
+                let point =
+                    |p: &Patch, c: usize| p.point(((c / m) as f64 + 0.5) / 2.0, ((c % m) as f64 + 0.5) / 2.0);
+                let mut bits = [0u64; 4];
+                let mut visible = 0;
+                for r in 0..cells {
+                    for s in 0..cells {
+                        let (a, b) = (point(&patches[i], r), point(&patches[j], s));
+                        if !occ.bvh.occluded(a, b - a, 1e-9, 1.0 - 1e-9, i as u32, j as u32) {
+                            let k = r * cells + s;
+                            bits[k / 64] |= 1 << (k % 64);
+                            visible += 1;
+                        }
+                    }
+                }
+                let want = match visible {
+                    16 => Visibility::Full,
+                    0 => Visibility::Blocked,
+                    _ => Visibility::Partial(Box::new(bits)),
+                };
+                partial += matches!(want, Visibility::Partial(_)) as usize;
+                blocked += (want == Visibility::Blocked) as usize;
+                assert_eq!(occ.link_visibility(i, &patches[i], j, &patches[j]), want, "pair {i} {j}");
+            }
+        }
+        assert!(partial > 100 && blocked > 100, "{partial} partial, {blocked} blocked");
     }
 }
