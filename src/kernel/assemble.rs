@@ -123,36 +123,32 @@ pub fn integrate_visible(
     (!c.is_zero()).then_some(c)
 }
 
-/// One pair for [`assemble`]: its visibility, with both blocks written to `ij` and `ji` (zeroed
-/// here), or `None` when it exchanges nothing. The same decisions as [`compute_pair`].
+/// One pair for [`assemble`] whose visibility is known: both blocks written to `ij` and `ji`
+/// (zeroed here), or false when it exchanges nothing. The same decisions as [`compute_pair`].
 fn assemble_pair(
     ctx: &PairContext,
     geom: &ElementGeometry,
-    occluders: Option<&Occluders>,
     i: usize,
     j: usize,
+    vis: &Visibility,
     ij: &mut [f64],
     ji: &mut [f64],
-) -> Option<Visibility> {
-    if !geom.face_each_other(i, j) {
-        return None;
-    }
-    let (pi, pj) = (&geom.patches[i], &geom.patches[j]);
-    let vis = match occluders {
-        Some(o) => o.link_visibility(i, pi, j, pj),
-        None => Visibility::Full,
-    };
-    if vis == Visibility::Blocked {
-        return None;
+) -> bool {
+    if *vis == Visibility::Blocked {
+        return false;
     }
     ij.fill(0.0);
     ji.fill(0.0);
+    let (pi, pj) = (&geom.patches[i], &geom.patches[j]);
     let spheres = (geom.info[i].sphere, geom.info[j].sphere);
     let whole = |second: bool, n| geom.samples(if second { j } else { i }, n);
-    integrate_pair_into(ctx, pi, pj, spheres, whole, &vis, ij, ji);
-    let zero = ij.iter().chain(ji.iter()).all(|&x| x == 0.0);
-    (!zero).then_some(vis)
+    integrate_pair_into(ctx, pi, pj, spheres, whole, vis, ij, ji);
+    !ij.iter().chain(ji.iter()).all(|&x| x == 0.0)
 }
+
+/// Sources per shared visibility traversal ([`Occluders::group_visibility`]): consecutive
+/// elements, most often a strip of one face's grid.
+const VISIBILITY_GROUP: usize = 8;
 
 /// Builds the link store of all interacting pairs. `progress(done, total)` is called from worker
 /// threads now and then and returns false to cancel (then `None` is returned).
@@ -176,11 +172,24 @@ pub fn assemble(
             }
             let (mut ij, mut ji) = ([0.0f64; 256], [0.0f64; 256]);
             let (ij, ji) = (&mut ij[..nb * nb], &mut ji[..nb * nb]);
-            for j in (i + 1)..n {
-                if let Some(v) = assemble_pair(ctx, geom, occluders, i, j, ij, ji) {
-                    row.sources.push(j as u32);
-                    row.coeffs.extend(ij.iter().chain(ji.iter()).map(|&x| x as f32));
-                    row.visibility.push(v);
+            let pi = &geom.patches[i];
+            let mut group: Vec<(usize, &Patch)> = Vec::with_capacity(VISIBILITY_GROUP);
+            let mut vis: Vec<Visibility> = Vec::with_capacity(VISIBILITY_GROUP);
+            for start in ((i + 1)..n).step_by(VISIBILITY_GROUP) {
+                group.clear();
+                vis.clear();
+                let facing = (start..n.min(start + VISIBILITY_GROUP)).filter(|&j| geom.face_each_other(i, j));
+                group.extend(facing.map(|j| (j, &geom.patches[j])));
+                match occluders {
+                    Some(o) => o.group_visibility(i, pi, &group, &mut vis),
+                    None => vis.extend(group.iter().map(|_| Visibility::Full)),
+                }
+                for (&(j, _), v) in group.iter().zip(vis.drain(..)) {
+                    if assemble_pair(ctx, geom, i, j, &v, ij, ji) {
+                        row.sources.push(j as u32);
+                        row.coeffs.extend(ij.iter().chain(ji.iter()).map(|&x| x as f32));
+                        row.visibility.push(v);
+                    }
                 }
             }
             let d = done.fetch_add(n - 1 - i, std::sync::atomic::Ordering::Relaxed) + n - 1 - i;

@@ -77,6 +77,11 @@ impl Bvh {
         &self.triangles
     }
 
+    /// Bounds of each triangle, in [`Bvh::triangles`] order.
+    pub fn triangle_bounds(&self) -> &[Aabb] {
+        &self.bounds
+    }
+
     /// Calls `f` with the index of every triangle whose bounds overlap `query`.
     pub fn for_each_overlapping(&self, query: &Aabb, f: impl FnMut(usize)) {
         self.for_each_accepted(|b| b.overlaps(query), f);

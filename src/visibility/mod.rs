@@ -196,6 +196,60 @@ impl Occluders {
         })
     }
 
+    /// [`Occluders::link_visibility`] of the links `(i, j)` for every `(j, pj)` of `js`, appended to
+    /// `out` in order. Sources near each other (a strip of a wall) share one traversal: the
+    /// triangles the shaft from `i` to all of them may hold are a superset of each link's, and
+    /// for links without plane culling any superset of the candidates gives the same rays' verdicts
+    /// (a triangle a ray hits lies in every conservative shaft of the link).
+    pub fn group_visibility(&self, i: usize, pi: &Patch, js: &[(usize, &Patch)], out: &mut Vec<Visibility>) {
+        if js.len() < 2 || self.culling_planes[i].is_some() {
+            out.extend(js.iter().map(|&(j, pj)| self.link_visibility(i, pi, j, pj)));
+            return;
+        }
+        let bi = pi.bounds();
+        let union = js.iter().fold(crate::geometry::Aabb::EMPTY, |b, (_, p)| b.union(p.bounds()));
+        let group = Shaft::new(&bi, &union);
+        let eps = 1e-9 * self.scale;
+        let (tris, bounds) = (self.bvh.triangles(), self.bvh.triangle_bounds());
+        GROUP.with_borrow_mut(|list| {
+            list.clear();
+            let in_group = |b: &crate::geometry::Aabb| {
+                b.overlaps(&group.bounds) && group.may_contain_overlapping_box(b, eps)
+            };
+            self.bvh.for_each_accepted(in_group, |t| {
+                if tris[t].element as usize != i && group.may_contain_triangle(&tris[t].v, eps) {
+                    list.push(t);
+                }
+            });
+            for &(j, pj) in js {
+                if self.culling_planes[j].is_some() {
+                    out.push(self.link_visibility(i, pi, j, pj));
+                    continue;
+                }
+                if list.is_empty() {
+                    out.push(Visibility::Full);
+                    continue;
+                }
+                let shaft = Shaft::new(&bi, &pj.bounds());
+                out.push(CANDIDATES.with_borrow_mut(|candidates| {
+                    candidates.clear();
+                    candidates.extend(list.iter().copied().filter(|&t| {
+                        let b = &bounds[t];
+                        tris[t].element as usize != j
+                            && b.overlaps(&shaft.bounds)
+                            && shaft.may_contain_overlapping_box(b, eps)
+                            && shaft.may_contain_triangle(&tris[t].v, eps)
+                    }));
+                    if candidates.is_empty() {
+                        Visibility::Full
+                    } else {
+                        self.cast(i, pi, j, pj, candidates, true)
+                    }
+                }));
+            }
+        });
+    }
+
     /// The rays of a link whose shaft holds `candidates`; `complete` when they are all the
     /// triangles (other than the link's own) that the shaft may hold.
     fn cast(
@@ -262,6 +316,8 @@ impl Occluders {
 thread_local! {
     /// Candidate triangles of the link being cast on this thread (reused, no per-link allocation).
     static CANDIDATES: std::cell::RefCell<Vec<usize>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// Candidate triangles of a group of links ([`Occluders::group_visibility`]).
+    static GROUP: std::cell::RefCell<Vec<usize>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// Up to [`BRUTE_FORCE_CANDIDATES`] triangles by coordinate, for Moeller-Trumbore against many
@@ -430,5 +486,33 @@ mod tests {
             }
         }
         assert!(partial > 100 && blocked > 100, "{partial} partial, {blocked} blocked");
+    }
+
+    /// A group of sources gives each link the visibility it has alone.
+    #[test]
+    fn group_visibility_is_link_visibility() {
+        let scene = crate::scenes::cornell_box(5, crate::scene::Settings::default());
+        let elements = crate::system::build_elements(&scene, 1.0, crate::basis::Basis::new(0));
+        let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
+        let occ = Occluders::new(&patches, 2);
+        let mut partial = 0;
+        for i in 0..patches.len() {
+            for start in ((i + 1)..patches.len()).step_by(7) {
+                let js: Vec<(usize, &Patch)> = (start..patches.len().min(start + 7))
+                    .filter(|&j| {
+                        crate::kernel::assemble::may_face(&patches[i], &patches[j])
+                            && crate::kernel::assemble::may_face(&patches[j], &patches[i])
+                    })
+                    .map(|j| (j, &patches[j]))
+                    .collect();
+                let mut got = Vec::new();
+                occ.group_visibility(i, &patches[i], &js, &mut got);
+                for (&(j, pj), v) in js.iter().zip(&got) {
+                    assert_eq!(*v, occ.link_visibility(i, &patches[i], j, pj), "pair {i} {j}");
+                    partial += matches!(v, Visibility::Partial(_)) as usize;
+                }
+            }
+        }
+        assert!(partial > 100, "{partial} partial");
     }
 }
