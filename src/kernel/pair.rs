@@ -228,6 +228,60 @@ fn gauss_leaf(
     ij: &mut [f64],
     ji: &mut [f64],
 ) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F (checked above).
+            unsafe { gauss_leaf_avx512(ctx, si, sj, vis, ij, ji) };
+            return;
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked above).
+            unsafe { gauss_leaf_avx2(ctx, si, sj, vis, ij, ji) };
+            return;
+        }
+    }
+    gauss_leaf_body(ctx, si, sj, vis, ij, ji);
+}
+
+/// [`gauss_leaf`] compiled for AVX-512: 8 lanes instead of 2 for the vectorised loops. The same
+/// operations (no fused multiply-add), so the same results.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f")]
+fn gauss_leaf_avx512(
+    ctx: &PairContext,
+    si: &Samples,
+    sj: &Samples,
+    vis: &Visibility,
+    ij: &mut [f64],
+    ji: &mut [f64],
+) {
+    gauss_leaf_body(ctx, si, sj, vis, ij, ji);
+}
+
+/// [`gauss_leaf`] compiled for AVX2 (4 lanes), same operations.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn gauss_leaf_avx2(
+    ctx: &PairContext,
+    si: &Samples,
+    sj: &Samples,
+    vis: &Visibility,
+    ij: &mut [f64],
+    ji: &mut [f64],
+) {
+    gauss_leaf_body(ctx, si, sj, vis, ij, ji);
+}
+
+#[inline(always)]
+fn gauss_leaf_body(
+    ctx: &PairContext,
+    si: &Samples,
+    sj: &Samples,
+    vis: &Visibility,
+    ij: &mut [f64],
+    ji: &mut [f64],
+) {
     let cells = ctx.vis_axis * ctx.vis_axis;
     let (na, nbp) = (si.len(), sj.len());
     let mut stack = [0.0f64; STACK_PRODUCT];
@@ -250,6 +304,7 @@ fn gauss_leaf(
 
 /// `M_ab = g(x_a, y_b) VIS_ab`, row-major `na x nbp`: the point kernel (`point::point_kernel`, the
 /// same operations) over structure-of-arrays samples, so the loop vectorises.
+#[inline(always)]
 fn kernel_matrix(si: &Samples, sj: &Samples, vis: &Visibility, cells: usize, m: &mut [f64]) {
     let nbp = sj.len();
     let [yx, yy, yz] = &sj.position_soa;
@@ -277,6 +332,7 @@ fn kernel_matrix(si: &Samples, sj: &Samples, vis: &Visibility, cells: usize, m: 
 
 /// `G_ij += P_i^T (M Q_j)` and `G_ji += P_j^T (M^T Q_i)` with `P = diag(w) Phi`, `Q = diag(wA) Phi`,
 /// one row of `M Q_j` (one column of `M^T Q_i`) at a time, in registers.
+#[inline(always)]
 fn project<const NB: usize>(si: &Samples, sj: &Samples, m: &[f64], ij: &mut [f64], ji: &mut [f64]) {
     let (na, nbp) = (si.len(), sj.len());
     let (pi_w, _) = si.weighted_basis.as_chunks::<NB>();
