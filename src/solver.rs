@@ -130,6 +130,59 @@ fn shoot_one(
     nb: usize,
     out: &mut [[f64; 3]],
 ) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F (checked above).
+            unsafe { shoot_one_avx512(links, reflectance, j, u, nb, out) };
+            return;
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked above).
+            unsafe { shoot_one_avx2(links, reflectance, j, u, nb, out) };
+            return;
+        }
+    }
+    shoot_one_body(links, reflectance, j, u, nb, out);
+}
+
+/// [`shoot_one`] compiled for AVX-512 (wider conversions and products), same operations.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f")]
+fn shoot_one_avx512(
+    links: &LinkStore,
+    reflectance: &[[f64; 3]],
+    j: ElementId,
+    u: &[[f64; 3]],
+    nb: usize,
+    out: &mut [[f64; 3]],
+) {
+    shoot_one_body(links, reflectance, j, u, nb, out);
+}
+
+/// [`shoot_one`] compiled for AVX2, same operations.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn shoot_one_avx2(
+    links: &LinkStore,
+    reflectance: &[[f64; 3]],
+    j: ElementId,
+    u: &[[f64; 3]],
+    nb: usize,
+    out: &mut [[f64; 3]],
+) {
+    shoot_one_body(links, reflectance, j, u, nb, out);
+}
+
+#[inline(always)]
+fn shoot_one_body(
+    links: &LinkStore,
+    reflectance: &[[f64; 3]],
+    j: ElementId,
+    u: &[[f64; 3]],
+    nb: usize,
+    out: &mut [[f64; 3]],
+) {
     match nb {
         1 => shoot_one_nb::<1>(links, reflectance, j, u, out),
         4 => shoot_one_nb::<4>(links, reflectance, j, u, out),
@@ -142,7 +195,7 @@ fn shoot_one(
 /// Blocks this many receivers ahead are prefetched: they are scattered over the whole store.
 const PREFETCH_AHEAD: usize = 4;
 
-#[inline]
+#[inline(always)]
 fn prefetch(block: &[f32]) {
     #[cfg(target_arch = "x86_64")]
     for line in block.chunks(16) {
@@ -156,6 +209,7 @@ fn prefetch(block: &[f32]) {
 }
 
 /// [`shoot_one`] with `NB` basis functions; the same operations in the same order.
+#[inline(always)]
 fn shoot_one_nb<const NB: usize>(
     links: &LinkStore,
     reflectance: &[[f64; 3]],
@@ -174,17 +228,21 @@ fn shoot_one_nb<const NB: usize>(
         let i = n.receiver as usize;
         let rho = reflectance[i];
         let o = &mut out[i];
-        for k in 0..NB {
-            let row = &g[k];
-            let mut acc = [0.0; 3];
-            for l in 0..NB {
-                let gkl = row[l] as f64;
-                acc[0] += gkl * u[l][0];
-                acc[1] += gkl * u[l][1];
-                acc[2] += gkl * u[l][2];
-            }
+        // acc[c][k] = sum_l G[k][l] u[l][c], l ascending as a dot product would; vectorised
+        // over k (one column of G at a time).
+        let mut acc = [[0.0f64; NB]; 3];
+        for l in 0..NB {
+            let col: [f64; NB] = std::array::from_fn(|k| g[k][l] as f64);
             for c in 0..3 {
-                o[k][c] += rho[c] * acc[c];
+                let ul = u[l][c];
+                for k in 0..NB {
+                    acc[c][k] += col[k] * ul;
+                }
+            }
+        }
+        for k in 0..NB {
+            for c in 0..3 {
+                o[k][c] += rho[c] * acc[c][k];
             }
         }
     }
