@@ -37,7 +37,7 @@ fn run(scene: &Scene, method: Method) -> Run {
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let settings = Settings { basis_order: 2, ..Settings::default() };
-    let frames = if quick { 4 } else { 12 };
+    let frames = if quick { 4 } else { 48 };
     let cases: Vec<(&str, Scene, &str)> = vec![
         ("Fig. 5a room", scenes::seed_room(if quick { 2.0 } else { 3.0 }, frames, settings.clone()), "65%"),
         (

@@ -256,9 +256,12 @@ pub fn advance(
                             }
                         }
                         // Exact (eq. 6), re-expanded along this frame's motion when the series applies.
+                        // Expanding costs about SERIES_ORDER + 1 quadratures: only worth it when the
+                        // pair stays within the bound for a few frames at this frame's speed.
                         let r_min = (state.use_series && both_translated && vis != Visibility::Blocked)
                             .then(|| series::eligible(&patches[iu], &patches[ju]))
-                            .flatten();
+                            .flatten()
+                            .filter(|r| SERIES_MAX_T * r >= MIN_SERIES_FRAMES * motion.length());
                         match r_min {
                             Some(r_min) => {
                                 let (ci, ri) = patches[iu].bounding_sphere();
@@ -429,6 +432,11 @@ fn series_check(
 }
 
 const _: () = assert!(SERIES_ORDER >= 2);
+
+/// A pair is expanded only if, at the current speed, the series would serve at least this many
+/// frames before `p` reaches `SERIES_MAX_T r_min` (measured: below 3, re-expansions cost more
+/// than the quadratures they save; benches/animation.rs).
+const MIN_SERIES_FRAMES: f64 = 3.0;
 
 /// `delta_b_r += rho_r (G_new - G_old) b_s` for receiver `r`, source `s`.
 fn add_delta(delta_b: &mut [[f64; 3]], sys: &System, r: usize, s: usize, new: &[f64], old: &[f64]) {

@@ -62,8 +62,8 @@ fn translation_keys(points: &[(f64, DVec3)]) -> Vec<Key> {
 fn moving_ceiling_light_matches_full() {
     let mut scene = scenes::cornell_box(4, settings());
     let light = scene.objects.iter_mut().find(|o| o.name == "Light").unwrap();
-    light.animation = translation_keys(&[(1.0, DVec3::ZERO), (4.0, DVec3::new(-0.15, 0.0, 0.1))]);
-    scene.frames = (1, 4);
+    light.animation = translation_keys(&[(1.0, DVec3::ZERO), (6.0, DVec3::new(-0.03, 0.0, 0.02))]);
+    scene.frames = (1, 6);
     let series = assert_matches_full(&scene, "ceiling light");
     assert!(series > 0, "a straight translation of the light uses the series");
 }
