@@ -6,12 +6,11 @@ and a contact sheet of a few frames rendered from the baked colours.
 """
 
 import argparse
-import subprocess
 import sys
 import time
 from pathlib import Path
 
-from .validate_cycles import REPO, cli, setup_blender
+from .validate_cycles import REPO, demo_scene, setup_blender
 
 
 def parse(argv):
@@ -30,21 +29,7 @@ def run(args):
     out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     scene_file = out / "scene.json"
-    subprocess.run(
-        [
-            str(cli()),
-            "demo-scene",
-            "-o",
-            str(scene_file),
-            "--frames",
-            str(args.frames),
-            "--subdiv",
-            str(args.subdiv),
-            "--order",
-            str(args.order),
-        ],
-        check=True,
-    )
+    demo_scene(scene_file, args.frames, args.subdiv, args.order)
     bpy = setup_blender()
     bpy.ops.wm.read_factory_settings(use_empty=True)
     objects, emitters = blender_scene.build(bpy, scene_file)
@@ -58,7 +43,8 @@ def run(args):
     print(f"demo: baked {args.frames} frames in {seconds:.1f} s ({seconds / args.frames:.2f} s per frame)")
     blend = out / "demo.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
-    frames = args.sheet or sorted({1, args.frames // 4, args.frames // 2, 3 * args.frames // 4, args.frames})
+    picks = (1, args.frames // 4, args.frames // 2, 3 * args.frames // 4, args.frames)
+    frames = args.sheet or sorted({max(1, f) for f in picks})
     skip = {
         ob.name
         for ob in objects.values()

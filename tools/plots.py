@@ -11,7 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .validate_cycles import REPO, cli
+from .validate_cycles import REPO, cli, demo_scene
 
 
 def parse(argv):
@@ -43,20 +43,7 @@ def run(args):
     work = REPO / "out" / "plots"
     work.mkdir(parents=True, exist_ok=True)
     scene_file = work / "scene.json"
-    subprocess.run(
-        [
-            str(cli()),
-            "demo-scene",
-            "-o",
-            str(scene_file),
-            "--frames",
-            str(args.frames),
-            "--subdiv",
-            str(args.subdiv),
-        ],
-        check=True,
-        capture_output=True,
-    )
+    demo_scene(scene_file, args.frames, args.subdiv)
     series = {}
     for label, flags in [
         ("incremental (series)", []),

@@ -43,6 +43,13 @@ def cli():
     return exe
 
 
+def demo_scene(path, frames, subdiv, order=2):
+    """Writes the demo Cornell box scene file with the CLI (`galerkin-radiosity demo-scene`)."""
+    cmd = [str(cli()), "demo-scene", "-o", str(path), "--frames", str(frames), "--subdiv", str(subdiv)]
+    subprocess.run([*cmd, "--order", str(order)], check=True, capture_output=True)
+    return path
+
+
 def setup_blender():
     os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="blender-user-"))
     import bpy
@@ -61,20 +68,7 @@ def run(args):
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     scene_file = out / "scene.json"
-    subprocess.run(
-        [
-            str(cli()),
-            "demo-scene",
-            "-o",
-            str(scene_file),
-            "--frames",
-            str(args.frames),
-            "--subdiv",
-            str(args.subdiv),
-        ],
-        check=True,
-        capture_output=True,
-    )
+    demo_scene(scene_file, args.frames, args.subdiv)
     bpy = setup_blender()
     bpy.ops.wm.read_factory_settings(use_empty=True)
     objects, emitters = blender_scene.build(bpy, scene_file)
