@@ -51,11 +51,6 @@ impl Basis {
         self.eval_into(s, t, &mut out);
         out
     }
-
-    /// Degree per axis `(a, b)` of function `k`.
-    pub fn degrees(self, k: usize) -> (usize, usize) {
-        (k / (self.order + 1), k % (self.order + 1))
-    }
 }
 
 /// Shifted orthonormal Legendre polynomials on [0,1], degrees 0..=3:

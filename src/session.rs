@@ -44,6 +44,9 @@ pub struct FrameStats {
     pub recomputed_direction: usize,
     /// Pairs (re-)expanded into a series this frame.
     pub series_expanded: usize,
+    /// Pairs holding a series after this frame, and the bytes of their terms.
+    pub series_pairs: usize,
+    pub series_bytes: usize,
     pub recomputed_half_space: usize,
     pub recomputed_visibility: usize,
     pub recomputed_non_translation: usize,
@@ -179,6 +182,8 @@ impl Session {
                         recomputed_half_space: u.recomputed_half_space,
                         links_series: u.links_series,
                         series_expanded: u.series_expanded,
+                        series_pairs: state.series_memory().0,
+                        series_bytes: state.series_memory().1,
                         recomputed_non_translation: u.recomputed_non_translation,
                         recomputed_translation: u.recomputed_translation,
                         shots: u.shots,

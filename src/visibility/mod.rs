@@ -41,26 +41,6 @@ impl Visibility {
             }
         }
     }
-
-    /// The same visibility seen from the other end (receiver and source swapped).
-    pub fn transposed(&self, cells: usize) -> Visibility {
-        match self {
-            Visibility::Partial(bits) => {
-                let mut out = [0u64; 4];
-                for r in 0..cells {
-                    for s in 0..cells {
-                        let i = r * cells + s;
-                        if (bits[i / 64] >> (i % 64)) & 1 == 1 {
-                            let j = s * cells + r;
-                            out[j / 64] |= 1 << (j % 64);
-                        }
-                    }
-                }
-                Visibility::Partial(Box::new(out))
-            }
-            v => v.clone(),
-        }
-    }
 }
 
 /// Sample cell (in an `m x m` grid) of the local parameter point `(s,t)`.
