@@ -52,16 +52,7 @@ impl Bvh {
                 continue;
             }
             let cb = tris.iter().fold(Aabb::EMPTY, |b, t| b.grow(centroid(t)));
-            let d = cb.diagonal();
-            let axis = if d.x >= d.y && d.x >= d.z {
-                0
-            } else if d.y >= d.z {
-                1
-            } else {
-                2
-            };
-            let mid = tris.len() / 2;
-            tris.select_nth_unstable_by(mid, |a, b| centroid(a)[axis].total_cmp(&centroid(b)[axis]));
+            let mid = sah_partition(tris, &cb);
             let left = nodes.len();
             nodes.push(Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
             nodes.push(Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
@@ -155,6 +146,82 @@ impl Bvh {
         }
         false
     }
+}
+
+/// Surface area of a box (SAH cost weight).
+fn half_area(b: &Aabb) -> f64 {
+    let d = (b.max - b.min).max(DVec3::ZERO);
+    d.x * d.y + d.y * d.z + d.z * d.x
+}
+
+/// Reorders `tris` around the best binned surface-area-heuristic split (12 bins per axis,
+/// Wald 2007) and returns the split index; a median split on the longest axis when every
+/// centroid falls in one bin. Large planar walls make median splits poor: measured in
+/// benches/rays.rs.
+fn sah_partition(tris: &mut [Triangle], cb: &Aabb) -> usize {
+    const BINS: usize = 12;
+    let d = cb.diagonal();
+    let mut best = (f64::INFINITY, 0usize, 0usize); // (cost, axis, last bin on the left)
+    for axis in 0..3 {
+        if d[axis] <= 0.0 {
+            continue;
+        }
+        let scale = BINS as f64 / d[axis];
+        let bin_of = |t: &Triangle| (((centroid(t)[axis] - cb.min[axis]) * scale) as usize).min(BINS - 1);
+        let mut counts = [0usize; BINS];
+        let mut boxes = [Aabb::EMPTY; BINS];
+        for t in tris.iter() {
+            let b = bin_of(t);
+            counts[b] += 1;
+            boxes[b] = boxes[b].union(Aabb::from_points(&t.v));
+        }
+        // Sweep from the right for the right-hand costs, then from the left.
+        let mut right_area = [0.0; BINS];
+        let mut right_count = [0usize; BINS];
+        let (mut acc, mut n) = (Aabb::EMPTY, 0);
+        for b in (1..BINS).rev() {
+            acc = acc.union(boxes[b]);
+            n += counts[b];
+            right_area[b] = half_area(&acc);
+            right_count[b] = n;
+        }
+        let (mut acc, mut n) = (Aabb::EMPTY, 0);
+        for b in 0..BINS - 1 {
+            acc = acc.union(boxes[b]);
+            n += counts[b];
+            if n == 0 || right_count[b + 1] == 0 {
+                continue;
+            }
+            let cost = half_area(&acc) * n as f64 + right_area[b + 1] * right_count[b + 1] as f64;
+            if cost < best.0 {
+                best = (cost, axis, b);
+            }
+        }
+    }
+    if !best.0.is_finite() {
+        let axis = if d.x >= d.y && d.x >= d.z {
+            0
+        } else if d.y >= d.z {
+            1
+        } else {
+            2
+        };
+        let mid = tris.len() / 2;
+        tris.select_nth_unstable_by(mid, |a, b| centroid(a)[axis].total_cmp(&centroid(b)[axis]));
+        return mid;
+    }
+    let (_, axis, last) = best;
+    let scale = BINS as f64 / d[axis];
+    let left = |t: &Triangle| (((centroid(t)[axis] - cb.min[axis]) * scale) as usize).min(BINS - 1) <= last;
+    // In-place partition: left-bin triangles first.
+    let mut i = 0;
+    for j in 0..tris.len() {
+        if left(&tris[j]) {
+            tris.swap(i, j);
+            i += 1;
+        }
+    }
+    i
 }
 
 fn centroid(t: &Triangle) -> DVec3 {
