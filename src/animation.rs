@@ -297,8 +297,7 @@ pub fn advance(
                                 if reason == Reason::Translation
                                     && state.use_series
                                     && existing_series.is_none()
-                                    && !(series::strictly_in_front(&patches[iu], &patches[ju])
-                                        && series::strictly_in_front(&patches[ju], &patches[iu]))
+                                    && !series::mutually_in_front(&patches[iu], &patches[ju])
                                 {
                                     reason = Reason::HalfSpace;
                                 }
@@ -411,9 +410,7 @@ fn series_check(
     if ser.epochs != (state.epochs[i], state.epochs[j]) {
         return Err(Reason::NonTranslation);
     }
-    if !(series::strictly_in_front(&patches[i], &patches[j])
-        && series::strictly_in_front(&patches[j], &patches[i]))
-    {
+    if !series::mutually_in_front(&patches[i], &patches[j]) {
         return Err(Reason::HalfSpace);
     }
     if vis != old_vis {

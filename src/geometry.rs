@@ -79,6 +79,32 @@ impl Rect {
     }
 }
 
+/// The plane of a planar patch, for side tests of other patches against its front.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrontPlane {
+    pub normal: DVec3,
+    /// The patch's centre `X(0.5, 0.5)`.
+    pub centre: DVec3,
+    /// Its bounding-sphere radius: side tests use a tolerance of `1e-9` of it.
+    pub radius: f64,
+}
+
+impl FrontPlane {
+    fn in_front(&self, p: DVec3) -> bool {
+        self.normal.dot(p - self.centre) > 1e-9 * self.radius
+    }
+
+    /// True when some corner of `b` lies in front (so some point of `b` may be lit by this patch).
+    pub fn any_in_front(&self, b: &Patch) -> bool {
+        b.corners.iter().any(|p| self.in_front(*p))
+    }
+
+    /// True when every corner, hence every point, of `b` lies strictly in front.
+    pub fn all_in_front(&self, b: &Patch) -> bool {
+        b.corners.iter().all(|p| self.in_front(*p))
+    }
+}
+
 /// A bilinear patch in world space.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Patch {
@@ -156,6 +182,15 @@ impl Patch {
         let n = self.centre_normal();
         let d = self.corners.iter().map(|p| (*p - c).dot(n).abs()).fold(0.0, f64::max);
         if r > 0.0 { d / r } else { 0.0 }
+    }
+
+    /// The patch's plane, or `None` when it is not planar (to 1e-9 of its size).
+    pub fn front_plane(&self) -> Option<FrontPlane> {
+        if self.non_planarity() > 1e-9 {
+            return None;
+        }
+        let (centre, radius) = self.bounding_sphere();
+        Some(FrontPlane { normal: self.centre_normal(), centre, radius })
     }
 
     /// The patch as one or two triangles (for ray casting), in the front orientation.

@@ -7,7 +7,7 @@ use glam::DVec3;
 
 use super::pair::{FAR, MID, PairCoefficients, PairContext, integrate_pair, integrate_pair_into};
 use super::samples::Samples;
-use crate::geometry::{Patch, Rect};
+use crate::geometry::{FrontPlane, Patch, Rect};
 use crate::links::{LinkRow, LinkStore};
 use crate::quadrature::GaussLegendre;
 use crate::visibility::{Occluders, Visibility};
@@ -27,22 +27,18 @@ pub struct ElementGeometry<'a> {
 struct ElementInfo {
     /// Bounding sphere (centre, radius).
     sphere: (DVec3, f64),
-    /// Centre normal; `None` when the element is not planar (then it may face anything).
-    normal: Option<DVec3>,
+    /// `None` when the element is not planar (then it may face anything).
+    plane: Option<FrontPlane>,
 }
 
 impl ElementInfo {
     fn new(p: &Patch) -> Self {
-        let sphere = p.bounding_sphere();
-        let normal = if p.non_planarity() > 1e-9 { None } else { Some(p.centre_normal()) };
-        Self { sphere, normal }
+        Self { sphere: p.bounding_sphere(), plane: p.front_plane() }
     }
 
-    /// [`may_face`] with `a` = this element: the same tests on the same numbers.
+    /// [`may_face`] with `a` = this element.
     fn may_face(&self, b: &Patch) -> bool {
-        let Some(n) = self.normal else { return true };
-        let (c, r) = self.sphere;
-        b.corners.iter().any(|p| n.dot(*p - c) > 1e-9 * r)
+        self.plane.is_none_or(|pl| pl.any_in_front(b))
     }
 }
 
@@ -79,13 +75,7 @@ impl<'a> ElementGeometry<'a> {
 
 /// True when some point of `b` may lie in front of `a` (conservative for non-planar patches).
 pub fn may_face(a: &Patch, b: &Patch) -> bool {
-    if a.non_planarity() > 1e-9 {
-        return true;
-    }
-    let n = a.centre_normal();
-    let c = a.point(0.5, 0.5);
-    let (_, r) = a.bounding_sphere();
-    b.corners.iter().any(|p| n.dot(*p - c) > 1e-9 * r)
+    a.front_plane().is_none_or(|pl| pl.any_in_front(b))
 }
 
 /// The coefficients and visibility of one pair, or `None` when it exchanges nothing.

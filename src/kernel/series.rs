@@ -89,20 +89,19 @@ pub fn min_distance(a: &Patch, b: &Patch) -> f64 {
 /// True when every corner of `b` lies strictly in front of planar `a` (so every point pair has
 /// positive cosines at `a`: the kernel has no half-space discontinuity, Fig. 4).
 pub fn strictly_in_front(a: &Patch, b: &Patch) -> bool {
-    if a.non_planarity() > 1e-9 {
-        return false;
-    }
-    let n = a.centre_normal();
-    let c = a.point(0.5, 0.5);
-    let (_, r) = a.bounding_sphere();
-    b.corners.iter().all(|p| n.dot(*p - c) > 1e-9 * r)
+    a.front_plane().is_some_and(|pl| pl.all_in_front(b))
+}
+
+/// Each patch wholly in front of the other: no half-space discontinuity either way.
+pub fn mutually_in_front(a: &Patch, b: &Patch) -> bool {
+    strictly_in_front(a, b) && strictly_in_front(b, a)
 }
 
 /// Pairs the series applies to: both planar, each wholly in front of the other, and separated
 /// enough that the kernel is one Gauss product (near pairs go through the adaptive integrator).
 /// Returns `r_min`.
 pub fn eligible(a: &Patch, b: &Patch) -> Option<f64> {
-    if !(strictly_in_front(a, b) && strictly_in_front(b, a)) {
+    if !mutually_in_front(a, b) {
         return None;
     }
     let (ca, ra) = a.bounding_sphere();
