@@ -4,6 +4,13 @@
 //! A *pair* `(a, b)` holds both directed links: `G_ab` (receiver `a`, source `b`) and `G_ba`, each
 //! `nb x nb` f32 with rows indexed by the receiver's basis function. Pairs are recomputed in
 //! place by the animation update; a pair that starts or stops interacting is added or emptied.
+//!
+//! Storage is by *shooter*: for element `j` and its basis function `l`, one contiguous column
+//! stream holds `G_ij^{kl}` (k = 0..nb) for every receiver `i` of `j`, in [`LinkStore::receivers_of`]
+//! order. Shooting one unshot coefficient `l` of `j` then reads `nb` consecutive floats per
+//! receiver and nothing else (the solver shoots coefficient by coefficient, most often `l = 0`);
+//! a row-major block per pair would cost the whole block's cache lines. [`LinkStore::block`] and
+//! [`LinkStore::blocks_f64`] still give row-major blocks.
 
 use crate::visibility::Visibility;
 
@@ -22,7 +29,7 @@ pub struct Pair {
 pub struct LinkRow {
     pub a: ElementId,
     pub sources: Vec<ElementId>,
-    /// `[G_ab | G_ba]` per source, f32, `2 nb^2` each.
+    /// `[G_ab | G_ba]` per source, f32 row-major, `2 nb^2` each.
     pub coeffs: Vec<f32>,
     pub visibility: Vec<Visibility>,
 }
@@ -31,22 +38,16 @@ pub struct LinkRow {
 pub struct LinkStore {
     nb: usize,
     pairs: Vec<Pair>,
-    /// `2 nb^2` per pair: `G_ab` then `G_ba`.
-    coeffs: Vec<f32>,
+    /// Per pair: the slot of `G_ab` among `b`'s receivers and of `G_ba` among `a`'s.
+    slots: Vec<[u32; 2]>,
     /// Per element: the pairs it belongs to.
     adjacency: Vec<Vec<PairId>>,
-    /// Per element, in `adjacency` order: the other element and the block it receives from this
-    /// one, so that shooting reads neither the pair records nor the other block.
-    sources: Vec<Vec<Neighbour>>,
-}
-
-/// An element's partner in a pair, as seen by a shooter: who receives, and from which block.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Neighbour {
-    /// The receiving element.
-    pub receiver: ElementId,
-    /// Index of the `nb x nb` block `G_receiver,shooter` (offset `block * nb^2` in the store).
-    pub block: u32,
+    /// Per element, in `adjacency` order: the other element of the pair, which receives what this
+    /// one shoots.
+    receivers: Vec<Vec<ElementId>>,
+    /// `[shooter * nb + l]`: column `l` of `G_receiver,shooter` for each receiver of the shooter,
+    /// in `receivers` order, `nb` floats each (index `k`, the receiver's function).
+    columns: Vec<Vec<f32>>,
 }
 
 impl LinkStore {
@@ -54,9 +55,10 @@ impl LinkStore {
         Self {
             nb,
             pairs: Vec::new(),
-            coeffs: Vec::new(),
+            slots: Vec::new(),
             adjacency: vec![Vec::new(); n_elements],
-            sources: vec![Vec::new(); n_elements],
+            receivers: vec![Vec::new(); n_elements],
+            columns: vec![Vec::new(); n_elements * nb],
         }
     }
 
@@ -86,7 +88,7 @@ impl LinkStore {
         &self.adjacency[e as usize]
     }
 
-    /// Adds a pair with its two blocks (`ab`, `ba`, f64 `nb x nb` each).
+    /// Adds a pair with its two blocks (`ab`, `ba`, f64 `nb x nb` row-major each).
     pub fn push(
         &mut self,
         a: ElementId,
@@ -97,86 +99,125 @@ impl LinkStore {
     ) -> PairId {
         let id = self.pairs.len() as PairId;
         self.pairs.push(Pair { a, b, visibility });
-        self.coeffs.extend(ab.iter().chain(ba).map(|&x| x as f32));
         self.link(a, b, id);
+        let nb = self.nb;
+        // G_ab is shot by b, G_ba by a; both go to the end of the shooter's columns.
+        for (shooter, g) in [(b, ab), (a, ba)] {
+            for l in 0..nb {
+                self.columns[shooter as usize * nb + l].extend((0..nb).map(|k| g[k * nb + l] as f32));
+            }
+        }
         id
     }
 
     fn link(&mut self, a: ElementId, b: ElementId, id: PairId) {
+        debug_assert_eq!(self.slots.len(), id as usize);
+        self.slots.push([self.receivers[b as usize].len() as u32, self.receivers[a as usize].len() as u32]);
         self.adjacency[a as usize].push(id);
         self.adjacency[b as usize].push(id);
-        // G_ab (block 2 id) is received by a from b; G_ba (2 id + 1) by b from a.
-        self.sources[b as usize].push(Neighbour { receiver: a, block: 2 * id });
-        self.sources[a as usize].push(Neighbour { receiver: b, block: 2 * id + 1 });
+        self.receivers[b as usize].push(a);
+        self.receivers[a as usize].push(b);
     }
 
-    /// What element `e` shoots to: each partner with the block it receives through, in
-    /// [`LinkStore::pairs_of`] order.
-    pub fn receivers_of(&self, e: ElementId) -> &[Neighbour] {
-        &self.sources[e as usize]
+    /// What element `e` shoots to, in [`LinkStore::pairs_of`] order.
+    pub fn receivers_of(&self, e: ElementId) -> &[ElementId] {
+        &self.receivers[e as usize]
     }
 
-    /// Block number `block` (see [`Neighbour::block`]), `nb x nb`, row = receiver function.
+    /// Column `l` of every block element `e` shoots through: for the `r`-th receiver `i` of
+    /// [`LinkStore::receivers_of`], `G_ie^{kl}` at `r * nb + k`.
     #[inline]
-    pub fn block_at(&self, block: u32) -> &[f32] {
-        let n2 = self.nb * self.nb;
-        &self.coeffs[block as usize * n2..(block as usize + 1) * n2]
+    pub fn shooter_column(&self, e: ElementId, l: usize) -> &[f32] {
+        &self.columns[e as usize * self.nb + l]
+    }
+
+    /// Where `G_receiver,other` of pair `p` lives: the shooter and the receiver's slot among the
+    /// shooter's receivers.
+    #[inline]
+    fn slot(&self, p: PairId, receiver: ElementId) -> (usize, usize) {
+        let pair = &self.pairs[p as usize];
+        let [ab, ba] = self.slots[p as usize];
+        if pair.a == receiver { (pair.b as usize, ab as usize) } else { (pair.a as usize, ba as usize) }
+    }
+
+    /// Column `l` of `G_receiver,other` of pair `p`: `nb` floats, index `k`.
+    #[inline]
+    pub fn column(&self, p: PairId, receiver: ElementId, l: usize) -> &[f32] {
+        let (shooter, slot) = self.slot(p, receiver);
+        &self.columns[shooter * self.nb + l][slot * self.nb..(slot + 1) * self.nb]
     }
 
     /// Adds rows of pairs `(a, b_k)` with their f32 blocks `[G_ab | G_ba]` one pair after the other
     /// (`2 nb^2` each), in row order then `b` order: as [`LinkStore::push`] one by one, with the
-    /// coefficients copied in parallel.
-    pub fn extend_rows(&mut self, rows: Vec<LinkRow>) {
+    /// coefficients copied in parallel (one shooter per task).
+    pub fn extend_rows(&mut self, mut rows: Vec<LinkRow>) {
         use rayon::prelude::*;
-        let block = 2 * self.nb * self.nb;
-        let total: usize = rows.iter().map(|r| r.coeffs.len()).sum();
-        let start = self.coeffs.len();
-        if start == 0 {
-            // Zeroed by the allocator (untouched pages), filled by the threads below.
-            self.coeffs = vec![0.0f32; total];
-        } else {
-            self.coeffs.resize(start + total, 0.0);
-        }
-        let mut dest: Vec<&mut [f32]> = Vec::with_capacity(rows.len());
-        let mut rest = &mut self.coeffs[start..];
-        for r in &rows {
-            let (head, tail) = rest.split_at_mut(r.coeffs.len());
-            dest.push(head);
-            rest = tail;
-        }
-        dest.into_par_iter().zip(&rows).for_each(|(d, r)| d.copy_from_slice(&r.coeffs));
-        let pairs: usize = rows.iter().map(|r| r.sources.len()).sum();
-        self.pairs.reserve(pairs);
-        for LinkRow { a, sources: bs, coeffs, visibility: vis } in rows {
-            debug_assert_eq!(coeffs.len(), bs.len() * block);
-            for (b, v) in bs.into_iter().zip(vis) {
+        let nb = self.nb;
+        let n2 = nb * nb;
+        let first = self.pairs.len();
+        // Where each new pair's blocks are: (row, index in row).
+        let mut origin: Vec<(u32, u32)> = Vec::with_capacity(rows.iter().map(|r| r.sources.len()).sum());
+        let old_len: Vec<usize> = self.receivers.iter().map(Vec::len).collect();
+        for (ri, row) in rows.iter_mut().enumerate() {
+            debug_assert_eq!(row.coeffs.len(), row.sources.len() * 2 * n2);
+            for (k, (&b, v)) in row.sources.iter().zip(row.visibility.drain(..)).enumerate() {
                 let id = self.pairs.len() as PairId;
-                self.pairs.push(Pair { a, b, visibility: v });
-                self.link(a, b, id);
+                self.pairs.push(Pair { a: row.a, b, visibility: v });
+                self.link(row.a, b, id);
+                origin.push((ri as u32, k as u32));
             }
         }
+        let (adjacency, pairs) = (&self.adjacency, &self.pairs);
+        self.columns.par_chunks_mut(nb).enumerate().for_each(|(e, cols)| {
+            let new = &adjacency[e][old_len[e]..];
+            if new.is_empty() {
+                return;
+            }
+            for col in cols.iter_mut() {
+                col.reserve_exact(new.len() * nb);
+            }
+            for &p in new {
+                let (ri, k) = origin[p as usize - first];
+                let row = &rows[ri as usize];
+                // The block e shoots through: G_ba (second half) when e is the row's a.
+                let half = if pairs[p as usize].a == e as ElementId { n2 } else { 0 };
+                let g = &row.coeffs[k as usize * 2 * n2 + half..][..n2];
+                for (l, col) in cols.iter_mut().enumerate() {
+                    col.extend((0..nb).map(|k| g[k * nb + l]));
+                }
+            }
+        });
     }
 
-    /// Replaces a pair's coefficients and visibility.
+    /// Replaces a pair's coefficients (`ab`, `ba`, f64 row-major) and visibility.
     pub fn set(&mut self, p: PairId, ab: &[f64], ba: &[f64], visibility: Visibility) {
-        let n2 = self.nb * self.nb;
-        let block = &mut self.coeffs[p as usize * 2 * n2..(p as usize + 1) * 2 * n2];
-        for (dst, src) in block.iter_mut().zip(ab.iter().chain(ba)) {
-            *dst = *src as f32;
+        let nb = self.nb;
+        let Pair { a, b, .. } = self.pairs[p as usize];
+        for (receiver, g) in [(a, ab), (b, ba)] {
+            let (shooter, slot) = self.slot(p, receiver);
+            for l in 0..nb {
+                let col = &mut self.columns[shooter * nb + l][slot * nb..(slot + 1) * nb];
+                for (k, dst) in col.iter_mut().enumerate() {
+                    *dst = g[k * nb + l] as f32;
+                }
+            }
         }
         self.pairs[p as usize].visibility = visibility;
     }
 
-    /// The block with `receiver` as receiver: `G_receiver,other`.
-    #[inline]
-    pub fn block(&self, p: PairId, receiver: ElementId) -> &[f32] {
-        let n2 = self.nb * self.nb;
-        let base = p as usize * 2 * n2;
-        if self.pairs[p as usize].a == receiver {
-            &self.coeffs[base..base + n2]
-        } else {
-            &self.coeffs[base + n2..base + 2 * n2]
+    /// The block with `receiver` as receiver, `G_receiver,other`, row-major (row = receiver
+    /// function), copied out of the column store.
+    pub fn block(&self, p: PairId, receiver: ElementId) -> Vec<f32> {
+        let nb = self.nb;
+        let (shooter, slot) = self.slot(p, receiver);
+        let mut g = vec![0.0; nb * nb];
+        for l in 0..nb {
+            let col = &self.columns[shooter * nb + l][slot * nb..(slot + 1) * nb];
+            for (k, &x) in col.iter().enumerate() {
+                g[k * nb + l] = x;
+            }
         }
+        g
     }
 
     /// The other element of pair `p`.
@@ -188,9 +229,10 @@ impl LinkStore {
 
     /// Bytes held by coefficients and pair records.
     pub fn memory_bytes(&self) -> usize {
-        self.coeffs.len() * 4
+        self.columns.iter().map(|c| c.len() * 4).sum::<usize>()
             + self.pairs.len() * std::mem::size_of::<Pair>()
-            + 2 * self.pairs.len() * std::mem::size_of::<Neighbour>()
+            + self.pairs.len() * std::mem::size_of::<[u32; 2]>()
+            + 2 * self.pairs.len() * (std::mem::size_of::<PairId>() + std::mem::size_of::<ElementId>())
     }
 }
 
@@ -205,7 +247,7 @@ impl LinkStore {
         self.adjacency[short as usize].iter().copied().find(|&p| self.other(p, short) == other)
     }
 
-    /// Both blocks of a pair as f64, oriented as `(G_ab, G_ba)` for the given `a`.
+    /// Both blocks of a pair as f64 row-major, oriented as `(G_ab, G_ba)` for the given `a`.
     pub fn blocks_f64(&self, p: PairId, a: ElementId) -> (Vec<f64>, Vec<f64>) {
         let b = self.other(p, a);
         let ab = self.block(p, a).iter().map(|&x| x as f64).collect();

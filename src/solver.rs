@@ -40,18 +40,48 @@ pub fn power(v: &[[f64; 3]], area: f64) -> f64 {
 
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ShootStats {
+    /// Columns shot: one unshot coefficient `l` of one element sent to all its receivers.
     pub shots: usize,
     /// Unshot power left, relative to the reference.
     pub residual: f64,
+    /// Link coefficients read by the shots (f32 each), the memory traffic that bounds a solve.
+    pub floats_read: u64,
 }
 
-/// Shooters of one batch: every element whose unshot power is at least this fraction of the
-/// largest. Shooting them together (Jacobi-style) instead of one at a time (Southwell) keeps the
-/// progressive order of magnitude and gives the threads enough work per batch.
+/// Shooters of one batch: every (element, coefficient) whose unshot power is at least this
+/// fraction of the largest. Shooting them together (Jacobi-style) instead of one at a time
+/// (Southwell) keeps the progressive order of magnitude and gives the threads enough work per
+/// batch.
 const BATCH_FRACTION: f64 = 0.25;
+
+/// Power of one unshot coefficient of an element, `area * sum_c |u_c|`, used to pick shooters.
+fn coefficient_power(u: &[f64; 3], area: f64) -> f64 {
+    (u[0].abs() + u[1].abs() + u[2].abs()) * area
+}
+
+/// One column shot: element `e` sends its unshot coefficient `l` (value `u`, RGB).
+#[derive(Clone, Copy, Debug)]
+struct Shot {
+    e: ElementId,
+    l: u32,
+    u: [f64; 3],
+}
+
+/// Batches with fewer link coefficients than this are shot on one thread: below it, handing
+/// out the work costs more than it saves.
+const PARALLEL_FLOATS: u64 = 1 << 16;
 
 /// Progressive refinement until the unshot power is below `stop_power`, shooting in parallel
 /// batches. `cancel` is polled between batches.
+///
+/// Shooters are single coefficients, not whole elements: a batch takes every coefficient `l`
+/// of every element whose own unshot power is large, and shooting it reads only column `l` of
+/// the element's blocks ([`LinkStore::shooter_column`]). What is left stays unshot, so the
+/// answer is the same; most of the work goes to `l = 0`, which carries most of the power. The
+/// stopping test is unchanged: the sum over elements of [`power`] of the unshot vector.
+///
+/// Threads split the receivers (element ranges of equal link count), not the shooters, so each
+/// writes its own part of `b` and `unshot` directly and the sums do not depend on the threads.
 pub fn shoot(
     links: &LinkStore,
     reflectance: &[[f64; 3]],
@@ -63,187 +93,242 @@ pub fn shoot(
     use rayon::prelude::*;
     let nb = x.nb;
     let n = area.len();
-    let mut priority: Vec<f64> = (0..n).map(|e| power(&x.unshot[e * nb..(e + 1) * nb], area[e])).collect();
-    let mut shots = 0;
-    let threads = rayon::current_num_threads().max(1);
+    let mut element_power: Vec<f64> =
+        (0..n).map(|e| power(&x.unshot[e * nb..(e + 1) * nb], area[e])).collect();
+    let mut priority: Vec<f64> = (0..n * nb).map(|i| coefficient_power(&x.unshot[i], area[i / nb])).collect();
+    let mut stats = ShootStats::default();
+    let parts = receiver_ranges(links, n, rayon::current_num_threads().max(1));
+    let mut shots: Vec<Shot> = Vec::new();
     loop {
-        let total: f64 = priority.iter().sum();
+        let total: f64 = element_power.iter().sum();
         let best = priority.iter().copied().fold(0.0, f64::max);
         if total <= stop_power || best <= 0.0 {
-            return Ok(ShootStats { shots, residual: total });
+            stats.residual = total;
+            return Ok(stats);
         }
         if cancel() {
             return Err(Error::Cancelled);
         }
         // Take the batch's unshot coefficients.
-        let mut shooters: Vec<(usize, Vec<[f64; 3]>)> = Vec::new();
+        shots.clear();
+        let mut floats = 0;
         for e in 0..n {
-            if priority[e] >= BATCH_FRACTION * best && priority[e] > 0.0 {
-                shooters.push((e, x.unshot[e * nb..(e + 1) * nb].to_vec()));
-                x.unshot[e * nb..(e + 1) * nb].fill([0.0; 3]);
-                priority[e] = 0.0;
+            let before = shots.len();
+            for l in 0..nb {
+                let i = e * nb + l;
+                if priority[i] >= BATCH_FRACTION * best && priority[i] > 0.0 {
+                    shots.push(Shot { e: e as ElementId, l: l as u32, u: x.unshot[i] });
+                    x.unshot[i] = [0.0; 3];
+                    priority[i] = 0.0;
+                }
+            }
+            if shots.len() > before {
+                element_power[e] = power(&x.unshot[e * nb..(e + 1) * nb], area[e]);
+                floats += ((shots.len() - before) * links.receivers_of(e as ElementId).len() * nb) as u64;
             }
         }
-        shots += shooters.len();
-        // Each chunk of shooters accumulates into its own buffer; buffers are summed.
-        let chunk = shooters.len().div_ceil(2 * threads).max(1);
-        let delta = shooters
-            .par_chunks(chunk)
-            .map(|batch| {
-                let mut buf = vec![[0.0f64; 3]; n * nb];
-                for (j, u) in batch {
-                    shoot_one(links, reflectance, *j as ElementId, u, nb, &mut buf);
-                }
-                buf
-            })
-            .reduce_with(|mut a, b| {
-                for (x, y) in a.iter_mut().zip(&b) {
-                    for c in 0..3 {
-                        x[c] += y[c];
-                    }
-                }
-                a
-            })
-            .unwrap_or_default();
-        for e in 0..n {
-            let d = &delta[e * nb..(e + 1) * nb];
-            if d.iter().all(|v| *v == [0.0; 3]) {
-                continue;
-            }
-            for k in 0..nb {
-                for c in 0..3 {
-                    x.b[e * nb + k][c] += d[k][c];
-                    x.unshot[e * nb + k][c] += d[k][c];
+        stats.shots += shots.len();
+        stats.floats_read += floats;
+        let ranges: &[(usize, usize)] = if floats < PARALLEL_FLOATS { &[(0, n)] } else { &parts };
+        // Split the outputs along the receiver ranges.
+        let mut work = Vec::with_capacity(ranges.len());
+        let (mut b, mut unshot) = (&mut x.b[..], &mut x.unshot[..]);
+        let (mut pr, mut ep) = (&mut priority[..], &mut element_power[..]);
+        for &(lo, hi) in ranges {
+            let (b0, b1) = b.split_at_mut((hi - lo) * nb);
+            let (u0, u1) = unshot.split_at_mut((hi - lo) * nb);
+            let (p0, p1) = pr.split_at_mut((hi - lo) * nb);
+            let (e0, e1) = ep.split_at_mut(hi - lo);
+            work.push(Part { lo, hi, b: b0, unshot: u0, priority: p0, element_power: e0 });
+            (b, unshot, pr, ep) = (b1, u1, p1, e1);
+        }
+        let shots = &shots;
+        let run = |part: Part| {
+            let mut touched = vec![false; part.hi - part.lo];
+            shoot_range(links, reflectance, shots, nb, part.lo, part.hi, part.b, part.unshot, &mut touched);
+            for (r, _) in touched.iter().enumerate().filter(|(_, t)| **t) {
+                let e = part.lo + r;
+                let u = &part.unshot[r * nb..(r + 1) * nb];
+                part.element_power[r] = power(u, area[e]);
+                for l in 0..nb {
+                    part.priority[r * nb + l] = coefficient_power(&u[l], area[e]);
                 }
             }
-            priority[e] = power(&x.unshot[e * nb..(e + 1) * nb], area[e]);
+        };
+        if work.len() == 1 {
+            work.into_iter().for_each(run);
+        } else {
+            work.into_par_iter().for_each(run);
         }
     }
 }
 
-/// Adds what element `j` with unshot coefficients `u` gives every receiver, `rho_i G_ij u`, to `out`.
-fn shoot_one(
+/// One thread's share of a batch: receivers `lo..hi` and their slices of the solution.
+struct Part<'a> {
+    lo: usize,
+    hi: usize,
+    b: &'a mut [[f64; 3]],
+    unshot: &'a mut [[f64; 3]],
+    priority: &'a mut [f64],
+    element_power: &'a mut [f64],
+}
+
+/// Splits elements `0..n` into at most `parts` consecutive ranges receiving about the same
+/// number of links (the work of a shot is per link).
+fn receiver_ranges(links: &LinkStore, n: usize, parts: usize) -> Vec<(usize, usize)> {
+    let degree = |e: usize| links.pairs_of(e as ElementId).len() + 1;
+    let total: usize = (0..n).map(degree).sum();
+    let mut ranges = Vec::with_capacity(parts);
+    let (mut lo, mut acc) = (0, 0);
+    for e in 0..n {
+        acc += degree(e);
+        if acc * parts >= total * (ranges.len() + 1) && ranges.len() + 1 < parts {
+            ranges.push((lo, e + 1));
+            lo = e + 1;
+        }
+    }
+    ranges.push((lo, n));
+    ranges
+}
+
+/// Adds to receivers `lo..hi` (outputs indexed from `lo`) what the batch `shots` (grouped by
+/// element, as taken) sends them: `rho_i sum_l G_ij^{.l} u_l` into `b` and `unshot`.
+#[allow(clippy::too_many_arguments)]
+fn shoot_range(
     links: &LinkStore,
     reflectance: &[[f64; 3]],
-    j: ElementId,
-    u: &[[f64; 3]],
+    shots: &[Shot],
     nb: usize,
-    out: &mut [[f64; 3]],
+    lo: usize,
+    hi: usize,
+    b: &mut [[f64; 3]],
+    unshot: &mut [[f64; 3]],
+    touched: &mut [bool],
 ) {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx512f") {
             // SAFETY: the CPU has AVX-512F (checked above).
-            unsafe { shoot_one_avx512(links, reflectance, j, u, nb, out) };
+            unsafe { shoot_range_avx512(links, reflectance, shots, nb, lo, hi, b, unshot, touched) };
             return;
         }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2 (checked above).
-            unsafe { shoot_one_avx2(links, reflectance, j, u, nb, out) };
+            unsafe { shoot_range_avx2(links, reflectance, shots, nb, lo, hi, b, unshot, touched) };
             return;
         }
     }
-    shoot_one_body(links, reflectance, j, u, nb, out);
+    shoot_range_body(links, reflectance, shots, nb, lo, hi, b, unshot, touched);
 }
 
-/// [`shoot_one`] compiled for AVX-512 (wider conversions and products), same operations.
+/// [`shoot_range`] compiled for AVX-512 (wider conversions and products), same operations.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,avx512f")]
-fn shoot_one_avx512(
+#[allow(clippy::too_many_arguments)]
+fn shoot_range_avx512(
     links: &LinkStore,
     reflectance: &[[f64; 3]],
-    j: ElementId,
-    u: &[[f64; 3]],
+    shots: &[Shot],
     nb: usize,
-    out: &mut [[f64; 3]],
+    lo: usize,
+    hi: usize,
+    b: &mut [[f64; 3]],
+    unshot: &mut [[f64; 3]],
+    touched: &mut [bool],
 ) {
-    shoot_one_body(links, reflectance, j, u, nb, out);
+    shoot_range_body(links, reflectance, shots, nb, lo, hi, b, unshot, touched);
 }
 
-/// [`shoot_one`] compiled for AVX2, same operations.
+/// [`shoot_range`] compiled for AVX2, same operations.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn shoot_one_avx2(
+#[allow(clippy::too_many_arguments)]
+fn shoot_range_avx2(
     links: &LinkStore,
     reflectance: &[[f64; 3]],
-    j: ElementId,
-    u: &[[f64; 3]],
+    shots: &[Shot],
     nb: usize,
-    out: &mut [[f64; 3]],
+    lo: usize,
+    hi: usize,
+    b: &mut [[f64; 3]],
+    unshot: &mut [[f64; 3]],
+    touched: &mut [bool],
 ) {
-    shoot_one_body(links, reflectance, j, u, nb, out);
+    shoot_range_body(links, reflectance, shots, nb, lo, hi, b, unshot, touched);
 }
 
 #[inline(always)]
-fn shoot_one_body(
+#[allow(clippy::too_many_arguments)]
+fn shoot_range_body(
     links: &LinkStore,
     reflectance: &[[f64; 3]],
-    j: ElementId,
-    u: &[[f64; 3]],
+    shots: &[Shot],
     nb: usize,
-    out: &mut [[f64; 3]],
+    lo: usize,
+    hi: usize,
+    b: &mut [[f64; 3]],
+    unshot: &mut [[f64; 3]],
+    touched: &mut [bool],
 ) {
+    let out = Out { lo, hi, b, unshot, touched };
     match nb {
-        1 => shoot_one_nb::<1>(links, reflectance, j, u, out),
-        4 => shoot_one_nb::<4>(links, reflectance, j, u, out),
-        9 => shoot_one_nb::<9>(links, reflectance, j, u, out),
-        16 => shoot_one_nb::<16>(links, reflectance, j, u, out),
+        1 => shoot_range_nb::<1>(links, reflectance, shots, out),
+        4 => shoot_range_nb::<4>(links, reflectance, shots, out),
+        9 => shoot_range_nb::<9>(links, reflectance, shots, out),
+        16 => shoot_range_nb::<16>(links, reflectance, shots, out),
         nb => unreachable!("{nb} basis functions"),
     }
 }
 
-/// Blocks this many receivers ahead are prefetched: they are scattered over the whole store.
-const PREFETCH_AHEAD: usize = 4;
-
-#[inline(always)]
-fn prefetch(block: &[f32]) {
-    #[cfg(target_arch = "x86_64")]
-    for line in block.chunks(16) {
-        // SAFETY: prefetching is a hint; the address is that of a live slice element.
-        unsafe {
-            std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(line.as_ptr().cast())
-        };
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = block;
+/// Receivers `lo..hi` and their outputs, indexed from `lo`.
+struct Out<'a> {
+    lo: usize,
+    hi: usize,
+    b: &'a mut [[f64; 3]],
+    unshot: &'a mut [[f64; 3]],
+    touched: &'a mut [bool],
 }
 
-/// [`shoot_one`] with `NB` basis functions; the same operations in the same order.
+/// [`shoot_range`] with `NB` basis functions.
 #[inline(always)]
-fn shoot_one_nb<const NB: usize>(
-    links: &LinkStore,
-    reflectance: &[[f64; 3]],
-    j: ElementId,
-    u: &[[f64; 3]],
-    out: &mut [[f64; 3]],
-) {
-    let u: &[[f64; 3]; NB] = u.try_into().expect("nb coefficients");
-    let (out, _) = out.as_chunks_mut::<NB>();
-    let receivers = links.receivers_of(j);
-    for (r, n) in receivers.iter().enumerate() {
-        if let Some(ahead) = receivers.get(r + PREFETCH_AHEAD) {
-            prefetch(links.block_at(ahead.block));
-        }
-        let (g, _) = links.block_at(n.block).as_chunks::<NB>();
-        let i = n.receiver as usize;
-        let rho = reflectance[i];
-        let o = &mut out[i];
-        // acc[c][k] = sum_l G[k][l] u[l][c], l ascending as a dot product would; vectorised
-        // over k (one column of G at a time).
-        let mut acc = [[0.0f64; NB]; 3];
-        for l in 0..NB {
-            let col: [f64; NB] = std::array::from_fn(|k| g[k][l] as f64);
-            for c in 0..3 {
-                let ul = u[l][c];
-                for k in 0..NB {
-                    acc[c][k] += col[k] * ul;
+fn shoot_range_nb<const NB: usize>(links: &LinkStore, reflectance: &[[f64; 3]], shots: &[Shot], out: Out) {
+    let Out { lo, hi, b, unshot, touched } = out;
+    let (b, _) = b.as_chunks_mut::<NB>();
+    let (unshot, _) = unshot.as_chunks_mut::<NB>();
+    for group in shots.chunk_by(|x, y| x.e == y.e) {
+        let e = group[0].e;
+        let receivers = links.receivers_of(e);
+        // The group's columns, each `[receiver][k]`.
+        let cols: [&[[f32; NB]]; NB] = std::array::from_fn(|m| match group.get(m) {
+            Some(s) => links.shooter_column(e, s.l as usize).as_chunks::<NB>().0,
+            None => &[],
+        });
+        let cols = &cols[..group.len()];
+        for (r, &i) in receivers.iter().enumerate() {
+            let i = i as usize;
+            if i < lo || i >= hi {
+                continue;
+            }
+            // acc[c][k] = sum_l G[k][l] u[l][c] over the group's l, vectorised over k.
+            let mut acc = [[0.0f64; NB]; 3];
+            for (col, s) in cols.iter().zip(group) {
+                let g: [f64; NB] = std::array::from_fn(|k| col[r][k] as f64);
+                for c in 0..3 {
+                    for k in 0..NB {
+                        acc[c][k] += g[k] * s.u[c];
+                    }
                 }
             }
-        }
-        for k in 0..NB {
-            for c in 0..3 {
-                o[k][c] += rho[c] * acc[c][k];
+            let rho = reflectance[i];
+            let i = i - lo;
+            for k in 0..NB {
+                for c in 0..3 {
+                    let d = rho[c] * acc[c][k];
+                    b[i][k][c] += d;
+                    unshot[i][k][c] += d;
+                }
             }
+            touched[i] = true;
         }
     }
 }
@@ -259,11 +344,11 @@ pub fn gauss_seidel(links: &LinkStore, reflectance: &[[f64; 3]], e: &[[f64; 3]],
             let mut acc = vec![[0.0; 3]; nb];
             for &p in links.pairs_of(i as ElementId) {
                 let j = links.other(p, i as ElementId) as usize;
-                let g = links.block(p, i as ElementId);
-                for k in 0..nb {
-                    for l in 0..nb {
+                for l in 0..nb {
+                    let g = links.column(p, i as ElementId, l);
+                    for k in 0..nb {
                         for c in 0..3 {
-                            acc[k][c] += g[k * nb + l] as f64 * b[j * nb + l][c];
+                            acc[k][c] += g[k] as f64 * b[j * nb + l][c];
                         }
                     }
                 }
