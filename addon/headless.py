@@ -33,6 +33,8 @@ def parse(argv):
     p.add_argument("--preview-material", action="store_true",
                    help="show colours through the preview material")
     p.add_argument("--no-shadows", action="store_true", help="no visibility tests")
+    p.add_argument("--no-corner-gather", action="store_true",
+                   help="corners from the face polynomials (faster, softer contact shadows)")
     p.add_argument("--clear", action="store_true", help="clear the bake instead of baking")
     p.add_argument("--save", help="save the result to this .blend (default: nothing is saved)")
     return p.parse_args(argv)
@@ -110,6 +112,8 @@ def _main(args, bpy, pkg):
         p.preview_material = True
     if args.no_shadows:
         p.visibility = False
+    if args.no_corner_gather:
+        p.corner_gather = False
     view_layer = scene.view_layers[0] if bpy.context.scene != scene else bpy.context.view_layer
     with bpy.context.temp_override(scene=scene, view_layer=view_layer):
         ctx = bpy.context

@@ -26,6 +26,7 @@ class RENDER_PT_radiosity(bpy.types.Panel):
         col.prop(p, "quality")
         col.prop(p, "tolerance")
         col.prop(p, "visibility")
+        col.prop(p, "corner_gather")
         col.prop(p, "method")
         col.prop(p, "threads")
         col.prop(p, "collection")

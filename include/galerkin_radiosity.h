@@ -153,6 +153,12 @@ typedef struct GrSettings {
    * How frames after the first are computed. Default `GR_METHOD_INCREMENTAL`.
    */
   GrMethod method;
+  /**
+   * 1: face corners report radiosity gathered at the corner with its own shadow rays (sharp
+   * contact shadows, corners hidden under objects go dark; costs about one kernel build per
+   * frame); 0: the face polynomial at the corner. Other values are invalid. Default 1.
+   */
+  uint32_t corner_gather;
 } GrSettings;
 
 /**

@@ -53,6 +53,8 @@ pub struct FrameStats {
     /// Pairs with a moved element whose motion is a pure translation.
     pub recomputed_translation: usize,
     pub shots: usize,
+    /// Time of the corner gather ([`crate::gather`]), included in `seconds`.
+    pub gather_seconds: f64,
     /// The frame was built from scratch (first frame, `--full`, or after a topology change).
     pub full_rebuild: bool,
 }
@@ -163,11 +165,24 @@ impl Session {
         let incremental = self.method != Method::Full && !self.stale;
         if let (true, Some(sys), Some(state)) = (incremental, self.system.as_mut(), self.animation.as_mut()) {
             // Keep what reads need, so a cancelled update leaves the last frame readable.
-            let saved =
-                (sys.solution.clone(), sys.elements.clone(), sys.emission.clone(), sys.reflectance.clone());
-            let outcome = self.pool.install(|| animation::advance(sys, state, &placed, frame, progress));
+            let saved = (
+                sys.solution.clone(),
+                sys.elements.clone(),
+                sys.emission.clone(),
+                sys.reflectance.clone(),
+                sys.corners.take(),
+            );
+            let outcome = self.pool.install(|| {
+                let outcome = animation::advance(sys, state, &placed, frame, progress)?;
+                if let (Outcome::Updated(_), true) = (&outcome, placed.settings.corner_gather) {
+                    let start = Instant::now();
+                    sys.gather_corners(&placed, frame, progress)?;
+                    return Ok((outcome, start.elapsed().as_secs_f64()));
+                }
+                Ok((outcome, 0.0))
+            });
             match outcome {
-                Ok(Outcome::Updated(u)) => {
+                Ok((Outcome::Updated(u), gather_seconds)) => {
                     let stats = FrameStats {
                         frame,
                         seconds: start.elapsed().as_secs_f64(),
@@ -187,24 +202,29 @@ impl Session {
                         recomputed_non_translation: u.recomputed_non_translation,
                         recomputed_translation: u.recomputed_translation,
                         shots: u.shots,
+                        gather_seconds,
                         ..Default::default()
                     };
                     self.frame = Some(frame);
                     return Ok(stats);
                 }
-                Ok(Outcome::NeedsRebuild) => {}
+                Ok((Outcome::NeedsRebuild, _)) => {}
                 Err(e) => {
-                    (sys.solution, sys.elements, sys.emission, sys.reflectance) = saved;
+                    (sys.solution, sys.elements, sys.emission, sys.reflectance, sys.corners) = saved;
                     self.stale = true;
                     return Err(e);
                 }
             }
         }
         let cancel = || !progress(1.0, "solve");
-        let system = self.pool.install(|| -> Result<System> {
+        let (system, gather_seconds) = self.pool.install(|| -> Result<(System, f64)> {
             let mut sys = System::build(&placed, frame, progress)?;
             sys.solve(placed.settings.tolerance, &cancel)?;
-            Ok(sys)
+            let start = Instant::now();
+            if placed.settings.corner_gather {
+                sys.gather_corners(&placed, frame, progress)?;
+            }
+            Ok((sys, start.elapsed().as_secs_f64()))
         })?;
         let stats = FrameStats {
             frame,
@@ -215,6 +235,7 @@ impl Session {
             pairs: system.stats.pairs,
             links_recomputed: system.stats.pairs,
             shots: system.stats.shots,
+            gather_seconds,
             full_rebuild: true,
             ..Default::default()
         };

@@ -118,6 +118,9 @@ pub struct System {
     /// Emission coefficients `e_i^k` (eq. 5): constant exitance projects onto `k = 0` only.
     pub emission: Vec<[f64; 3]>,
     pub solution: Coefficients,
+    /// `B` gathered at every face corner for the current solution ([`crate::gather`]), per object
+    /// in face order; `None` when corners come from the face polynomials.
+    pub corners: Option<Vec<Vec<[f64; 3]>>>,
     pub stats: SystemStats,
 }
 
@@ -163,7 +166,7 @@ impl System {
             ..Default::default()
         };
         let solution = Coefficients::zeros(elements.len(), nb);
-        Ok(System { basis, elements, links, reflectance, emission, solution, stats })
+        Ok(System { basis, elements, links, reflectance, emission, solution, corners: None, stats })
     }
 
     /// Element areas, in element order.
@@ -218,7 +221,20 @@ impl System {
         out.map(|x| x / el.area)
     }
 
-    /// Per object, per face: the mean `B` and `B` at each corner (issue 2, items 6 and 8).
+    /// Gathers `B` at every face corner ([`crate::gather`]) for the current solution, placed as
+    /// `scene` is at `frame`; [`System::face_results`] then reports those corners.
+    pub fn gather_corners(&mut self, scene: &Scene, frame: f64, progress: Progress) -> Result<()> {
+        self.corners = None;
+        let s = &scene.settings;
+        let patches: Vec<Patch> = self.elements.iter().map(|e| e.patch).collect();
+        let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
+        self.corners =
+            Some(crate::gather::corner_radiosity(self, scene, frame, occluders.as_ref(), progress)?);
+        Ok(())
+    }
+
+    /// Per object, per face: the mean `B` and `B` at each corner (issue 2, items 6 and 8), the
+    /// corners gathered when [`System::gather_corners`] ran for this solution.
     pub fn face_results(&self, scene: &Scene, frame: f64) -> Vec<ObjectResult> {
         let mut out: Vec<ObjectResult> = scene
             .objects
@@ -229,6 +245,12 @@ impl System {
                 corner_radiosity: Vec::new(),
             })
             .collect();
+        if let Some(corners) = &self.corners {
+            for (res, c) in out.iter_mut().zip(corners) {
+                res.corner_radiosity = c.iter().map(|v| to_f32(*v)).collect();
+            }
+        }
+        let gathered = self.corners.is_some();
         let mut elements = self.elements.iter().enumerate().peekable();
         for (o, obj) in scene.objects.iter().enumerate() {
             for (f, face) in obj.faces.iter().enumerate() {
@@ -238,6 +260,9 @@ impl System {
                         let e = *e;
                         elements.next();
                         res.face_radiosity.push(to_f32(self.mean(e)));
+                        if gathered {
+                            continue;
+                        }
                         for (s, t) in corner_params(face.len()) {
                             let v =
                                 if face.len() == 3 && t == 1.0 { self.apex(e) } else { self.eval(e, s, t) };
@@ -248,7 +273,9 @@ impl System {
                         // A skipped zero-area face shows its own exitance.
                         let e = to_f32(scene.emission_at(obj.face_materials[f] as usize, frame));
                         res.face_radiosity.push(e);
-                        res.corner_radiosity.extend(std::iter::repeat_n(e, face.len()));
+                        if !gathered {
+                            res.corner_radiosity.extend(std::iter::repeat_n(e, face.len()));
+                        }
                     }
                 }
             }

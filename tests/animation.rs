@@ -8,7 +8,9 @@ use galerkin_radiosity::system::no_progress;
 use glam::{DMat4, DVec3};
 
 fn settings() -> Settings {
-    Settings { basis_order: 2, tolerance: 1e-5, ..Settings::default() }
+    // Corners from the polynomials: these tests compare the solver's methods (tests/gather.rs
+    // covers the gather).
+    Settings { basis_order: 2, tolerance: 1e-5, corner_gather: false, ..Settings::default() }
 }
 
 /// Bakes all frames with `method`; returns per frame all corner values and the stats.

@@ -267,6 +267,7 @@ fn versions_and_defaults() {
     assert_eq!(s.visibility_samples as usize, d.visibility_samples);
     assert_eq!(s.threads as usize, d.threads);
     assert_eq!(s.method, GrMethod::Incremental);
+    assert_eq!(s.corner_gather, u32::from(d.corner_gather));
 }
 
 #[test]
@@ -483,6 +484,11 @@ fn unknown_enum_values_and_nulls() {
     let mut vis = d;
     vis.visibility = 2;
     assert_eq!(f.new_session(&vis).unwrap_err().0, GrStatus::InvalidArgument);
+    let mut gather = d;
+    gather.corner_gather = 3;
+    let (st, msg) = f.new_session(&gather).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidArgument);
+    assert!(msg.contains("corner_gather"), "{msg}");
 
     let mut out = null_mut();
     let st = unsafe {

@@ -30,6 +30,7 @@ struct RawSettings {
     visibility_samples: u32,
     threads: u32,
     method: u32,
+    corner_gather: u32,
 }
 
 const _: () = assert!(size_of::<RawSettings>() == size_of::<GrSettings>());
@@ -102,16 +103,18 @@ fn matrix() -> impl Strategy<Value = [f32; 16]> {
 }
 
 fn settings() -> impl Strategy<Value = RawSettings> {
-    (0u32..=3, 1u32..=6, prop::sample::select(vec![1e-4, 1e-2, 0.5]), 0u32..=1, 1u32..=2, 0u32..=2, 0u32..=2)
-        .prop_map(|(b, q, t, v, vs, th, m)| RawSettings {
-            basis_order: b,
-            quadrature_order: q,
-            tolerance: t,
-            visibility: v,
-            visibility_samples: vs,
-            threads: th,
-            method: m,
-        })
+    let numbers =
+        (0u32..=3, 1u32..=6, prop::sample::select(vec![1e-4, 1e-2, 0.5]), 0u32..=1, 1u32..=2, 0u32..=2);
+    (numbers, 0u32..=2, 0u32..=1).prop_map(|((b, q, t, v, vs, th), m, g)| RawSettings {
+        basis_order: b,
+        quadrature_order: q,
+        tolerance: t,
+        visibility: v,
+        visibility_samples: vs,
+        threads: th,
+        method: m,
+        corner_gather: g,
+    })
 }
 
 /// One thing wrong with the call to `gr_session_new` (besides what the scene itself may get
@@ -131,7 +134,7 @@ enum Fault {
 
 fn fault() -> impl Strategy<Value = Fault> {
     let setting = prop_oneof![
-        (0usize..7, prop_oneof![Just(0u64), 3u64..20, Just(u64::from(u32::MAX))]),
+        (0usize..8, prop_oneof![Just(0u64), 3u64..20, Just(u64::from(u32::MAX))]),
         Just(2usize).prop_flat_map(|k| {
             (
                 Just(k),
@@ -278,6 +281,7 @@ fn run(c: &Case) -> Result<(), TestCaseError> {
                 3 => settings.visibility = v32,
                 4 => settings.visibility_samples = v32,
                 5 => settings.threads = v32,
+                6 => settings.corner_gather = v32,
                 _ => settings.method = v32,
             }
         }

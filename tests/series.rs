@@ -99,7 +99,7 @@ fn re_expansion_threshold_is_enforced() {
         Material { name: "floor".into(), reflectance: [0.6; 3], emission: [0.0; 3] },
         Material { name: "light".into(), reflectance: [0.0; 3], emission: [5.0; 3] },
     ];
-    let settings = Settings { basis_order: 2, tolerance: 1e-6, ..Settings::default() };
+    let settings = Settings { basis_order: 2, tolerance: 1e-6, corner_gather: false, ..Settings::default() };
     let scene = Scene::new(settings, (1, 12), materials, vec![vec![]; 2], vec![floor, light]).unwrap();
     let mut inc = Session::new(scene.clone(), Method::Incremental).unwrap();
     let mut full = Session::new(scene, Method::Full).unwrap();

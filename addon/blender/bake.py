@@ -576,6 +576,7 @@ def settings_from_scene(scene) -> BakeSettings:
         quality=p.quality,
         tolerance=p.tolerance,
         visibility=p.visibility,
+        corner_gather=p.corner_gather,
         threads=p.threads,
         method=p.method.lower(),
         frame_start=start,

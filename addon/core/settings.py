@@ -34,6 +34,7 @@ class BakeSettings:
     quality: str = "MEDIUM"
     tolerance: float = 1e-4
     visibility: bool = True
+    corner_gather: bool = True
     threads: int = 0
     method: str = "incremental"
     frame_start: int = 1
@@ -74,6 +75,7 @@ class BakeSettings:
             "visibility_samples": visibility_samples,
             "tolerance": self.tolerance,
             "visibility": self.visibility,
+            "corner_gather": self.corner_gather,
             "threads": self.threads,
             "method": self.method,
         }

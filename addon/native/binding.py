@@ -78,6 +78,7 @@ class _Settings(Structure):
         ("visibility_samples", c_uint32),
         ("threads", c_uint32),
         ("method", c_uint32),
+        ("corner_gather", c_uint32),
     ]
 
 
@@ -262,8 +263,8 @@ def _settings(lib: ctypes.CDLL, settings: dict) -> _Settings:
             s.method = METHODS[value]
         elif key == "tolerance":
             s.tolerance = float(value)
-        elif key == "visibility":
-            s.visibility = _u32(value, "settings.visibility")  # True/False or 1/0
+        elif key in ("visibility", "corner_gather"):
+            setattr(s, key, _u32(value, f"settings.{key}"))  # True/False or 1/0
         elif key in ("basis_order", "quadrature_order", "visibility_samples", "threads"):
             setattr(s, key, _u32(value, f"settings.{key}"))
         else:
@@ -275,7 +276,7 @@ class Session:
     """A baking session: the scene, its thread pool and the last solved frame.
 
     ``settings``: optional keys basis_order, quadrature_order, tolerance, visibility,
-    visibility_samples, threads, method ('incremental' | 'exact' | 'full').
+    visibility_samples, threads, method ('incremental' | 'exact' | 'full'), corner_gather.
     ``reflectance``, ``emission``: (M, 3) per material. ``objects``: dicts with ``vertices``
     (N, 3), ``face_sizes`` (F,) of 3 or 4, ``face_indices`` (sum of face_sizes,) local to the
     object, ``face_materials`` (F,), and optionally ``matrix`` (4, 4) row-major world-from-object

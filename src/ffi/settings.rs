@@ -38,6 +38,10 @@ pub struct GrSettings {
     pub threads: u32,
     /// How frames after the first are computed. Default `GR_METHOD_INCREMENTAL`.
     pub method: GrMethod,
+    /// 1: face corners report radiosity gathered at the corner with its own shadow rays (sharp
+    /// contact shadows, corners hidden under objects go dark; costs about one kernel build per
+    /// frame); 0: the face polynomial at the corner. Other values are invalid. Default 1.
+    pub corner_gather: u32,
 }
 
 impl GrSettings {
@@ -52,6 +56,7 @@ impl GrSettings {
             visibility_samples: d.visibility_samples as u32,
             threads: d.threads as u32,
             method: GrMethod::Incremental,
+            corner_gather: u32::from(d.corner_gather),
         }
     }
 }
@@ -76,7 +81,7 @@ pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Me
     }
     // SAFETY: p is non-null, aligned and readable. `method` is read as the u32 it is in C, never
     // as a `GrMethod`, so an unknown value is not undefined behaviour.
-    let (basis_order, quadrature_order, tolerance, visibility, visibility_samples, threads, method) = unsafe {
+    let (basis_order, quadrature_order, tolerance, visibility, visibility_samples, threads, method, gather) = unsafe {
         (
             (&raw const (*p).basis_order).read(),
             (&raw const (*p).quadrature_order).read(),
@@ -85,6 +90,7 @@ pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Me
             (&raw const (*p).visibility_samples).read(),
             (&raw const (*p).threads).read(),
             (&raw const (*p).method).cast::<u32>().read(),
+            (&raw const (*p).corner_gather).read(),
         )
     };
     let method = match method {
@@ -102,6 +108,13 @@ pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Me
             return Err(Failure::invalid(format!("settings.visibility {v} is neither 0 nor 1")));
         }
     };
+    let corner_gather = match gather {
+        0 => false,
+        1 => true,
+        v => {
+            return Err(Failure::invalid(format!("settings.corner_gather {v} is neither 0 nor 1")));
+        }
+    };
     let settings = Settings {
         basis_order: basis_order as usize,
         quadrature_order: quadrature_order as usize,
@@ -109,6 +122,7 @@ pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Me
         visibility,
         visibility_samples: visibility_samples as usize,
         threads: threads as usize,
+        corner_gather,
         // Settings the C struct does not carry keep the library's defaults.
         ..Settings::default()
     };

@@ -26,6 +26,7 @@ struct SettingsFile {
     visibility_samples: Option<usize>,
     threads: Option<usize>,
     adaptive_quadrature: Option<bool>,
+    corner_gather: Option<bool>,
 }
 
 #[derive(Deserialize)]
@@ -99,6 +100,7 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
         visibility_samples: s.visibility_samples.unwrap_or(d.visibility_samples),
         threads: s.threads.unwrap_or(d.threads),
         adaptive_quadrature: s.adaptive_quadrature.unwrap_or(d.adaptive_quadrature),
+        corner_gather: s.corner_gather.unwrap_or(d.corner_gather),
     };
     let mut materials = Vec::new();
     let mut emission_keys = Vec::new();
@@ -249,7 +251,7 @@ pub fn scene_to_json(scene: &Scene) -> String {
         "version": 1,
         "settings": {
             "basis_order": s.basis_order, "quadrature_order": s.quadrature_order, "tolerance": s.tolerance,
-            "visibility": s.visibility, "visibility_samples": s.visibility_samples, "threads": s.threads, "adaptive_quadrature": s.adaptive_quadrature,
+            "visibility": s.visibility, "visibility_samples": s.visibility_samples, "threads": s.threads, "adaptive_quadrature": s.adaptive_quadrature, "corner_gather": s.corner_gather,
         },
         "frames": [scene.frames.0, scene.frames.1],
         "materials": materials,

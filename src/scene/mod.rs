@@ -30,6 +30,9 @@ pub struct Settings {
     /// Fewer quadrature points for well-separated pairs (README, "Quadrature"); off only for
     /// reference solutions.
     pub adaptive_quadrature: bool,
+    /// Face corners report `B` gathered at the corner from the solution ([`crate::gather`]),
+    /// with its own shadow rays, instead of the face polynomial's value there.
+    pub corner_gather: bool,
 }
 
 impl Default for Settings {
@@ -42,6 +45,7 @@ impl Default for Settings {
             visibility_samples: 2,
             threads: 0,
             adaptive_quadrature: true,
+            corner_gather: true,
         }
     }
 }

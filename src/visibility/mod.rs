@@ -133,6 +133,25 @@ impl Occluders {
         self.samples_per_axis
     }
 
+    /// Whether the segment from `a` (on element `i`) to `b` (on element `j`) is unobstructed by
+    /// any other element: one ray, for point queries such as the corner gather.
+    pub fn segment_visible(&self, a: DVec3, b: DVec3, i: u32, j: u32) -> bool {
+        !self.bvh.occluded(a, b - a, 1e-9, 1.0 - 1e-9, i, j)
+    }
+
+    /// Whether some occluder triangle, not of element `i`, has bounds within `r` of the point `x`
+    /// and reaches in front of its tangent plane (normal `n`): something may hide `x` from close by.
+    pub fn any_near(&self, x: DVec3, n: DVec3, r: f64, i: u32) -> bool {
+        let query = crate::geometry::Aabb { min: x - DVec3::splat(r), max: x + DVec3::splat(r) };
+        let eps = 1e-9 * self.scale;
+        let mut found = false;
+        self.bvh.for_each_overlapping(&query, |t| {
+            let tri = &self.bvh.triangles()[t];
+            found |= tri.element != i && tri.v.iter().any(|v| n.dot(*v - x) > eps);
+        });
+        found
+    }
+
     /// Visibility between elements `i` and `j`; also returns whether any ray was needed.
     pub fn link_visibility(&self, i: usize, pi: &Patch, j: usize, pj: &Patch) -> Visibility {
         let shaft = Shaft::new(&pi.bounds(), &pj.bounds());

@@ -3,10 +3,11 @@ DIFFUSE bake at 128 samples as ground truth, ours at basis order 2 through the a
 
 Tolerances come from the sample count: two Cycles bakes with different seeds measure Cycles'
 own noise; per-object mean radiance (averaged over all corners, so the noise mostly cancels)
-must agree within 3% + 2 noise-of-the-mean and the RMSE within 3% + 2 x the per-corner noise
-on the three walls; the blocks' and floor's means within 10%, the ceiling's within 15%. The floor
-under the blocks and the ceiling behind the light are
-reported, not asserted (a per-face polynomial cannot follow those discontinuities: README).
+must agree within 3% + 2 noise-of-the-mean and the RMSE within 3% + 2 x the per-corner noise on
+the walls, floor, ceiling and tall block: the corner gather (src/gather.rs) darkens the corners
+under the blocks and behind the light as Cycles does. The short block's bottom corners see the
+floor through the floor faces' polynomials, which a block edge crosses: its mean within 10%, its
+RMSE reported (README, "Validation against Cycles").
 """
 
 import subprocess
@@ -49,8 +50,7 @@ def test_cornell_box_agrees_with_cycles(blender, tmp_path):
         rmse = bakes.relative_rmse(ours, ref)
         lines.append(f"{ob.name}: mean {mean_error:.3f}, rmse {rmse:.3f}, Cycles noise {noise:.3f}")
         print(lines[-1])
-        if ob.name in ("BackWall", "RightWall", "LeftWall"):
+        if ob.name != "ShortBlock":
             assert rmse < 0.03 + 2 * noise, lines[-1]
             assert mean_error < 0.03 + 2 * mean_noise, lines[-1]
-        # Blocks are single faces at this size, touching the floor: their corner means are looser.
-        assert mean_error < (0.10 if ob.name != "Ceiling" else 0.15), lines[-1]
+        assert mean_error < 0.10, lines[-1]

@@ -1,0 +1,184 @@
+//! The corner gather (src/gather.rs): closed forms at corners, and corners hidden by contact.
+
+use galerkin_radiosity::gather;
+use galerkin_radiosity::scene::{Material, Object, Scene, Settings};
+use galerkin_radiosity::scenes;
+use galerkin_radiosity::system::{System, no_progress};
+use glam::DVec3;
+
+fn solved(scene: &Scene) -> System {
+    let mut sys = System::build(scene, 1.0, &no_progress).unwrap();
+    sys.solve(scene.settings.tolerance, &|| false).unwrap();
+    sys
+}
+
+fn gathered(scene: &Scene) -> (System, Vec<Vec<[f32; 3]>>) {
+    let mut sys = solved(scene);
+    let polynomial = sys.face_results(scene, 1.0).into_iter().map(|r| r.corner_radiosity).collect();
+    sys.gather_corners(scene, 1.0, &no_progress).unwrap();
+    (sys, polynomial)
+}
+
+fn materials(rho: f64, emission: f64) -> Vec<Material> {
+    vec![
+        Material { name: "grey".into(), reflectance: [rho; 3], emission: [0.0; 3] },
+        Material { name: "emitter".into(), reflectance: [0.0; 3], emission: [emission; 3] },
+    ]
+}
+
+/// Closed enclosure, uniform rho and E: B = E / (1 - rho) at every corner too, including the
+/// room's edges and corners, where a perpendicular wall is nearly singular.
+#[test]
+fn furnace_corners_are_e_over_one_minus_rho() {
+    for &(n, order, rho) in &[(2, 1, 0.5), (3, 2, 0.9)] {
+        let scene = scenes::closed_box(
+            n,
+            rho,
+            1.0,
+            Settings { basis_order: order, tolerance: 1e-8, ..Settings::default() },
+        );
+        let (sys, _) = gathered(&scene);
+        let want = 1.0 / (1.0 - rho);
+        let mut worst: f64 = 0.0;
+        for r in sys.face_results(&scene, 1.0) {
+            for c in &r.corner_radiosity {
+                worst = worst.max((c[0] as f64 - want).abs() / want);
+            }
+        }
+        eprintln!("furnace n {n} order {order} rho {rho}: worst corner error {worst:.2e}");
+        assert!(worst < 2e-3, "worst relative corner error {worst}");
+    }
+}
+
+/// Differential area parallel to an `a x b` rectangle at distance `c`, under its corner
+/// (references.md).
+fn corner_rectangle(a: f64, b: f64, c: f64) -> f64 {
+    let (x, y) = (a / c, b / c);
+    let (sx, sy) = ((1.0 + x * x).sqrt(), (1.0 + y * y).sqrt());
+    (x / sx * (y / sx).atan() + y / sy * (x / sy).atan()) / (2.0 * std::f64::consts::PI)
+}
+
+/// A differential area under the corner of a parallel 1 x 1 emitter at height 1 receives
+/// F = 0.138532 (references.md): the floor corner is `rho Be F`, gathered at the corner moved
+/// `INSET` into its face, where four rectangles superpose.
+#[test]
+fn corner_under_parallel_emitter_matches_closed_form() {
+    let floor = scenes::subdivided_quad(
+        "floor",
+        [DVec3::ZERO, DVec3::new(2.0, 0.0, 0.0), DVec3::new(2.0, 2.0, 0.0), DVec3::new(0.0, 2.0, 0.0)],
+        2,
+        0,
+    );
+    // Emitter over [0,1]^2 at z = 1, facing down; its corner above the floor's corner (0,0).
+    let e = [
+        DVec3::new(0.0, 0.0, 1.0),
+        DVec3::new(0.0, 1.0, 1.0),
+        DVec3::new(1.0, 1.0, 1.0),
+        DVec3::new(1.0, 0.0, 1.0),
+    ];
+    let emitter = scenes::subdivided_quad("emitter", e, 1, 1);
+    let (rho, be) = (0.5, 10.0);
+    let settings = Settings { basis_order: 2, tolerance: 1e-9, ..Settings::default() };
+    let scene =
+        Scene::new(settings, (1, 1), materials(rho, be), vec![vec![], vec![]], vec![floor, emitter]).unwrap();
+    let (sys, polynomial) = gathered(&scene);
+    let floor = &sys.face_results(&scene, 1.0)[0];
+    // Face 0 spans [0,1]^2 of the floor; its corner 0 is (0,0), under the emitter's corner.
+    let got = floor.corner_radiosity[0][0] as f64;
+    assert!((corner_rectangle(1.0, 1.0, 1.0) - 0.138532).abs() < 1e-6);
+    let d = gather::INSET;
+    let f = corner_rectangle(d, d, 1.0)
+        + 2.0 * corner_rectangle(1.0 - d, d, 1.0)
+        + corner_rectangle(1.0 - d, 1.0 - d, 1.0);
+    let want = rho * be * f;
+    let rel = (got - want).abs() / want;
+    let poly = polynomial[0][0][0] as f64;
+    eprintln!("corner: gathered {got:.5}, polynomial {poly:.5}, closed form {want:.5} ({rel:.1e})");
+    assert!(rel < 1e-4, "gathered {got} vs {want}");
+}
+
+/// An open-bottom box standing on the floor over the floor's corner: the corner sees nothing and
+/// is black, as a vertex bake finds it; the face polynomial under the box edge leaks light there.
+#[test]
+fn corner_under_a_standing_box_is_dark() {
+    let floor = scenes::subdivided_quad(
+        "floor",
+        [DVec3::ZERO, DVec3::new(1.0, 0.0, 0.0), DVec3::new(1.0, 1.0, 0.0), DVec3::new(0.0, 1.0, 0.0)],
+        2,
+        0,
+    );
+    let e = [
+        DVec3::new(-1.0, -1.0, 2.0),
+        DVec3::new(-1.0, 2.0, 2.0),
+        DVec3::new(2.0, 2.0, 2.0),
+        DVec3::new(2.0, -1.0, 2.0),
+    ];
+    let emitter = scenes::subdivided_quad("emitter", e, 1, 1);
+    let scene = Scene::new(
+        Settings { basis_order: 2, tolerance: 1e-8, ..Settings::default() },
+        (1, 1),
+        materials(0.5, 1.0),
+        vec![vec![], vec![]],
+        vec![floor, emitter, open_box(DVec3::new(-0.2, -0.2, 0.0), DVec3::new(0.3, 0.3, 0.5))],
+    )
+    .unwrap();
+    let (sys, polynomial) = gathered(&scene);
+    let floor = &sys.face_results(&scene, 1.0)[0];
+    // Face 0 = [0,0.5]^2: corner 0 (0,0) under the box, corner 2 (0.5,0.5) in the open.
+    let (hidden, open) = (floor.corner_radiosity[0][0], floor.corner_radiosity[2][0]);
+    let leak = polynomial[0][0][0];
+    eprintln!("hidden corner {hidden:.2e}, open corner {open:.4}, polynomial at the hidden corner {leak:.4}");
+    assert!(open > 0.05, "the open corner is lit: {open}");
+    assert!(hidden < 1e-6 * open, "the hidden corner is dark: {hidden}");
+    // The face polynomial is far off at that corner (here it undershoots): else this test shows nothing.
+    assert!(leak.abs() > 0.1 * open, "the polynomial is right at the hidden corner: {leak}");
+}
+
+/// Five outward faces (no bottom) of the axis-aligned box `lo..hi`.
+fn open_box(lo: DVec3, hi: DVec3) -> Object {
+    let p = |x: f64, y: f64, z: f64| DVec3::new(x, y, z);
+    let (a, b) = (lo, hi);
+    let faces = [
+        [p(a.x, a.y, b.z), p(b.x, a.y, b.z), p(b.x, b.y, b.z), p(a.x, b.y, b.z)],
+        [p(a.x, a.y, a.z), p(b.x, a.y, a.z), p(b.x, a.y, b.z), p(a.x, a.y, b.z)],
+        [p(b.x, a.y, a.z), p(b.x, b.y, a.z), p(b.x, b.y, b.z), p(b.x, a.y, b.z)],
+        [p(b.x, b.y, a.z), p(a.x, b.y, a.z), p(a.x, b.y, b.z), p(b.x, b.y, b.z)],
+        [p(a.x, b.y, a.z), p(a.x, a.y, a.z), p(a.x, a.y, b.z), p(a.x, b.y, b.z)],
+    ];
+    scenes::merge("box", faces.iter().map(|q| scenes::subdivided_quad("side", *q, 1, 0)).collect())
+}
+
+/// Gathered corners of the incremental update equal those of a from-scratch solve of the same
+/// frame (the gather reads only the solution), within 1% of the peak as in tests/animation.rs.
+#[test]
+fn gathered_corners_of_incremental_frames_match_full() {
+    use galerkin_radiosity::session::{Method, Session};
+    let scene = scenes::cornell_box_animated(
+        4,
+        3,
+        Settings { basis_order: 1, tolerance: 1e-5, ..Settings::default() },
+    );
+    let corners = |method| {
+        let mut session = Session::new(scene.clone(), method).unwrap();
+        (1..=3)
+            .map(|f| {
+                let stats = session.solve_frame(f as f64, &no_progress).unwrap();
+                assert!(stats.gather_seconds > 0.0);
+                session
+                    .face_results()
+                    .unwrap()
+                    .into_iter()
+                    .flat_map(|r| r.corner_radiosity)
+                    .collect::<Vec<_>>()
+            })
+            .collect::<Vec<_>>()
+    };
+    let (inc, full) = (corners(Method::Incremental), corners(Method::Full));
+    for (f, (a, b)) in inc.iter().zip(&full).enumerate() {
+        let peak = b.iter().flatten().fold(0.0f32, |m, x| m.max(*x));
+        let worst =
+            a.iter().zip(b).flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).abs())).fold(0.0, f32::max);
+        eprintln!("frame {}: worst gathered corner difference {:.2e} of peak", f + 1, worst / peak);
+        assert!(worst <= 0.01 * peak, "frame {}: {worst} vs peak {peak}", f + 1);
+    }
+}
