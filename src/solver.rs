@@ -99,6 +99,7 @@ pub fn shoot(
     let mut stats = ShootStats::default();
     let parts = receiver_ranges(links, n, rayon::current_num_threads().max(1));
     let mut shots: Vec<Shot> = Vec::new();
+    let mut gathered = vec![0.0f64; n * 3 * nb];
     loop {
         let total: f64 = element_power.iter().sum();
         let best = priority.iter().copied().fold(0.0, f64::max);
@@ -133,21 +134,33 @@ pub fn shoot(
         // Split the outputs along the receiver ranges.
         let mut work = Vec::with_capacity(ranges.len());
         let (mut b, mut unshot) = (&mut x.b[..], &mut x.unshot[..]);
-        let (mut pr, mut ep) = (&mut priority[..], &mut element_power[..]);
+        let (mut pr, mut ep, mut gs) = (&mut priority[..], &mut element_power[..], &mut gathered[..]);
         for &(lo, hi) in ranges {
-            let (b0, b1) = b.split_at_mut((hi - lo) * nb);
-            let (u0, u1) = unshot.split_at_mut((hi - lo) * nb);
-            let (p0, p1) = pr.split_at_mut((hi - lo) * nb);
-            let (e0, e1) = ep.split_at_mut(hi - lo);
-            work.push(Part { lo, hi, b: b0, unshot: u0, priority: p0, element_power: e0 });
-            (b, unshot, pr, ep) = (b1, u1, p1, e1);
+            let m = hi - lo;
+            let (b0, b1) = b.split_at_mut(m * nb);
+            let (u0, u1) = unshot.split_at_mut(m * nb);
+            let (p0, p1) = pr.split_at_mut(m * nb);
+            let (e0, e1) = ep.split_at_mut(m);
+            let (g0, g1) = gs.split_at_mut(m * 3 * nb);
+            work.push(Part { lo, hi, b: b0, unshot: u0, priority: p0, element_power: e0, gathered: g0 });
+            (b, unshot, pr, ep, gs) = (b1, u1, p1, e1, g1);
         }
         let shots = &shots;
         let run = |part: Part| {
             let mut touched = vec![false; part.hi - part.lo];
-            shoot_range(links, reflectance, shots, nb, part.lo, part.hi, part.b, part.unshot, &mut touched);
+            shoot_range(links, shots, nb, part.lo, part.hi, part.gathered, &mut touched);
+            // rho_i is the same for every shooter, so it multiplies the sum once, here.
             for (r, _) in touched.iter().enumerate().filter(|(_, t)| **t) {
                 let e = part.lo + r;
+                let g = &mut part.gathered[r * 3 * nb..(r + 1) * 3 * nb];
+                for k in 0..nb {
+                    for c in 0..3 {
+                        let d = reflectance[e][c] * g[c * nb + k];
+                        part.b[r * nb + k][c] += d;
+                        part.unshot[r * nb + k][c] += d;
+                    }
+                }
+                g.fill(0.0);
                 let u = &part.unshot[r * nb..(r + 1) * nb];
                 part.element_power[r] = power(u, area[e]);
                 for l in 0..nb {
@@ -171,6 +184,8 @@ struct Part<'a> {
     unshot: &'a mut [[f64; 3]],
     priority: &'a mut [f64],
     element_power: &'a mut [f64],
+    /// `sum_j G_ij u_j` per receiver, `[c][k]`, zero between batches.
+    gathered: &'a mut [f64],
 }
 
 /// Splits elements `0..n` into at most `parts` consecutive ranges receiving about the same
@@ -192,109 +207,94 @@ fn receiver_ranges(links: &LinkStore, n: usize, parts: usize) -> Vec<(usize, usi
 }
 
 /// Adds to receivers `lo..hi` (outputs indexed from `lo`) what the batch `shots` (grouped by
-/// element, as taken) sends them: `rho_i sum_l G_ij^{.l} u_l` into `b` and `unshot`.
-#[allow(clippy::too_many_arguments)]
+/// element, as taken) sends them before reflection, `sum_l G_ij^{kl} u_l`, into `gathered`
+/// (`[receiver][c][k]`), and marks them `touched`.
 fn shoot_range(
     links: &LinkStore,
-    reflectance: &[[f64; 3]],
     shots: &[Shot],
     nb: usize,
     lo: usize,
     hi: usize,
-    b: &mut [[f64; 3]],
-    unshot: &mut [[f64; 3]],
+    gathered: &mut [f64],
     touched: &mut [bool],
 ) {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx512f") {
             // SAFETY: the CPU has AVX-512F (checked above).
-            unsafe { shoot_range_avx512(links, reflectance, shots, nb, lo, hi, b, unshot, touched) };
+            unsafe { shoot_range_avx512(links, shots, nb, lo, hi, gathered, touched) };
             return;
         }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2 (checked above).
-            unsafe { shoot_range_avx2(links, reflectance, shots, nb, lo, hi, b, unshot, touched) };
+            unsafe { shoot_range_avx2(links, shots, nb, lo, hi, gathered, touched) };
             return;
         }
     }
-    shoot_range_body(links, reflectance, shots, nb, lo, hi, b, unshot, touched);
+    shoot_range_body(links, shots, nb, lo, hi, gathered, touched);
 }
 
 /// [`shoot_range`] compiled for AVX-512 (wider conversions and products), same operations.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,avx512f")]
-#[allow(clippy::too_many_arguments)]
 fn shoot_range_avx512(
     links: &LinkStore,
-    reflectance: &[[f64; 3]],
     shots: &[Shot],
     nb: usize,
     lo: usize,
     hi: usize,
-    b: &mut [[f64; 3]],
-    unshot: &mut [[f64; 3]],
+    gathered: &mut [f64],
     touched: &mut [bool],
 ) {
-    shoot_range_body(links, reflectance, shots, nb, lo, hi, b, unshot, touched);
+    shoot_range_body(links, shots, nb, lo, hi, gathered, touched);
 }
 
 /// [`shoot_range`] compiled for AVX2, same operations.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-#[allow(clippy::too_many_arguments)]
 fn shoot_range_avx2(
     links: &LinkStore,
-    reflectance: &[[f64; 3]],
     shots: &[Shot],
     nb: usize,
     lo: usize,
     hi: usize,
-    b: &mut [[f64; 3]],
-    unshot: &mut [[f64; 3]],
+    gathered: &mut [f64],
     touched: &mut [bool],
 ) {
-    shoot_range_body(links, reflectance, shots, nb, lo, hi, b, unshot, touched);
+    shoot_range_body(links, shots, nb, lo, hi, gathered, touched);
 }
 
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 fn shoot_range_body(
     links: &LinkStore,
-    reflectance: &[[f64; 3]],
     shots: &[Shot],
     nb: usize,
     lo: usize,
     hi: usize,
-    b: &mut [[f64; 3]],
-    unshot: &mut [[f64; 3]],
+    gathered: &mut [f64],
     touched: &mut [bool],
 ) {
-    let out = Out { lo, hi, b, unshot, touched };
     match nb {
-        1 => shoot_range_nb::<1>(links, reflectance, shots, out),
-        4 => shoot_range_nb::<4>(links, reflectance, shots, out),
-        9 => shoot_range_nb::<9>(links, reflectance, shots, out),
-        16 => shoot_range_nb::<16>(links, reflectance, shots, out),
+        1 => shoot_range_nb::<1>(links, shots, lo, hi, gathered, touched),
+        4 => shoot_range_nb::<4>(links, shots, lo, hi, gathered, touched),
+        9 => shoot_range_nb::<9>(links, shots, lo, hi, gathered, touched),
+        16 => shoot_range_nb::<16>(links, shots, lo, hi, gathered, touched),
         nb => unreachable!("{nb} basis functions"),
     }
 }
 
-/// Receivers `lo..hi` and their outputs, indexed from `lo`.
-struct Out<'a> {
-    lo: usize,
-    hi: usize,
-    b: &'a mut [[f64; 3]],
-    unshot: &'a mut [[f64; 3]],
-    touched: &'a mut [bool],
-}
-
 /// [`shoot_range`] with `NB` basis functions.
 #[inline(always)]
-fn shoot_range_nb<const NB: usize>(links: &LinkStore, reflectance: &[[f64; 3]], shots: &[Shot], out: Out) {
-    let Out { lo, hi, b, unshot, touched } = out;
-    let (b, _) = b.as_chunks_mut::<NB>();
-    let (unshot, _) = unshot.as_chunks_mut::<NB>();
+fn shoot_range_nb<const NB: usize>(
+    links: &LinkStore,
+    shots: &[Shot],
+    lo: usize,
+    hi: usize,
+    gathered: &mut [f64],
+    touched: &mut [bool],
+) {
+    let (gathered, _) = gathered.as_chunks_mut::<NB>();
+    let (gathered, _) = gathered.as_chunks_mut::<3>();
     for group in shots.chunk_by(|x, y| x.e == y.e) {
         let e = group[0].e;
         let receivers = links.receivers_of(e);
@@ -309,8 +309,8 @@ fn shoot_range_nb<const NB: usize>(links: &LinkStore, reflectance: &[[f64; 3]], 
             if i < lo || i >= hi {
                 continue;
             }
-            // acc[c][k] = sum_l G[k][l] u[l][c] over the group's l, vectorised over k.
-            let mut acc = [[0.0f64; NB]; 3];
+            // acc[c][k] += sum_l G[k][l] u[l][c] over the group's l, vectorised over k.
+            let acc = &mut gathered[i - lo];
             for (col, s) in cols.iter().zip(group) {
                 let g: [f64; NB] = std::array::from_fn(|k| col[r][k] as f64);
                 for c in 0..3 {
@@ -319,16 +319,7 @@ fn shoot_range_nb<const NB: usize>(links: &LinkStore, reflectance: &[[f64; 3]], 
                     }
                 }
             }
-            let rho = reflectance[i];
-            let i = i - lo;
-            for k in 0..NB {
-                for c in 0..3 {
-                    let d = rho[c] * acc[c][k];
-                    b[i][k][c] += d;
-                    unshot[i][k][c] += d;
-                }
-            }
-            touched[i] = true;
+            touched[i - lo] = true;
         }
     }
 }
