@@ -9,8 +9,10 @@
 //! tracer's vertex bake does; where the polynomial is good, both agree to quadrature error. This
 //! is the classic "final gather" / local pass of radiosity systems (e.g. Lischinski et al. 1993).
 //!
-//! Sources are the elements linked with the corner's element (nothing else can reach it). Which
-//! rays are cast depends on the link's element-to-element visibility and on what lies next to the
+//! Sources are the emitters, always with shadow rays from the corner (direct light casts the
+//! sharpest shadows, and a corner on its element's edge can sit in a penumbra none of the
+//! element's visibility samples is in), and the elements linked with the corner's element. For
+//! those, which rays are cast depends on the link's visibility and on what lies next to the
 //! corner: a corner on an element edge can be hidden while every visibility sample of its element
 //! sees (a light hung just below the ceiling over a corner), or see while none does, and a pair
 //! blocked everywhere has no link at all. So when some occluder comes within the element's radius
@@ -63,13 +65,36 @@ pub fn corner_radiosity(
     // Each source's Gauss nodes over its whole domain, with B there: the common far case.
     let nodes: Vec<Nodes> =
         patches.par_iter().enumerate().map(|(j, p)| Nodes::new(sys, j, p, &Rect::UNIT, &rule)).collect();
-    // One task per face corner: (object, face, corner) -> the element and local point.
+    let nb = sys.basis.len();
+    let is_emitter: Vec<bool> =
+        (0..patches.len()).map(|e| sys.emission[e * nb].iter().any(|&x| x > 0.0)).collect();
+    let emitters: Vec<usize> = (0..patches.len()).filter(|&e| is_emitter[e]).collect();
+    // One task per distinct corner point: faces of one object meeting at a vertex with the same
+    // normal and material see the same light there (4 faces per vertex of a grid), gathered once.
     let mut tasks = Vec::new();
+    let mut task_of_corner = Vec::new();
+    let mut shared = std::collections::HashMap::new();
     for (o, obj) in scene.objects.iter().enumerate() {
         for (f, face) in obj.faces.iter().enumerate() {
-            for (s, t) in corner_params(face.len()) {
+            for (&v, (s, t)) in face.iter().zip(corner_params(face.len())) {
                 let (si, ti) = (s.clamp(INSET, 1.0 - INSET), t.clamp(INSET, 1.0 - INSET));
-                tasks.push((o, sys.element_of_face(o, f, si, ti), obj.face_materials[f]));
+                let at = sys.element_of_face(o, f, si, ti);
+                let material = obj.face_materials[f];
+                let key = at.map(|(e, s, t)| {
+                    let n = sys.elements[e].patch.area_vector(s, t).normalize_or_zero();
+                    (o, v, material, (n * 1e6).round().as_i64vec3().to_array())
+                });
+                let task = match key.and_then(|k| shared.get(&k)) {
+                    Some(&task) => task,
+                    None => {
+                        tasks.push((at, material));
+                        if let Some(k) = key {
+                            shared.insert(k, tasks.len() - 1);
+                        }
+                        tasks.len() - 1
+                    }
+                };
+                task_of_corner.push(task);
             }
         }
     }
@@ -77,14 +102,22 @@ pub fn corner_radiosity(
     let done = std::sync::atomic::AtomicUsize::new(0);
     let values: Vec<[f64; 3]> = tasks
         .par_iter()
-        .map(|&(_, at, material)| {
+        .map(|&(at, material)| {
             let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             if d.is_multiple_of(256) && !progress(d as f64 / total.max(1) as f64, "corner gather") {
                 return Err(Error::Cancelled);
             }
             Ok(match at {
                 Some((e, s, t)) => {
-                    let gather = Gather { sys, patches: &patches, nodes: &nodes, rule: &rule, occluders };
+                    let gather = Gather {
+                        sys,
+                        emitters: &emitters,
+                        is_emitter: &is_emitter,
+                        patches: &patches,
+                        nodes: &nodes,
+                        rule: &rule,
+                        occluders,
+                    };
                     gather.at(e, s, t)
                 }
                 None => scene.emission_at(material as usize, frame),
@@ -92,7 +125,7 @@ pub fn corner_radiosity(
         })
         .collect::<Result<_>>()?;
     let mut out: Vec<Vec<[f64; 3]>> = Vec::with_capacity(scene.objects.len());
-    let mut it = values.into_iter();
+    let mut it = task_of_corner.into_iter().map(|task| values[task]);
     for obj in &scene.objects {
         let n: usize = obj.faces.iter().map(|f| corner_params(f.len()).len()).sum();
         out.push(it.by_ref().take(n).collect());
@@ -126,6 +159,9 @@ impl Nodes {
 /// What one corner needs: the solved system, its elements' geometry and the occluders.
 struct Gather<'a> {
     sys: &'a System,
+    /// Elements with emission, and the flag per element.
+    emitters: &'a [usize],
+    is_emitter: &'a [bool],
     patches: &'a [Patch],
     nodes: &'a [Nodes],
     rule: &'a GaussLegendre,
@@ -165,6 +201,9 @@ impl Gather<'_> {
             let pair = sys.links.pair(p);
             let j = sys.links.other(p, i as ElementId) as usize;
             linked.push(j);
+            if self.is_emitter[j] {
+                continue;
+            }
             let cast = match (&pair.visibility, !rx.near) {
                 _ if self.occluders.is_none() => Rays::None,
                 (Visibility::Full, true) => Rays::None,
@@ -174,14 +213,21 @@ impl Gather<'_> {
             };
             add(self.irradiance_from(&rx, j, &Rect::UNIT, cast, 0));
         }
+        // Direct light makes the sharpest shadows, and a corner can sit in a penumbra that none
+        // of its element's visibility samples is in: emitters are always sources, with rays.
+        let faces_corner = |j: usize| {
+            j != i && self.patches[j].front_plane().is_none_or(|f| f.any_in_front(&self.patches[i]))
+        };
+        for &j in self.emitters.iter().filter(|&&j| faces_corner(j)) {
+            let rays = if self.occluders.is_some() { Rays::All } else { Rays::None };
+            add(self.irradiance_from(&rx, j, &Rect::UNIT, rays, 0));
+        }
         // Next to an occluder the corner may see what no sample of its element sees, and the
         // store holds no link for a pair blocked everywhere: every other element is a source.
         if rx.near {
             linked.sort_unstable();
-            for j in (0..self.patches.len()).filter(|&j| j != i && linked.binary_search(&j).is_err()) {
-                if self.patches[j].front_plane().is_some_and(|f| !f.any_in_front(&self.patches[i])) {
-                    continue;
-                }
+            let unlinked = |j: &usize| linked.binary_search(j).is_err() && !self.is_emitter[*j];
+            for j in (0..self.patches.len()).filter(unlinked).filter(|&j| faces_corner(j)) {
                 add(self.irradiance_from(&rx, j, &Rect::UNIT, Rays::All, 0));
             }
         }

@@ -1,7 +1,7 @@
 //! `galerkin-radiosity`: bake a scene file, or write the demo scene.
 //!
 //! ```text
-//! galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--quiet]
+//! galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--no-corner-gather] [--quiet]
 //! galerkin-radiosity demo-scene -o SCENE.json [--frames N] [--subdiv N] [--order N]
 //! ```
 //! Exits 0 on success, 1 on any error with a one-line message on stderr, 2 on a usage error.
@@ -17,7 +17,7 @@ use galerkin_radiosity::scenes;
 use galerkin_radiosity::session::{Method, Session};
 
 const USAGE: &str = "usage:
-  galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--quiet]
+  galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--no-corner-gather] [--quiet]
   galerkin-radiosity demo-scene -o SCENE.json [--kind cornell|cornell-light|room|billiard] [--frames N] [--subdiv N] [--order N]";
 
 fn main() -> ExitCode {
@@ -91,6 +91,7 @@ fn bake(args: &[String]) -> Result<(), CliError> {
     let full = take_flag(&mut args, "--full");
     let exact = take_flag(&mut args, "--exact");
     let quiet = take_flag(&mut args, "--quiet");
+    let no_gather = take_flag(&mut args, "--no-corner-gather");
     if full && exact {
         return Err(CliError::Usage("--full and --exact exclude each other".into()));
     }
@@ -100,6 +101,9 @@ fn bake(args: &[String]) -> Result<(), CliError> {
     let mut scene = read_scene(&PathBuf::from(input))?;
     if let Some(t) = threads {
         scene.settings.threads = parse(&t, "--threads")?;
+    }
+    if no_gather {
+        scene.settings.corner_gather = false;
     }
     let (first, last) = match frames {
         None => scene.frames,
