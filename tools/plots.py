@@ -25,11 +25,9 @@ def parse(argv):
 
 def frame_times(scene_file, out, method_flags):
     result = out / f"times{''.join(method_flags) or '-incremental'}.json"
-    subprocess.run(
-        # The corner gather costs every method the same; the plot compares the methods.
-        [str(cli()), "bake", str(scene_file), "-o", str(result), "--quiet", "--no-corner-gather", *method_flags],
-        check=True,
-    )
+    # The corner gather costs every method the same; the plot compares the methods.
+    cmd = [str(cli()), "bake", str(scene_file), "-o", str(result), "--quiet", "--no-corner-gather"]
+    subprocess.run([*cmd, *method_flags], check=True)
     frames = json.loads(result.read_text())["frames"]
     return [f["frame"] for f in frames], [f["stats"]["seconds"] for f in frames], frames
 
