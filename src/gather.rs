@@ -25,7 +25,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::geometry::{Patch, Rect};
+use crate::geometry::{Aabb, Patch, Rect};
 use crate::kernel::point::{point_kernel, point_to_polygon};
 use crate::kernel::samples::Samples;
 use crate::links::ElementId;
@@ -250,7 +250,7 @@ impl Gather<'_> {
                 local = Nodes::new(self.sys, j, patch, rect, self.rule);
                 &local
             };
-            return self.gauss(rx, j, nodes, cast);
+            return self.gauss(rx, j, nodes, &sub.bounds(), cast);
         }
         if depth >= MAX_DEPTH {
             let (s, t) = rect.map(0.5, 0.5);
@@ -273,14 +273,21 @@ impl Gather<'_> {
         sum
     }
 
-    fn gauss(&self, rx: &Receiver, j: usize, nodes: &Nodes, cast: Rays) -> [f64; 3] {
+    /// The Gauss sum over `nodes` of source `j` (inside `bounds`), shadow rays as `cast` says.
+    fn gauss(&self, rx: &Receiver, j: usize, nodes: &Nodes, bounds: &Aabb, cast: Rays) -> [f64; 3] {
+        let mut lit: Vec<(usize, f64)> = (0..nodes.position.len())
+            .map(|k| (k, point_kernel(rx.x, rx.n, nodes.position[k], nodes.normal[k])))
+            .filter(|&(_, g)| g != 0.0)
+            .collect();
+        if let (Rays::All, Some(o), false) = (cast, self.occluders, lit.is_empty()) {
+            let targets: Vec<DVec3> = lit.iter().map(|&(k, _)| nodes.position[k]).collect();
+            let mut visible = Vec::with_capacity(targets.len());
+            o.point_visibility(rx.x, rx.n, (rx.element, j as u32), bounds, &targets, &mut visible);
+            let mut v = visible.into_iter();
+            lit.retain(|_| v.next() == Some(true));
+        }
         let mut sum = [0.0; 3];
-        for k in 0..nodes.position.len() {
-            let y = nodes.position[k];
-            let g = point_kernel(rx.x, rx.n, y, nodes.normal[k]);
-            if g == 0.0 || !self.visible(rx, j, y, cast) {
-                continue;
-            }
+        for (k, g) in lit {
             let w = g * nodes.area_weight[k];
             for c in 0..3 {
                 sum[c] += w * nodes.radiosity[k][c];

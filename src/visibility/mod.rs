@@ -139,6 +139,51 @@ impl Occluders {
         !self.bvh.occluded(a, b - a, 1e-9, 1.0 - 1e-9, i, j)
     }
 
+    /// Which segments from the point `x` (on element `i`, front normal `n`) to `targets` (points
+    /// of element `j`, inside `bounds`) are unobstructed, written to `out` in order. Triangles are
+    /// first gathered from the shaft between `x` and `bounds` (usually none: no rays at all);
+    /// short lists are tested directly, long ones through the BVH.
+    pub fn point_visibility(
+        &self,
+        x: DVec3,
+        n: DVec3,
+        (i, j): (u32, u32),
+        bounds: &crate::geometry::Aabb,
+        targets: &[DVec3],
+        out: &mut Vec<bool>,
+    ) {
+        out.clear();
+        let eps = 1e-9 * self.scale;
+        let point = crate::geometry::Aabb { min: x, max: x };
+        let shaft = Shaft::new(&point, bounds);
+        // Segments leave `x` to its front: triangles wholly behind its tangent plane cannot block.
+        let behind = |b: &crate::geometry::Aabb| {
+            let (c, h) = (b.centre(), b.diagonal() * 0.5);
+            n.dot(c - x) + n.abs().dot(h) <= 0.5 * eps
+        };
+        let in_shaft = |b: &crate::geometry::Aabb| {
+            b.overlaps(&shaft.bounds) && shaft.may_contain_overlapping_box(b, eps) && !behind(b)
+        };
+        CANDIDATES.with_borrow_mut(|candidates| {
+            candidates.clear();
+            self.bvh.for_each_accepted(in_shaft, |t| {
+                let tri = &self.bvh.triangles()[t];
+                if tri.element != i && tri.element != j && shaft.may_contain_triangle(&tri.v, eps) {
+                    candidates.push(t);
+                }
+            });
+            if candidates.is_empty() {
+                out.resize(targets.len(), true);
+            } else if candidates.len() <= BRUTE_FORCE_CANDIDATES {
+                let tris = CandidateTriangles::gather(&self.edges, candidates);
+                let from = tris.from(x);
+                out.extend(targets.iter().map(|&y| !tris.any_hit(&from, y - x, 1e-9, 1.0 - 1e-9)));
+            } else {
+                out.extend(targets.iter().map(|&y| !self.bvh.occluded(x, y - x, 1e-9, 1.0 - 1e-9, i, j)));
+            }
+        });
+    }
+
     /// Whether some occluder triangle, not of element `i`, has bounds within `r` of the point `x`
     /// and reaches in front of its tangent plane (normal `n`): something may hide `x` from close by.
     pub fn any_near(&self, x: DVec3, n: DVec3, r: f64, i: u32) -> bool {
