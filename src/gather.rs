@@ -63,8 +63,12 @@ pub fn corner_radiosity(
     let rule = GaussLegendre::new(GAUSS_POINTS);
     let patches: Vec<Patch> = sys.elements.iter().map(|e| e.patch).collect();
     // Each source's Gauss nodes over its whole domain, with B there: the common far case.
-    let nodes: Vec<Nodes> =
-        patches.par_iter().enumerate().map(|(j, p)| Nodes::new(sys, j, p, &Rect::UNIT, &rule)).collect();
+    let cells_per_axis = scene.settings.visibility_samples;
+    let nodes: Vec<Nodes> = patches
+        .par_iter()
+        .enumerate()
+        .map(|(j, p)| Nodes::new(sys, j, p, &Rect::UNIT, &rule, cells_per_axis))
+        .collect();
     let nb = sys.basis.len();
     let is_emitter: Vec<bool> =
         (0..patches.len()).map(|e| sys.emission[e * nb].iter().any(|&x| x > 0.0)).collect();
@@ -117,6 +121,7 @@ pub fn corner_radiosity(
                         nodes: &nodes,
                         rule: &rule,
                         occluders,
+                        cells_per_axis,
                     };
                     gather.at(e, s, t)
                 }
@@ -136,15 +141,17 @@ pub fn corner_radiosity(
 /// Gauss nodes of a source rectangle: position, unit normal, area weight and `B` there.
 struct Nodes {
     position: Vec<DVec3>,
+    /// Visibility cell of each node in its element.
+    cell: Vec<usize>,
     normal: Vec<DVec3>,
     area_weight: Vec<f64>,
     radiosity: Vec<[f64; 3]>,
 }
 
 impl Nodes {
-    fn new(sys: &System, j: usize, patch: &Patch, rect: &Rect, rule: &GaussLegendre) -> Self {
+    fn new(sys: &System, j: usize, patch: &Patch, rect: &Rect, rule: &GaussLegendre, m: usize) -> Self {
         let nb = sys.basis.len();
-        let s = Samples::new(patch, rect, rule, sys.basis, 1);
+        let s = Samples::new(patch, rect, rule, sys.basis, m);
         let b = &sys.solution.b[j * nb..(j + 1) * nb];
         let radiosity = (0..s.len())
             .map(|k| {
@@ -152,7 +159,7 @@ impl Nodes {
                 std::array::from_fn(|c| (0..nb).map(|l| g[l] * b[l][c]).sum())
             })
             .collect();
-        Nodes { position: s.position, normal: s.normal, area_weight: s.area_weight, radiosity }
+        Nodes { position: s.position, cell: s.cell, normal: s.normal, area_weight: s.area_weight, radiosity }
     }
 }
 
@@ -166,6 +173,8 @@ struct Gather<'a> {
     nodes: &'a [Nodes],
     rule: &'a GaussLegendre,
     occluders: Option<&'a Occluders>,
+    /// Visibility samples per axis of the link masks.
+    cells_per_axis: usize,
 }
 
 /// The receiving point and what its rays skip.
@@ -175,13 +184,21 @@ struct Receiver {
     element: u32,
     /// Some occluder lies next to `x` ([`Occluders::any_near`]).
     near: bool,
+    /// Visibility cell of `x` in its element.
+    cell: usize,
 }
 
 /// Shadow rays of one link from the corner.
-#[derive(Clone, Copy, PartialEq)]
-enum Rays {
+#[derive(Clone, Copy)]
+enum Rays<'v> {
     None,
     All,
+    /// No rays: the link's mask, from the corner's visibility cell (`cell`) to each node's.
+    Mask {
+        vis: &'v Visibility,
+        cell: usize,
+        corner_is_a: bool,
+    },
 }
 
 impl Gather<'_> {
@@ -193,7 +210,8 @@ impl Gather<'_> {
         let n = patch.area_vector(s, t).normalize_or_zero();
         let x = patch.point(s, t);
         let near = self.occluders.is_some_and(|o| o.any_near(x, n, patch.bounding_sphere().1, i as u32));
-        let rx = Receiver { x, n, element: i as u32, near };
+        let cell = crate::visibility::cell_of(s, t, self.cells_per_axis);
+        let rx = Receiver { x, n, element: i as u32, near, cell };
         let mut irradiance = [0.0; 3];
         let mut add = |e: [f64; 3]| (0..3).for_each(|c| irradiance[c] += e[c]);
         let mut linked = Vec::new();
@@ -204,12 +222,14 @@ impl Gather<'_> {
             if self.is_emitter[j] {
                 continue;
             }
-            let cast = match (&pair.visibility, !rx.near) {
+            let cast = match (&pair.visibility, rx.near) {
                 _ if self.occluders.is_none() => Rays::None,
-                (Visibility::Full, true) => Rays::None,
-                (Visibility::Full, false) => Rays::All,
-                (Visibility::Blocked, true) => continue,
-                (Visibility::Blocked, false) | (Visibility::Partial(_), _) => Rays::All,
+                (_, true) => Rays::All,
+                (Visibility::Full, false) => Rays::None,
+                (Visibility::Blocked, false) => continue,
+                (vis @ Visibility::Partial(_), false) => {
+                    Rays::Mask { vis, cell: rx.cell, corner_is_a: pair.a == i as ElementId }
+                }
             };
             add(self.irradiance_from(&rx, j, &Rect::UNIT, cast, 0));
         }
@@ -237,7 +257,7 @@ impl Gather<'_> {
     }
 
     /// `integral g(x,y) V(x,y) B_j(y) dA_y` over `rect` of source `j`.
-    fn irradiance_from(&self, rx: &Receiver, j: usize, rect: &Rect, cast: Rays, depth: u32) -> [f64; 3] {
+    fn irradiance_from(&self, rx: &Receiver, j: usize, rect: &Rect, cast: Rays<'_>, depth: u32) -> [f64; 3] {
         let patch = &self.patches[j];
         let sub = patch.sub_patch(rect);
         let (centre, radius) = sub.bounding_sphere();
@@ -247,7 +267,7 @@ impl Gather<'_> {
             let nodes = if depth == 0 {
                 &self.nodes[j]
             } else {
-                local = Nodes::new(self.sys, j, patch, rect, self.rule);
+                local = Nodes::new(self.sys, j, patch, rect, self.rule, self.cells_per_axis);
                 &local
             };
             return self.gauss(rx, j, nodes, &sub.bounds(), cast);
@@ -255,7 +275,7 @@ impl Gather<'_> {
         if depth >= MAX_DEPTH {
             let (s, t) = rect.map(0.5, 0.5);
             let y = patch.point(s, t);
-            if !self.visible(rx, j, y, cast) {
+            if !self.visible(rx, j, y, crate::visibility::cell_of(s, t, self.cells_per_axis), cast) {
                 return [0.0; 3];
             }
             let polygon = sub.corners;
@@ -274,7 +294,7 @@ impl Gather<'_> {
     }
 
     /// The Gauss sum over `nodes` of source `j` (inside `bounds`), shadow rays as `cast` says.
-    fn gauss(&self, rx: &Receiver, j: usize, nodes: &Nodes, bounds: &Aabb, cast: Rays) -> [f64; 3] {
+    fn gauss(&self, rx: &Receiver, j: usize, nodes: &Nodes, bounds: &Aabb, cast: Rays<'_>) -> [f64; 3] {
         let mut lit: Vec<(usize, f64)> = (0..nodes.position.len())
             .map(|k| (k, point_kernel(rx.x, rx.n, nodes.position[k], nodes.normal[k])))
             .filter(|&(_, g)| g != 0.0)
@@ -285,6 +305,8 @@ impl Gather<'_> {
             o.point_visibility(rx.x, rx.n, (rx.element, j as u32), bounds, &targets, &mut visible);
             let mut v = visible.into_iter();
             lit.retain(|_| v.next() == Some(true));
+        } else if let Rays::Mask { .. } = cast {
+            lit.retain(|&(k, _)| self.visible(rx, j, nodes.position[k], nodes.cell[k], cast));
         }
         let mut sum = [0.0; 3];
         for (k, g) in lit {
@@ -296,10 +318,19 @@ impl Gather<'_> {
         sum
     }
 
-    fn visible(&self, rx: &Receiver, j: usize, y: DVec3, rays: Rays) -> bool {
+    /// Whether `y` (in visibility cell `cell` of source `j`) is seen from the corner.
+    fn visible(&self, rx: &Receiver, j: usize, y: DVec3, cell: usize, rays: Rays<'_>) -> bool {
+        let cells = self.cells_per_axis * self.cells_per_axis;
         match (rays, self.occluders) {
             (Rays::None, _) | (_, None) => true,
             (Rays::All, Some(o)) => o.segment_visible(rx.x, y, rx.element, j as u32),
+            (Rays::Mask { vis, cell: corner, corner_is_a }, _) => {
+                if corner_is_a {
+                    vis.at(corner, cell, cells) > 0.0
+                } else {
+                    vis.at(cell, corner, cells) > 0.0
+                }
+            }
         }
     }
 }
