@@ -185,10 +185,12 @@ impl Occluders {
     }
 
     /// Whether some occluder triangle, not of element `i`, has bounds within `r` of the point `x`
-    /// and reaches in front of its tangent plane (normal `n`): something may hide `x` from close by.
+    /// and reaches in front of its tangent plane (normal `n`) by more than `r / 100`: something
+    /// may hide `x` from close by. (The margin keeps the neighbours on a gently curved or
+    /// twisted surface, such as the Cornell box's left wall, from counting.)
     pub fn any_near(&self, x: DVec3, n: DVec3, r: f64, i: u32) -> bool {
         let query = crate::geometry::Aabb { min: x - DVec3::splat(r), max: x + DVec3::splat(r) };
-        let eps = 1e-9 * self.scale;
+        let eps = 1e-2 * r;
         let mut found = false;
         self.bvh.for_each_overlapping(&query, |t| {
             let tri = &self.bvh.triangles()[t];
