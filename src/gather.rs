@@ -16,10 +16,16 @@
 //! corner: a corner on an element edge can be hidden while every visibility sample of its element
 //! sees (a light hung just below the ceiling over a corner), or see while none does, and a pair
 //! blocked everywhere has no link at all. So when some occluder comes within the element's radius
-//! of the corner, every element in front is a source and every ray is cast; elsewhere only
-//! partial links cast rays, a fully visible link stays visible and a blocked one blocked.
-//! Measured on the Cornell box (819 faces, Cycles 1,024 spp): per-corner relative RMSE 16.8% with
-//! the polynomials' corners, 6.0% gathered with element visibility only, 5.x% with this rule.
+//! of the corner, every element in front is a source and every ray is cast; elsewhere a partial
+//! link reads its visibility mask from the corner's cell, a fully visible link stays visible and
+//! a blocked one blocked.
+//!
+//! What a corner keeps from frame to frame (the seed's idea applied to the gather): the *moments*
+//! `m_j^l = integral_j g(x,y) V(x,y) Gamma_l(y) dA_y` of each source, so that
+//! `B(x) = E + rho sum_j sum_l m_j^l b_j^l` is a dot product once the solution changes. A moment
+//! is recomputed only when the corner or the source moved, when what decides its visibility
+//! changed (the link's mask, the corner's neighbourhood), or when a moving object's swept bounds
+//! enter the shaft between the corner and the source.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -32,7 +38,8 @@ use crate::links::ElementId;
 use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
 use crate::system::{Progress, System, corner_params};
-use crate::visibility::{Occluders, Visibility};
+use crate::visibility::shaft::Shaft;
+use crate::visibility::{Occluders, Visibility, cell_of};
 
 /// Corners are gathered this far inside their face (in its parameter domain): exactly on an edge,
 /// a perpendicular neighbour is seen edge-on and drops out, while a vertex bake and the eye see
@@ -46,39 +53,163 @@ const GAUSS_RATIO: f64 = 3.0;
 /// Gauss points per axis on a separated source rectangle.
 const GAUSS_POINTS: usize = 3;
 
-/// Splits before a source rectangle is taken as a polygon of constant radiosity (its exact
-/// point-to-polygon form factor times `B` at its centre).
+/// Splits before a source rectangle is taken as a polygon: its exact point-to-polygon form
+/// factor times the basis at its centre.
 const MAX_DEPTH: u32 = 12;
 
-/// Radiosity at every face corner, per object in face order (the order of
-/// [`crate::scene::json::ObjectResult::corner_radiosity`]); skipped zero-area faces report their
-/// exitance. Runs on the current rayon pool; `progress` may cancel.
-pub fn corner_radiosity(
-    sys: &System,
-    scene: &Scene,
-    frame: f64,
-    occluders: Option<&Occluders>,
-    progress: Progress,
-) -> Result<Vec<Vec<[f64; 3]>>> {
-    let rule = GaussLegendre::new(GAUSS_POINTS);
-    let patches: Vec<Patch> = sys.elements.iter().map(|e| e.patch).collect();
-    // Each source's Gauss nodes over its whole domain, with B there: the common far case.
-    let cells_per_axis = scene.settings.visibility_samples;
-    let nodes: Vec<Nodes> = patches
-        .par_iter()
-        .enumerate()
-        .map(|(j, p)| Nodes::new(sys, j, p, &Rect::UNIT, &rule, cells_per_axis))
-        .collect();
-    let nb = sys.basis.len();
-    let is_emitter: Vec<bool> =
-        (0..patches.len()).map(|e| sys.emission[e * nb].iter().any(|&x| x > 0.0)).collect();
-    let emitters: Vec<usize> = (0..patches.len()).filter(|&e| is_emitter[e]).collect();
-    // One task per distinct corner point: faces of one object meeting at a vertex with the same
-    // normal and material see the same light there (4 faces per vertex of a grid), gathered once.
-    let mut tasks = Vec::new();
-    let mut task_of_corner = Vec::new();
+/// `B` at every face corner, per object in face order.
+pub type CornerValues = Vec<Vec<[f64; 3]>>;
+
+/// The corner gather of one frame, kept to update the next one's.
+pub struct CornerGather {
+    /// Distinct corner points.
+    points: Vec<CornerPoint>,
+    /// Per point, its sources and their moments.
+    rows: Vec<Row>,
+    /// The element patches `rows` were computed with.
+    patches: Vec<Patch>,
+}
+
+/// What this frame's gather did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GatherStats {
+    /// Distinct corner points and (point, source) moments.
+    pub points: usize,
+    pub moments: usize,
+    /// Moments computed this frame (all of them on a first frame).
+    pub recomputed: usize,
+}
+
+/// A corner point: faces of one object meeting at a vertex with the same normal and material see
+/// the same light there (4 faces per vertex of a grid), gathered once.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct CornerPoint {
+    /// The element covering it and the local point (inset), or `None` for a skipped face.
+    at: Option<(usize, f64, f64)>,
+    material: u32,
+}
+
+/// One point's sources, sorted by element, with how their visibility was decided and their
+/// moments (`nb` per source).
+#[derive(Clone, Debug, Default)]
+struct Row {
+    near: bool,
+    sources: Vec<u32>,
+    modes: Vec<Mode>,
+    moments: Vec<f32>,
+}
+
+/// How a moment's visibility was decided; a different decision recomputes the moment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mode {
+    /// Everything visible (a fully visible link, or visibility off).
+    Open,
+    /// Shadow rays from the corner.
+    Rays,
+    /// The link's mask from the corner's visibility cell: bit `s` for the source's cell `s`.
+    Mask(u16),
+}
+
+impl CornerGather {
+    /// Gathers every face corner of `sys` (placed as `scene` is at `frame`), reusing what
+    /// `previous` (the last frame's gather of the same system) computed where nothing that
+    /// decides it changed. Returns the corners per object in face order (the order of
+    /// [`crate::scene::json::ObjectResult::corner_radiosity`]) and the gather to keep.
+    pub fn run(
+        sys: &System,
+        scene: &Scene,
+        frame: f64,
+        occluders: Option<&Occluders>,
+        previous: Option<&CornerGather>,
+        progress: Progress,
+    ) -> Result<(CornerValues, CornerGather, GatherStats)> {
+        let rule = GaussLegendre::new(GAUSS_POINTS);
+        let patches: Vec<Patch> = sys.elements.iter().map(|e| e.patch).collect();
+        let cells_per_axis = scene.settings.visibility_samples;
+        let nodes: Vec<Nodes> =
+            patches.par_iter().map(|p| Nodes::new(sys, p, &Rect::UNIT, &rule, cells_per_axis)).collect();
+        let nb = sys.basis.len();
+        let is_emitter: Vec<bool> =
+            (0..patches.len()).map(|e| sys.emission[e * nb].iter().any(|&x| x > 0.0)).collect();
+        let emitters: Vec<usize> = (0..patches.len()).filter(|&e| is_emitter[e]).collect();
+        let (points, point_of_corner, corners_per_object) = corner_points(sys, scene);
+        // What moved since `previous`, by object: each object's old and new bounds.
+        let previous = previous.filter(|p| p.points == points && p.patches.len() == patches.len());
+        let moved: Vec<bool> = match previous {
+            Some(p) => patches.iter().zip(&p.patches).map(|(a, b)| a != b).collect(),
+            None => vec![true; patches.len()],
+        };
+        let mut swept: Vec<Aabb> = Vec::new();
+        if let Some(p) = previous {
+            let mut by_object = std::collections::BTreeMap::new();
+            for e in (0..patches.len()).filter(|&e| moved[e]) {
+                let b = by_object.entry(sys.elements[e].object).or_insert(Aabb::EMPTY);
+                *b = b.union(patches[e].bounds()).union(p.patches[e].bounds());
+            }
+            swept.extend(by_object.into_values());
+        }
+        let scale = patches.iter().fold(Aabb::EMPTY, |b, p| b.union(p.bounds())).diagonal().length();
+        let gather = Gather {
+            sys,
+            emitters: &emitters,
+            is_emitter: &is_emitter,
+            patches: &patches,
+            nodes: &nodes,
+            rule: &rule,
+            occluders,
+            cells_per_axis,
+            moved: &moved,
+            swept: &swept,
+            eps: 1e-9 * scale.max(1e-300),
+        };
+        let total = points.len();
+        let done = std::sync::atomic::AtomicUsize::new(0);
+        let rows: Vec<(Row, usize)> = points
+            .par_iter()
+            .enumerate()
+            .map(|(k, point)| {
+                let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                if d.is_multiple_of(256) && !progress(d as f64 / total.max(1) as f64, "corner gather") {
+                    return Err(Error::Cancelled);
+                }
+                Ok(match point.at {
+                    Some((e, s, t)) => gather.row(e, s, t, previous.map(|p| &p.rows[k])),
+                    None => (Row::default(), 0),
+                })
+            })
+            .collect::<Result<_>>()?;
+        let values: Vec<[f64; 3]> = points
+            .iter()
+            .zip(&rows)
+            .map(|(point, (row, _))| match point.at {
+                Some((e, _, _)) => radiosity(sys, e, row),
+                None => scene.emission_at(point.material as usize, frame),
+            })
+            .collect();
+        let stats = GatherStats {
+            points: points.len(),
+            moments: rows.iter().map(|(r, _)| r.sources.len()).sum(),
+            recomputed: rows.iter().map(|(_, n)| n).sum(),
+        };
+        let mut out = Vec::with_capacity(corners_per_object.len());
+        let mut it = point_of_corner.iter().map(|&k| values[k]);
+        for &n in &corners_per_object {
+            out.push(it.by_ref().take(n).collect());
+        }
+        let kept = CornerGather { points, rows: rows.into_iter().map(|(r, _)| r).collect(), patches };
+        Ok((out, kept, stats))
+    }
+}
+
+/// The distinct corner points of the scene's faces, the point of each face corner, and the
+/// number of face corners per object.
+fn corner_points(sys: &System, scene: &Scene) -> (Vec<CornerPoint>, Vec<usize>, Vec<usize>) {
+    let mut points = Vec::new();
+    let mut point_of_corner = Vec::new();
+    let mut per_object = Vec::with_capacity(scene.objects.len());
     let mut shared = std::collections::HashMap::new();
     for (o, obj) in scene.objects.iter().enumerate() {
+        let before = point_of_corner.len();
         for (f, face) in obj.faces.iter().enumerate() {
             for (&v, (s, t)) in face.iter().zip(corner_params(face.len())) {
                 let (si, ti) = (s.clamp(INSET, 1.0 - INSET), t.clamp(INSET, 1.0 - INSET));
@@ -88,82 +219,67 @@ pub fn corner_radiosity(
                     let n = sys.elements[e].patch.area_vector(s, t).normalize_or_zero();
                     (o, v, material, (n * 1e6).round().as_i64vec3().to_array())
                 });
-                let task = match key.and_then(|k| shared.get(&k)) {
-                    Some(&task) => task,
+                let k = match key.and_then(|k| shared.get(&k)) {
+                    Some(&k) => k,
                     None => {
-                        tasks.push((at, material));
-                        if let Some(k) = key {
-                            shared.insert(k, tasks.len() - 1);
+                        points.push(CornerPoint { at, material });
+                        if let Some(key) = key {
+                            shared.insert(key, points.len() - 1);
                         }
-                        tasks.len() - 1
+                        points.len() - 1
                     }
                 };
-                task_of_corner.push(task);
+                point_of_corner.push(k);
+            }
+        }
+        per_object.push(point_of_corner.len() - before);
+    }
+    (points, point_of_corner, per_object)
+}
+
+/// `B = E_i + rho_i sum_j sum_l m_j^l b_j^l` at a point of element `i`.
+fn radiosity(sys: &System, i: usize, row: &Row) -> [f64; 3] {
+    let nb = sys.basis.len();
+    let mut irradiance = [0.0; 3];
+    for (k, &j) in row.sources.iter().enumerate() {
+        let m = &row.moments[k * nb..(k + 1) * nb];
+        let b = &sys.solution.b[j as usize * nb..(j as usize + 1) * nb];
+        for l in 0..nb {
+            for c in 0..3 {
+                irradiance[c] += m[l] as f64 * b[l][c];
             }
         }
     }
-    let total = tasks.len();
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    let values: Vec<[f64; 3]> = tasks
-        .par_iter()
-        .map(|&(at, material)| {
-            let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            if d.is_multiple_of(256) && !progress(d as f64 / total.max(1) as f64, "corner gather") {
-                return Err(Error::Cancelled);
-            }
-            Ok(match at {
-                Some((e, s, t)) => {
-                    let gather = Gather {
-                        sys,
-                        emitters: &emitters,
-                        is_emitter: &is_emitter,
-                        patches: &patches,
-                        nodes: &nodes,
-                        rule: &rule,
-                        occluders,
-                        cells_per_axis,
-                    };
-                    gather.at(e, s, t)
-                }
-                None => scene.emission_at(material as usize, frame),
-            })
-        })
-        .collect::<Result<_>>()?;
-    let mut out: Vec<Vec<[f64; 3]>> = Vec::with_capacity(scene.objects.len());
-    let mut it = task_of_corner.into_iter().map(|task| values[task]);
-    for obj in &scene.objects {
-        let n: usize = obj.faces.iter().map(|f| corner_params(f.len()).len()).sum();
-        out.push(it.by_ref().take(n).collect());
-    }
-    Ok(out)
+    let (rho, e) = (sys.reflectance[i], sys.emission[i * nb]);
+    std::array::from_fn(|c| e[c] + rho[c] * irradiance[c])
 }
 
-/// Gauss nodes of a source rectangle: position, unit normal, area weight and `B` there.
+/// Gauss nodes of a source rectangle: position, unit normal, area weight and the basis there.
 struct Nodes {
     position: Vec<DVec3>,
     /// Visibility cell of each node in its element.
     cell: Vec<usize>,
     normal: Vec<DVec3>,
     area_weight: Vec<f64>,
-    radiosity: Vec<[f64; 3]>,
+    /// `Gamma_l` at each node, `len x nb`.
+    basis: Vec<f64>,
 }
 
 impl Nodes {
-    fn new(sys: &System, j: usize, patch: &Patch, rect: &Rect, rule: &GaussLegendre, m: usize) -> Self {
-        let nb = sys.basis.len();
+    fn new(sys: &System, patch: &Patch, rect: &Rect, rule: &GaussLegendre, m: usize) -> Self {
         let s = Samples::new(patch, rect, rule, sys.basis, m);
-        let b = &sys.solution.b[j * nb..(j + 1) * nb];
-        let radiosity = (0..s.len())
-            .map(|k| {
-                let g = &s.basis[k * nb..(k + 1) * nb];
-                std::array::from_fn(|c| (0..nb).map(|l| g[l] * b[l][c]).sum())
-            })
-            .collect();
-        Nodes { position: s.position, cell: s.cell, normal: s.normal, area_weight: s.area_weight, radiosity }
+        Nodes {
+            position: s.position,
+            cell: s.cell,
+            normal: s.normal,
+            area_weight: s.area_weight,
+            basis: s.basis,
+        }
     }
 }
 
-/// What one corner needs: the solved system, its elements' geometry and the occluders.
+/// What every corner needs: the solved system, its elements' geometry, the occluders, and what
+/// moved since the kept gather.
 struct Gather<'a> {
     sys: &'a System,
     /// Elements with emission, and the flag per element.
@@ -175,6 +291,11 @@ struct Gather<'a> {
     occluders: Option<&'a Occluders>,
     /// Visibility samples per axis of the link masks.
     cells_per_axis: usize,
+    /// Per element: moved since the kept gather (all, without one).
+    moved: &'a [bool],
+    /// Old-and-new bounds of each moving object.
+    swept: &'a [Aabb],
+    eps: f64,
 }
 
 /// The receiving point and what its rays skip.
@@ -182,155 +303,184 @@ struct Receiver {
     x: DVec3,
     n: DVec3,
     element: u32,
-    /// Some occluder lies next to `x` ([`Occluders::any_near`]).
-    near: bool,
     /// Visibility cell of `x` in its element.
     cell: usize,
 }
 
-/// Shadow rays of one link from the corner.
-#[derive(Clone, Copy)]
-enum Rays<'v> {
-    None,
-    All,
-    /// No rays: the link's mask, from the corner's visibility cell (`cell`) to each node's.
-    Mask {
-        vis: &'v Visibility,
-        cell: usize,
-        corner_is_a: bool,
-    },
-}
-
 impl Gather<'_> {
-    /// `B` at local `(s,t)` of element `i`.
-    fn at(&self, i: usize, s: f64, t: f64) -> [f64; 3] {
+    /// The sources and moments of the point at local `(s,t)` of element `i`, reusing `previous`
+    /// (this point's row of the kept gather) where allowed; also how many moments were computed.
+    fn row(&self, i: usize, s: f64, t: f64, previous: Option<&Row>) -> (Row, usize) {
         let sys = self.sys;
-        let nb = sys.basis.len();
         let patch = &self.patches[i];
         let n = patch.area_vector(s, t).normalize_or_zero();
         let x = patch.point(s, t);
         let near = self.occluders.is_some_and(|o| o.any_near(x, n, patch.bounding_sphere().1, i as u32));
-        let cell = crate::visibility::cell_of(s, t, self.cells_per_axis);
-        let rx = Receiver { x, n, element: i as u32, near, cell };
-        let mut irradiance = [0.0; 3];
-        let mut add = |e: [f64; 3]| (0..3).for_each(|c| irradiance[c] += e[c]);
-        let mut linked = Vec::new();
+        let rx = Receiver { x, n, element: i as u32, cell: cell_of(s, t, self.cells_per_axis) };
+        let previous = previous.filter(|p| !self.moved[i] && p.near == near);
+        let rays = |open: Mode| if self.occluders.is_some() { open } else { Mode::Open };
+        // The sources and how each one's visibility is decided.
+        let mut wanted: Vec<(u32, Mode)> = Vec::new();
         for &p in sys.links.pairs_of(i as ElementId) {
             let pair = sys.links.pair(p);
-            let j = sys.links.other(p, i as ElementId) as usize;
-            linked.push(j);
-            if self.is_emitter[j] {
+            let j = sys.links.other(p, i as ElementId);
+            if self.is_emitter[j as usize] {
                 continue;
             }
-            let cast = match (&pair.visibility, rx.near) {
-                _ if self.occluders.is_none() => Rays::None,
-                (_, true) => Rays::All,
-                (Visibility::Full, false) => Rays::None,
+            let mode = match (&pair.visibility, near) {
+                _ if self.occluders.is_none() => Mode::Open,
+                (_, true) => Mode::Rays,
+                (Visibility::Full, false) => Mode::Open,
                 (Visibility::Blocked, false) => continue,
                 (vis @ Visibility::Partial(_), false) => {
-                    Rays::Mask { vis, cell: rx.cell, corner_is_a: pair.a == i as ElementId }
+                    Mode::Mask(self.mask_row(vis, rx.cell, pair.a == i as u32))
                 }
             };
-            add(self.irradiance_from(&rx, j, &Rect::UNIT, cast, 0));
+            wanted.push((j, mode));
         }
         // Direct light makes the sharpest shadows, and a corner can sit in a penumbra that none
         // of its element's visibility samples is in: emitters are always sources, with rays.
-        let faces_corner = |j: usize| {
-            j != i && self.patches[j].front_plane().is_none_or(|f| f.any_in_front(&self.patches[i]))
-        };
+        let faces_corner =
+            |j: usize| j != i && self.patches[j].front_plane().is_none_or(|f| f.any_in_front(patch));
         for &j in self.emitters.iter().filter(|&&j| faces_corner(j)) {
-            let rays = if self.occluders.is_some() { Rays::All } else { Rays::None };
-            add(self.irradiance_from(&rx, j, &Rect::UNIT, rays, 0));
+            wanted.push((j as u32, rays(Mode::Rays)));
         }
         // Next to an occluder the corner may see what no sample of its element sees, and the
         // store holds no link for a pair blocked everywhere: every other element is a source.
-        if rx.near {
-            linked.sort_unstable();
-            let unlinked = |j: &usize| linked.binary_search(j).is_err() && !self.is_emitter[*j];
-            for j in (0..self.patches.len()).filter(unlinked).filter(|&j| faces_corner(j)) {
-                add(self.irradiance_from(&rx, j, &Rect::UNIT, Rays::All, 0));
+        if near {
+            let mut listed: Vec<u32> = wanted.iter().map(|w| w.0).collect();
+            listed.sort_unstable();
+            for j in (0..self.patches.len()).filter(|&j| faces_corner(j)) {
+                if listed.binary_search(&(j as u32)).is_err() && !self.is_emitter[j] {
+                    wanted.push((j as u32, Mode::Rays));
+                }
             }
         }
-        let rho = sys.reflectance[i];
-        let emission = sys.emission[i * nb];
-        std::array::from_fn(|c| emission[c] + rho[c] * irradiance[c])
+        wanted.sort_unstable_by_key(|w| w.0);
+        let nb = sys.basis.len();
+        let mut row = Row {
+            near,
+            sources: Vec::with_capacity(wanted.len()),
+            modes: Vec::with_capacity(wanted.len()),
+            moments: Vec::with_capacity(wanted.len() * nb),
+        };
+        let mut computed = 0;
+        let mut m = vec![0.0; nb];
+        for (j, mode) in wanted {
+            let kept = previous.and_then(|p| {
+                let k = p.sources.binary_search(&j).ok()?;
+                (p.modes[k] == mode && self.unchanged(&rx, j as usize, mode))
+                    .then(|| &p.moments[k * nb..(k + 1) * nb])
+            });
+            match kept {
+                Some(old) => row.moments.extend_from_slice(old),
+                None => {
+                    m.fill(0.0);
+                    self.moments(&rx, j as usize, &Rect::UNIT, mode, 0, &mut m);
+                    row.moments.extend(m.iter().map(|&v| v as f32));
+                    computed += 1;
+                }
+            }
+            row.sources.push(j);
+            row.modes.push(mode);
+        }
+        (row, computed)
     }
 
-    /// `integral g(x,y) V(x,y) B_j(y) dA_y` over `rect` of source `j`.
-    fn irradiance_from(&self, rx: &Receiver, j: usize, rect: &Rect, cast: Rays<'_>, depth: u32) -> [f64; 3] {
+    /// A kept moment of source `j` still holds: the source did not move and, when its visibility
+    /// comes from rays, no moving object's swept bounds entered the shaft between the corner and
+    /// the source (the corner's element and the mode are checked by the caller; a mask or open
+    /// moment depends on nothing else).
+    fn unchanged(&self, rx: &Receiver, j: usize, mode: Mode) -> bool {
+        if self.moved[j] {
+            return false;
+        }
+        if mode != Mode::Rays {
+            return true;
+        }
+        let bounds = self.patches[j].bounds();
+        let point = Aabb { min: rx.x, max: rx.x };
+        let region = bounds.union(point);
+        let mut shaft = None;
+        !self.swept.iter().any(|s| {
+            s.overlaps(&region)
+                && shaft.get_or_insert_with(|| Shaft::new(&point, &bounds)).may_contain_box(s, self.eps)
+        })
+    }
+
+    /// The link's visibility bits from the corner's cell to each of the source's cells.
+    fn mask_row(&self, vis: &Visibility, corner: usize, corner_is_a: bool) -> u16 {
+        let cells = self.cells_per_axis * self.cells_per_axis;
+        (0..cells).fold(0u16, |bits, s| {
+            let seen = if corner_is_a { vis.at(corner, s, cells) } else { vis.at(s, corner, cells) };
+            bits | (u16::from(seen > 0.0) << s)
+        })
+    }
+
+    /// Adds `integral g(x,y) V(x,y) Gamma_l(y) dA_y` over `rect` of source `j` to `out[l]`.
+    fn moments(&self, rx: &Receiver, j: usize, rect: &Rect, mode: Mode, depth: u32, out: &mut [f64]) {
         let patch = &self.patches[j];
         let sub = patch.sub_patch(rect);
         let (centre, radius) = sub.bounding_sphere();
-        let distance = rx.x.distance(centre);
-        if distance >= GAUSS_RATIO * radius {
-            let local;
-            let nodes = if depth == 0 {
-                &self.nodes[j]
+        if rx.x.distance(centre) >= GAUSS_RATIO * radius {
+            if depth == 0 {
+                self.gauss(rx, j, &self.nodes[j], &sub.bounds(), mode, out);
             } else {
-                local = Nodes::new(self.sys, j, patch, rect, self.rule, self.cells_per_axis);
-                &local
-            };
-            return self.gauss(rx, j, nodes, &sub.bounds(), cast);
+                let nodes = Nodes::new(self.sys, patch, rect, self.rule, self.cells_per_axis);
+                self.gauss(rx, j, &nodes, &sub.bounds(), mode, out);
+            }
+            return;
         }
         if depth >= MAX_DEPTH {
             let (s, t) = rect.map(0.5, 0.5);
-            let y = patch.point(s, t);
-            if !self.visible(rx, j, y, crate::visibility::cell_of(s, t, self.cells_per_axis), cast) {
-                return [0.0; 3];
+            if !self.visible(rx, j, patch.point(s, t), cell_of(s, t, self.cells_per_axis), mode) {
+                return;
             }
-            let polygon = sub.corners;
-            let f = point_to_polygon(rx.x, rx.n, &polygon, sub.centre_normal());
-            let b = self.sys.eval(j, s, t);
-            return b.map(|b| f * b);
+            let f = point_to_polygon(rx.x, rx.n, &sub.corners, sub.centre_normal());
+            for (l, g) in self.sys.basis.eval(s, t).into_iter().enumerate() {
+                out[l] += f * g;
+            }
+            return;
         }
-        let mut sum = [0.0; 3];
         for q in rect.quadrants() {
-            let e = self.irradiance_from(rx, j, &q, cast, depth + 1);
-            for c in 0..3 {
-                sum[c] += e[c];
-            }
+            self.moments(rx, j, &q, mode, depth + 1, out);
         }
-        sum
     }
 
-    /// The Gauss sum over `nodes` of source `j` (inside `bounds`), shadow rays as `cast` says.
-    fn gauss(&self, rx: &Receiver, j: usize, nodes: &Nodes, bounds: &Aabb, cast: Rays<'_>) -> [f64; 3] {
+    /// The Gauss sum over `nodes` of source `j` (inside `bounds`) into `out`.
+    fn gauss(&self, rx: &Receiver, j: usize, nodes: &Nodes, bounds: &Aabb, mode: Mode, out: &mut [f64]) {
         let mut lit: Vec<(usize, f64)> = (0..nodes.position.len())
             .map(|k| (k, point_kernel(rx.x, rx.n, nodes.position[k], nodes.normal[k])))
             .filter(|&(_, g)| g != 0.0)
             .collect();
-        if let (Rays::All, Some(o), false) = (cast, self.occluders, lit.is_empty()) {
-            let targets: Vec<DVec3> = lit.iter().map(|&(k, _)| nodes.position[k]).collect();
-            let mut visible = Vec::with_capacity(targets.len());
-            o.point_visibility(rx.x, rx.n, (rx.element, j as u32), bounds, &targets, &mut visible);
-            let mut v = visible.into_iter();
-            lit.retain(|_| v.next() == Some(true));
-        } else if let Rays::Mask { .. } = cast {
-            lit.retain(|&(k, _)| self.visible(rx, j, nodes.position[k], nodes.cell[k], cast));
+        match (mode, self.occluders) {
+            (Mode::Rays, Some(o)) if !lit.is_empty() => {
+                let targets: Vec<DVec3> = lit.iter().map(|&(k, _)| nodes.position[k]).collect();
+                let mut visible = Vec::with_capacity(targets.len());
+                o.point_visibility(rx.x, rx.n, (rx.element, j as u32), bounds, &targets, &mut visible);
+                let mut v = visible.into_iter();
+                lit.retain(|_| v.next() == Some(true));
+            }
+            (Mode::Mask(_), _) => {
+                lit.retain(|&(k, _)| self.visible(rx, j, nodes.position[k], nodes.cell[k], mode));
+            }
+            _ => {}
         }
-        let mut sum = [0.0; 3];
+        let nb = out.len();
         for (k, g) in lit {
             let w = g * nodes.area_weight[k];
-            for c in 0..3 {
-                sum[c] += w * nodes.radiosity[k][c];
+            for l in 0..nb {
+                out[l] += w * nodes.basis[k * nb + l];
             }
         }
-        sum
     }
 
     /// Whether `y` (in visibility cell `cell` of source `j`) is seen from the corner.
-    fn visible(&self, rx: &Receiver, j: usize, y: DVec3, cell: usize, rays: Rays<'_>) -> bool {
-        let cells = self.cells_per_axis * self.cells_per_axis;
-        match (rays, self.occluders) {
-            (Rays::None, _) | (_, None) => true,
-            (Rays::All, Some(o)) => o.segment_visible(rx.x, y, rx.element, j as u32),
-            (Rays::Mask { vis, cell: corner, corner_is_a }, _) => {
-                if corner_is_a {
-                    vis.at(corner, cell, cells) > 0.0
-                } else {
-                    vis.at(cell, corner, cells) > 0.0
-                }
-            }
+    fn visible(&self, rx: &Receiver, j: usize, y: DVec3, cell: usize, mode: Mode) -> bool {
+        match (mode, self.occluders) {
+            (Mode::Open, _) | (_, None) => true,
+            (Mode::Rays, Some(o)) => o.segment_visible(rx.x, y, rx.element, j as u32),
+            (Mode::Mask(bits), _) => bits >> cell & 1 == 1,
         }
     }
 }

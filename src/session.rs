@@ -11,6 +11,7 @@ use glam::DMat4;
 
 use crate::animation::{self, AnimationState, Outcome};
 use crate::error::{Error, Result};
+use crate::gather::GatherStats;
 use crate::scene::Scene;
 use crate::scene::json::ObjectResult;
 use crate::system::{Progress, System};
@@ -55,6 +56,10 @@ pub struct FrameStats {
     pub shots: usize,
     /// Time of the corner gather ([`crate::gather`]), included in `seconds`.
     pub gather_seconds: f64,
+    /// (Corner, source) moments of the gather, and how many were computed this frame (the rest
+    /// were kept from the last frame).
+    pub gather_moments: usize,
+    pub gather_recomputed: usize,
     /// The frame was built from scratch (first frame, `--full`, or after a topology change).
     pub full_rebuild: bool,
 }
@@ -176,13 +181,13 @@ impl Session {
                 let outcome = animation::advance(sys, state, &placed, frame, progress)?;
                 if let (Outcome::Updated(_), true) = (&outcome, placed.settings.corner_gather) {
                     let start = Instant::now();
-                    sys.gather_corners(&placed, frame, progress)?;
-                    return Ok((outcome, start.elapsed().as_secs_f64()));
+                    let g = sys.gather_corners(&placed, frame, progress)?;
+                    return Ok((outcome, (start.elapsed().as_secs_f64(), g)));
                 }
-                Ok((outcome, 0.0))
+                Ok((outcome, (0.0, GatherStats::default())))
             });
             match outcome {
-                Ok((Outcome::Updated(u), gather_seconds)) => {
+                Ok((Outcome::Updated(u), (gather_seconds, g))) => {
                     let stats = FrameStats {
                         frame,
                         seconds: start.elapsed().as_secs_f64(),
@@ -203,6 +208,8 @@ impl Session {
                         recomputed_translation: u.recomputed_translation,
                         shots: u.shots,
                         gather_seconds,
+                        gather_moments: g.moments,
+                        gather_recomputed: g.recomputed,
                         ..Default::default()
                     };
                     self.frame = Some(frame);
@@ -217,14 +224,15 @@ impl Session {
             }
         }
         let cancel = || !progress(1.0, "solve");
-        let (system, gather_seconds) = self.pool.install(|| -> Result<(System, f64)> {
+        let (system, gather_seconds, g) = self.pool.install(|| -> Result<(System, f64, GatherStats)> {
             let mut sys = System::build(&placed, frame, progress)?;
             sys.solve(placed.settings.tolerance, &cancel)?;
             let start = Instant::now();
+            let mut g = GatherStats::default();
             if placed.settings.corner_gather {
-                sys.gather_corners(&placed, frame, progress)?;
+                g = sys.gather_corners(&placed, frame, progress)?;
             }
-            Ok((sys, start.elapsed().as_secs_f64()))
+            Ok((sys, start.elapsed().as_secs_f64(), g))
         })?;
         let stats = FrameStats {
             frame,
@@ -236,6 +244,8 @@ impl Session {
             links_recomputed: system.stats.pairs,
             shots: system.stats.shots,
             gather_seconds,
+            gather_moments: g.moments,
+            gather_recomputed: g.recomputed,
             full_rebuild: true,
             ..Default::default()
         };

@@ -7,6 +7,7 @@ use glam::DVec3;
 
 use crate::basis::Basis;
 use crate::error::{Error, Result};
+use crate::gather::{CornerGather, GatherStats};
 use crate::geometry::{Patch, Rect};
 use crate::kernel::PairContext;
 use crate::kernel::assemble::{ElementGeometry, assemble};
@@ -121,6 +122,8 @@ pub struct System {
     /// `B` gathered at every face corner for the current solution ([`crate::gather`]), per object
     /// in face order; `None` when corners come from the face polynomials.
     pub corners: Option<Vec<Vec<[f64; 3]>>>,
+    /// The last corner gather, which the next one updates.
+    gather: Option<CornerGather>,
     pub stats: SystemStats,
 }
 
@@ -166,7 +169,17 @@ impl System {
             ..Default::default()
         };
         let solution = Coefficients::zeros(elements.len(), nb);
-        Ok(System { basis, elements, links, reflectance, emission, solution, corners: None, stats })
+        Ok(System {
+            basis,
+            elements,
+            links,
+            reflectance,
+            emission,
+            solution,
+            corners: None,
+            gather: None,
+            stats,
+        })
     }
 
     /// Element areas, in element order.
@@ -222,15 +235,19 @@ impl System {
     }
 
     /// Gathers `B` at every face corner ([`crate::gather`]) for the current solution, placed as
-    /// `scene` is at `frame`; [`System::face_results`] then reports those corners.
-    pub fn gather_corners(&mut self, scene: &Scene, frame: f64, progress: Progress) -> Result<()> {
+    /// `scene` is at `frame`, updating the last frame's gather; [`System::face_results`] then
+    /// reports those corners.
+    pub fn gather_corners(&mut self, scene: &Scene, frame: f64, progress: Progress) -> Result<GatherStats> {
         self.corners = None;
         let s = &scene.settings;
         let patches: Vec<Patch> = self.elements.iter().map(|e| e.patch).collect();
         let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
-        self.corners =
-            Some(crate::gather::corner_radiosity(self, scene, frame, occluders.as_ref(), progress)?);
-        Ok(())
+        let previous = self.gather.take();
+        let (corners, kept, stats) =
+            CornerGather::run(self, scene, frame, occluders.as_ref(), previous.as_ref(), progress)?;
+        self.corners = Some(corners);
+        self.gather = Some(kept);
+        Ok(stats)
     }
 
     /// Per object, per face: the mean `B` and `B` at each corner (issue 2, items 6 and 8), the
