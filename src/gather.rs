@@ -120,7 +120,7 @@ impl CornerGather {
         scene: &Scene,
         frame: f64,
         occluders: Option<&Occluders>,
-        previous: Option<&CornerGather>,
+        previous: Option<CornerGather>,
         progress: Progress,
     ) -> Result<(CornerValues, CornerGather, GatherStats)> {
         let rule = GaussLegendre::new(GAUSS_POINTS);
@@ -135,12 +135,12 @@ impl CornerGather {
         let (points, point_of_corner, corners_per_object) = corner_points(sys, scene);
         // What moved since `previous`, by object: each object's old and new bounds.
         let previous = previous.filter(|p| p.points == points && p.patches.len() == patches.len());
-        let moved: Vec<bool> = match previous {
+        let moved: Vec<bool> = match &previous {
             Some(p) => patches.iter().zip(&p.patches).map(|(a, b)| a != b).collect(),
             None => vec![true; patches.len()],
         };
         let mut swept: Vec<Aabb> = Vec::new();
-        if let Some(p) = previous {
+        if let Some(p) = &previous {
             let mut by_object = std::collections::BTreeMap::new();
             for e in (0..patches.len()).filter(|&e| moved[e]) {
                 let b = by_object.entry(sys.elements[e].object).or_insert(Aabb::EMPTY);
@@ -164,16 +164,20 @@ impl CornerGather {
         };
         let total = points.len();
         let done = std::sync::atomic::AtomicUsize::new(0);
+        let kept_rows: Vec<Option<Row>> = match previous {
+            Some(p) => p.rows.into_iter().map(Some).collect(),
+            None => vec![None; points.len()],
+        };
         let rows: Vec<(Row, usize)> = points
             .par_iter()
-            .enumerate()
-            .map(|(k, point)| {
+            .zip(kept_rows)
+            .map(|(point, kept)| {
                 let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 if d.is_multiple_of(256) && !progress(d as f64 / total.max(1) as f64, "corner gather") {
                     return Err(Error::Cancelled);
                 }
                 Ok(match point.at {
-                    Some((e, s, t)) => gather.row(e, s, t, previous.map(|p| &p.rows[k])),
+                    Some((e, s, t)) => gather.row(e, s, t, kept),
                     None => (Row::default(), 0),
                 })
             })
@@ -310,7 +314,7 @@ struct Receiver {
 impl Gather<'_> {
     /// The sources and moments of the point at local `(s,t)` of element `i`, reusing `previous`
     /// (this point's row of the kept gather) where allowed; also how many moments were computed.
-    fn row(&self, i: usize, s: f64, t: f64, previous: Option<&Row>) -> (Row, usize) {
+    fn row(&self, i: usize, s: f64, t: f64, previous: Option<Row>) -> (Row, usize) {
         let sys = self.sys;
         let patch = &self.patches[i];
         let n = patch.area_vector(s, t).normalize_or_zero();
@@ -358,6 +362,27 @@ impl Gather<'_> {
         }
         wanted.sort_unstable_by_key(|w| w.0);
         let nb = sys.basis.len();
+        let mut m = vec![0.0; nb];
+        // The common case: the same sources, decided the same way: update the row in place.
+        let same = |p: &Row| {
+            p.sources.len() == wanted.len()
+                && wanted.iter().zip(p.sources.iter().zip(&p.modes)).all(|(w, (&j, &mode))| *w == (j, mode))
+        };
+        if previous.as_ref().is_some_and(same) {
+            let mut row = previous.expect("checked above");
+            let mut computed = 0;
+            for (k, &(j, mode)) in wanted.iter().enumerate() {
+                if !self.unchanged(&rx, j as usize, mode) {
+                    m.fill(0.0);
+                    self.moments(&rx, j as usize, &Rect::UNIT, mode, 0, &mut m);
+                    for (o, v) in row.moments[k * nb..(k + 1) * nb].iter_mut().zip(&m) {
+                        *o = *v as f32;
+                    }
+                    computed += 1;
+                }
+            }
+            return (row, computed);
+        }
         let mut row = Row {
             near,
             sources: Vec::with_capacity(wanted.len()),
@@ -365,9 +390,8 @@ impl Gather<'_> {
             moments: Vec::with_capacity(wanted.len() * nb),
         };
         let mut computed = 0;
-        let mut m = vec![0.0; nb];
         for (j, mode) in wanted {
-            let kept = previous.and_then(|p| {
+            let kept = previous.as_ref().and_then(|p| {
                 let k = p.sources.binary_search(&j).ok()?;
                 (p.modes[k] == mode && self.unchanged(&rx, j as usize, mode))
                     .then(|| &p.moments[k * nb..(k + 1) * nb])

@@ -244,7 +244,7 @@ impl System {
         let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
         let previous = self.gather.take();
         let (corners, kept, stats) =
-            CornerGather::run(self, scene, frame, occluders.as_ref(), previous.as_ref(), progress)?;
+            CornerGather::run(self, scene, frame, occluders.as_ref(), previous, progress)?;
         self.corners = Some(corners);
         self.gather = Some(kept);
         Ok(stats)
