@@ -353,7 +353,8 @@ GrStatus gr_session_face_radiosity(const struct GrSession *s,
 /**
  * Writes the radiosity (RGB, W/m^2) at each face corner of object `object` at the last solved
  * frame: 3 floats per corner, faces in order, corners in face order. `out` holds `len` floats,
- * at least 3 x the corner count.
+ * at least 3 x the corner count. With `corner_gather` on (the default) these are gathered at
+ * each corner with its own shadow rays; otherwise each face's polynomial there.
  *
  * # Safety
  * `s` is NULL or a live session; `out` is NULL or points to `len` writable floats.
@@ -368,7 +369,8 @@ GrStatus gr_session_corner_radiosity(const struct GrSession *s,
  * face `faces[i]` of object `objects[i]` at face parameters `(st[2i], st[2i+1])` in [0,1]^2
  * (corner order of the face: (0,0), (1,0), (1,1), (0,1); a triangle's third corner is the
  * collapsed edge t = 1). Writes 3 floats per point to `out`, which must not overlap the inputs.
- * Nothing is written unless every point is valid.
+ * Nothing is written unless every point is valid. These are the face polynomials' values (the
+ * Galerkin solution itself), never gathered: for display at vertices read the corners.
  *
  * # Safety
  * `s` is NULL or a live session; `objects` and `faces` point to `count` readable `uint32_t`,
