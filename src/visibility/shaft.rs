@@ -25,50 +25,32 @@ impl Shaft {
         let mut planes = [(DVec3::ZERO, 0.0); MAX_PLANES];
         let mut abs_normals = [DVec3::ZERO; MAX_PLANES];
         let mut count = 0;
-        // side 0: min face, side 1: max face. For each pair of faces on different axes where A
-        // alone defines one and B alone the other, a plane joins A's and B's edges there.
-        for u in 0..3 {
-            for v in (u + 1)..3 {
-                for su in 0..2 {
-                    for sv in 0..2 {
-                        let (ea_u, eb_u) = (face(a, u, su), face(b, u, su));
-                        let (ea_v, eb_v) = (face(a, v, sv), face(b, v, sv));
-                        let a_u = beyond(ea_u, eb_u, su);
-                        let b_u = beyond(eb_u, ea_u, su);
-                        let a_v = beyond(ea_v, eb_v, sv);
-                        let b_v = beyond(eb_v, ea_v, sv);
-                        if !((a_u && b_v) || (b_u && a_v)) {
-                            continue;
-                        }
-                        // Corner edges of A and B on these two faces, in the (u, v) plane.
-                        let pa = (ea_u, ea_v);
-                        let pb = (eb_u, eb_v);
-                        // Outward direction of this corner of the union box.
-                        let out = (if su == 1 { 1.0 } else { -1.0 }, if sv == 1 { 1.0 } else { -1.0 });
-                        let line = (pb.0 - pa.0, pb.1 - pa.1);
-                        let mut n2 = (line.1, -line.0);
-                        if n2.0 * out.0 + n2.1 * out.1 < 0.0 {
-                            n2 = (-n2.0, -n2.1);
-                        }
-                        let mut n = DVec3::ZERO;
-                        n[u] = n2.0;
-                        n[v] = n2.1;
-                        let len = n.length();
-                        if len == 0.0 {
-                            continue;
-                        }
-                        let n = n / len;
-                        let mut p = DVec3::ZERO;
-                        p[u] = pa.0;
-                        p[v] = pa.1;
-                        planes[count] = (n, n.dot(p));
-                        abs_normals[count] = n.abs();
-                        count += 1;
-                    }
-                }
-            }
-        }
+        for_each_plane(a, b, |n, d| {
+            planes[count] = (n, d);
+            abs_normals[count] = n.abs();
+            count += 1;
+            true
+        });
         Shaft { bounds, planes, abs_normals, count }
+    }
+
+    /// `Shaft::new(a, b).may_contain_box(x, eps)`, the same decision, without building the
+    /// shaft: planes are formed one at a time and the first that leaves `x` outside ends the
+    /// test (most boxes tested against many shafts, such as a moving object's swept bounds
+    /// against every pair's shaft, are outside).
+    pub fn between_may_contain_box(a: &Aabb, b: &Aabb, x: &Aabb, eps: f64) -> bool {
+        if !x.overlaps(&a.union(*b)) {
+            return false;
+        }
+        let (c, h) = (x.centre(), x.diagonal() * 0.5);
+        let mut inside = true;
+        for_each_plane(a, b, |n, d| {
+            // (`!(x > y)`, not `x <= y`: a NaN keeps the box in, as in `may_contain_overlapping_box`)
+            let outside = n.dot(c) - n.abs().dot(h) > d + eps;
+            inside = !outside;
+            inside
+        });
+        inside
     }
 
     fn planes(&self) -> &[(DVec3, f64)] {
@@ -111,6 +93,55 @@ impl Shaft {
     }
 }
 
+/// Calls `f(n, d)` for each plane of the shaft between `a` and `b` (`n . p > d` is outside,
+/// `|n| = 1`) until `f` returns false. Side 0 is the min face, side 1 the max face: for each
+/// pair of faces on different axes where A alone defines one and B alone the other, a plane
+/// joins A's and B's edges there.
+#[inline]
+fn for_each_plane(a: &Aabb, b: &Aabb, mut f: impl FnMut(DVec3, f64) -> bool) {
+    for u in 0..3 {
+        for v in (u + 1)..3 {
+            for su in 0..2 {
+                for sv in 0..2 {
+                    let (ea_u, eb_u) = (face(a, u, su), face(b, u, su));
+                    let (ea_v, eb_v) = (face(a, v, sv), face(b, v, sv));
+                    let a_u = beyond(ea_u, eb_u, su);
+                    let b_u = beyond(eb_u, ea_u, su);
+                    let a_v = beyond(ea_v, eb_v, sv);
+                    let b_v = beyond(eb_v, ea_v, sv);
+                    if !((a_u && b_v) || (b_u && a_v)) {
+                        continue;
+                    }
+                    // Corner edges of A and B on these two faces, in the (u, v) plane.
+                    let pa = (ea_u, ea_v);
+                    let pb = (eb_u, eb_v);
+                    // Outward direction of this corner of the union box.
+                    let out = (if su == 1 { 1.0 } else { -1.0 }, if sv == 1 { 1.0 } else { -1.0 });
+                    let line = (pb.0 - pa.0, pb.1 - pa.1);
+                    let mut n2 = (line.1, -line.0);
+                    if n2.0 * out.0 + n2.1 * out.1 < 0.0 {
+                        n2 = (-n2.0, -n2.1);
+                    }
+                    let mut n = DVec3::ZERO;
+                    n[u] = n2.0;
+                    n[v] = n2.1;
+                    let len = n.length();
+                    if len == 0.0 {
+                        continue;
+                    }
+                    let n = n / len;
+                    let mut p = DVec3::ZERO;
+                    p[u] = pa.0;
+                    p[v] = pa.1;
+                    if !f(n, n.dot(p)) {
+                        return;
+                    }
+                }
+            }
+        }
+    }
+}
+
 fn face(b: &Aabb, axis: usize, side: usize) -> f64 {
     if side == 0 { b.min[axis] } else { b.max[axis] }
 }
@@ -141,5 +172,27 @@ mod tests {
         let p = DVec3::new(4.0, 0.0, 0.0);
         assert!(shaft.bounds.min.cmple(p).all() && p.cmple(shaft.bounds.max).all());
         assert!(!shaft.may_contain_triangle(&[p, p, p], 1e-9));
+    }
+
+    /// The early-exit box test decides as the built shaft does.
+    #[test]
+    fn between_may_contain_box_is_may_contain_box() {
+        let f = |k: usize, a: f64| ((k as f64 * a).sin() * 43758.5453).fract().abs() * 4.0;
+        let boxed = |k: usize, s: f64| {
+            let p = DVec3::new(f(k, 1.1), f(k, 2.3), f(k, 3.7));
+            Aabb { min: p, max: p + DVec3::new(f(k, 5.1), f(k, 6.3), f(k, 7.9)) * s }
+        };
+        let (mut inside, mut outside) = (0, 0);
+        for k in 0..5000 {
+            let (a, b, x) = (boxed(3 * k, 0.5), boxed(3 * k + 1, 0.5), boxed(3 * k + 2, 0.2));
+            let want = Shaft::new(&a, &b).may_contain_box(&x, 1e-9);
+            assert_eq!(Shaft::between_may_contain_box(&a, &b, &x, 1e-9), want, "case {k}");
+            if want {
+                inside += 1;
+            } else {
+                outside += 1;
+            }
+        }
+        assert!(inside > 100 && outside > 100, "{inside} inside, {outside} outside");
     }
 }
