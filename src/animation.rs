@@ -8,7 +8,10 @@
 //!
 //! Which pairs change: every pair whose two elements moved relative to each other, and every pair
 //! whose shaft the moving elements' swept bounds (old and new positions) may enter or leave: the
-//! visibility changes the seed left to a separate shadow algorithm (issue 3, item 4).
+//! visibility changes the seed left to a separate shadow algorithm (issue 3, item 4). A static
+//! pair's segments do not move, so its mask is re-checked against the moved triangles alone
+//! (old and new positions, [`Occluders::relink_visibility`]); the shaft traversal remains for
+//! pairs with a moved element and for the rare segment only the movers' old position blocked.
 //!
 //! How a changed pair is updated ([`Method::Incremental`](crate::session::Method)): while the
 //! relative motion is a translation along the direction of the pair's expansion, within
@@ -24,15 +27,15 @@ use glam::DVec3;
 use crate::error::{Error, Result};
 use crate::geometry::{Aabb, Patch};
 use crate::kernel::PairContext;
-use crate::kernel::assemble::{ElementGeometry, integrate_visible};
+use crate::kernel::assemble::{ElementGeometry, KeptGeometry, integrate_visible};
 use crate::kernel::series::{self, PairSeries, SERIES_MAX_T, SERIES_ORDER};
-use crate::links::PairId;
+use crate::links::{LinkStore, PairId};
 use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
 use crate::solver;
 use crate::system::{Progress, System, build_elements};
 use crate::visibility::shaft::Shaft;
-use crate::visibility::{Occluders, Visibility};
+use crate::visibility::{MovedTriangles, Occluders, Visibility};
 
 /// What one update did.
 #[derive(Clone, Debug, Default)]
@@ -56,6 +59,17 @@ pub struct UpdateStats {
     pub recomputed_translation: usize,
     /// Pairs (re-)expanded this frame.
     pub series_expanded: usize,
+    /// Static pairs whose shaft was tested against the moving elements' swept bounds.
+    pub shaft_tests: usize,
+    /// Pairs examined in detail: moved relative to each other, or shaft entered by the swept bounds.
+    pub candidates: usize,
+    /// Link visibility evaluations by a shaft traversal ([`Occluders::link_visibility`]).
+    pub visibility_checks: usize,
+    /// Static pairs whose visibility was re-checked against the moved triangles only
+    /// ([`Occluders::relink_visibility`]).
+    pub visibility_relinked: usize,
+    /// Sample segments tested against occluders (`m^4` per link that needed rays).
+    pub segments_tested: u64,
     pub kernel_seconds: f64,
     pub solve_seconds: f64,
     pub shots: usize,
@@ -75,17 +89,91 @@ pub struct AnimationState {
     /// Per element: bumped whenever it moves by anything but a translation.
     epochs: Vec<u32>,
     use_series: bool,
+    /// Pair ids by their two elements.
+    index: PairIndex,
+    /// The element geometry of the last update, for elements that do not move in the next.
+    geometry: Option<KeptGeometry>,
+    /// Per element: whether its plane has culled occluders ([`Occluders::culls`]) in any frame
+    /// since the build; `None` before the first update.
+    culled: Option<Vec<bool>>,
 }
 
 impl AnimationState {
     pub fn new(n_elements: usize, use_series: bool) -> Self {
-        Self { series: Vec::new(), epochs: vec![0; n_elements], use_series }
+        Self {
+            series: Vec::new(),
+            epochs: vec![0; n_elements],
+            use_series,
+            index: PairIndex::default(),
+            geometry: None,
+            culled: None,
+        }
     }
 
     /// Pairs holding a series, and the bytes their terms take.
     pub fn series_memory(&self) -> (usize, usize) {
         let held: Vec<_> = self.series.iter().flatten().collect();
         (held.len(), held.iter().map(|s| s.terms.len() * 4).sum())
+    }
+}
+
+/// The stored pairs by their two elements: a hash lookup per candidate where
+/// [`LinkStore::find`] scans an element's adjacency (hundreds of pairs, each a random read).
+#[derive(Default)]
+struct PairIndex {
+    ids: std::collections::HashMap<u64, PairId, std::hash::BuildHasherDefault<PairHasher>>,
+    /// Pairs `0..indexed` of the store are in `ids` (the store only appends).
+    indexed: usize,
+}
+
+impl PairIndex {
+    fn key(a: u32, b: u32) -> u64 {
+        ((a.min(b) as u64) << 32) | a.max(b) as u64
+    }
+
+    /// Adds the pairs the store gained since the last call (all of them the first time).
+    fn sync(&mut self, links: &LinkStore) {
+        if links.len() < self.indexed {
+            *self = Self::default();
+        }
+        self.ids.reserve(links.len() - self.indexed);
+        for p in self.indexed..links.len() {
+            let pair = links.pair(p as PairId);
+            self.ids.insert(Self::key(pair.a, pair.b), p as PairId);
+        }
+        self.indexed = links.len();
+    }
+
+    /// Records pair `p`, just pushed to the store.
+    fn insert(&mut self, a: u32, b: u32, p: PairId) {
+        debug_assert_eq!(p as usize, self.indexed);
+        self.ids.insert(Self::key(a, b), p);
+        self.indexed += 1;
+    }
+
+    fn get(&self, a: u32, b: u32) -> Option<PairId> {
+        self.ids.get(&Self::key(a, b)).copied()
+    }
+}
+
+/// A multiplicative hash for the index's `u64` keys (SipHash, the default, costs more than the
+/// lookup needs; the keys are not attacker-controlled).
+#[derive(Default)]
+struct PairHasher(u64);
+
+impl std::hash::Hasher for PairHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(self.0 ^ b as u64);
+        }
+    }
+
+    fn write_u64(&mut self, x: u64) {
+        self.0 = (x ^ (x >> 32)).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0 ^ (self.0 >> 29)
     }
 }
 
@@ -112,6 +200,8 @@ struct PairUpdate {
     j: u32,
     /// `(G_ij, G_ji, visibility)`, or `None` when the pair no longer exchanges light.
     coefficients: Option<(Vec<f64>, Vec<f64>, Visibility)>,
+    /// `Delta K b` it adds (eq. 9): `nb` coefficients for receiver `i`, then `nb` for `j`.
+    delta: Vec<[f64; 3]>,
     series: SeriesAction,
     reason: Reason,
 }
@@ -125,6 +215,9 @@ enum Candidate {
     VisibilityOnly,
 }
 
+/// A pair `(i, j)`, `i < j`, that may have changed.
+type PairCandidate = (u32, u32, Candidate);
+
 /// Updates `sys` (solved for `prev`) to `next` at `frame`.
 pub fn advance(
     sys: &mut System,
@@ -134,6 +227,7 @@ pub fn advance(
     progress: Progress,
 ) -> Result<Outcome> {
     let start = std::time::Instant::now();
+    let segments_before = crate::visibility::segments_tested();
     let s = &next.settings;
     let basis = sys.basis;
     let nb = basis.len();
@@ -175,55 +269,127 @@ pub fn advance(
             adaptive: s.adaptive_quadrature,
         };
         let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
-        let geom = ElementGeometry::new(&patches, &ctx);
+        let geom = ElementGeometry::reusing(state.geometry.take(), &patches, &moved, &ctx);
         let shaft_eps = 1e-9 * scene_scale;
-        let candidates: Vec<(u32, u32, Candidate)> = (0..n)
+        let bounds: Vec<Aabb> = patches.iter().map(Patch::bounds).collect();
+        state.index.sync(&sys.links);
+        // Per element i, its candidates (i, j > i) and how many shafts it tested.
+        let per_element: Vec<(Vec<PairCandidate>, usize)> = (0..n)
             .into_par_iter()
-            .flat_map_iter(|i| {
-                let (moved, translated, shift, patches, swept) =
-                    (&moved, &translated, &shift, &patches, &swept);
-                ((i + 1)..n).filter_map(move |j| {
-                    let rigid = translated[i] && translated[j] && (shift[j] - shift[i]).length() <= eps;
-                    if (moved[i] || moved[j]) && !rigid {
-                        return Some((i as u32, j as u32, Candidate::Moved));
+            .map(|i| {
+                let mut found = Vec::new();
+                let mut tests = 0;
+                for j in (i + 1)..n {
+                    if moved[i] || moved[j] {
+                        let rigid = translated[i] && translated[j] && (shift[j] - shift[i]).length() <= eps;
+                        if !rigid {
+                            found.push((i as u32, j as u32, Candidate::Moved));
+                            continue;
+                        }
                     }
                     if !s.visibility {
-                        return None;
+                        continue;
                     }
-                    let (bi, bj) = (patches[i].bounds(), patches[j].bounds());
-                    if !bi.union(bj).overlaps(swept) {
-                        return None;
+                    let (bi, bj) = (&bounds[i], &bounds[j]);
+                    if !bi.union(*bj).overlaps(&swept) {
+                        continue;
                     }
-                    Shaft::new(&bi, &bj).may_contain_box(swept, shaft_eps).then_some((
-                        i as u32,
-                        j as u32,
-                        Candidate::VisibilityOnly,
-                    ))
-                })
+                    tests += 1;
+                    if Shaft::between_may_contain_box(bi, bj, &swept, shaft_eps) {
+                        found.push((i as u32, j as u32, Candidate::VisibilityOnly));
+                    }
+                }
+                (found, tests)
             })
             .collect();
+        stats.shaft_tests = per_element.iter().map(|(_, t)| t).sum();
+        let candidates: Vec<PairCandidate> = per_element.into_iter().flat_map(|(c, _)| c).collect();
+        stats.candidates = candidates.len();
+        // Static pairs re-check their masks against the moved triangles only (exact, see
+        // `Occluders::relink_visibility`) when neither element has culled occluders by its plane
+        // since the build: then every mask they hold is an any-hit mask over all occluders.
+        let moved_triangles =
+            MovedTriangles::new((0..n).filter(|&e| moved[e]).map(|e| (old[e], &patches[e])));
+        if let Some(o) = &occluders {
+            let before = state.culled.take().unwrap_or_else(|| {
+                // First update since the build: the build's occluders are not kept.
+                let built: Vec<Patch> = old.iter().map(|p| **p).collect();
+                let b = Occluders::new(&built, s.visibility_samples);
+                (0..n).map(|e| b.culls(e)).collect()
+            });
+            state.culled = Some((0..n).map(|e| before[e] || o.culls(e)).collect());
+        }
+        let relink_ok = |i: usize, j: usize| state.culled.as_ref().is_some_and(|c| !c[i] && !c[j]);
+        let visibility_checks = std::sync::atomic::AtomicUsize::new(0);
+        let visibility_relinked = std::sync::atomic::AtomicUsize::new(0);
         let total = candidates.len();
         let done = std::sync::atomic::AtomicUsize::new(0);
-        let ids: Vec<Option<PairId>> = candidates.par_iter().map(|&(i, j, _)| sys.links.find(i, j)).collect();
-        let updates: Vec<Option<PairUpdate>> = candidates
+        // Delta K b of an update with the previous frame's b, both directions (eq. 9), computed
+        // here in parallel: the old blocks are strided reads of the column store.
+        let with_delta = |mut u: PairUpdate| {
+            let mut old = [0.0; 2 * 256];
+            let zeros = [0.0; 256];
+            let (old_ij, old_ji) = old[..2 * nb * nb].split_at_mut(nb * nb);
+            if let Some(p) = state.index.get(u.i, u.j) {
+                sys.links.block_into(p, u.i, old_ij);
+                sys.links.block_into(p, u.j, old_ji);
+            }
+            let (new_ij, new_ji) = match &u.coefficients {
+                Some((ij, ji, _)) => (&ij[..], &ji[..]),
+                None => (&zeros[..nb * nb], &zeros[..nb * nb]),
+            };
+            u.delta = vec![[0.0; 3]; 2 * nb];
+            let (di, dj) = u.delta.split_at_mut(nb);
+            delta_kb(di, sys, u.i as usize, u.j as usize, new_ij, old_ij);
+            delta_kb(dj, sys, u.j as usize, u.i as usize, new_ji, old_ji);
+            u
+        };
+        let updates: Vec<PairUpdate> = candidates
             .par_iter()
-            .zip(&ids)
-            .map(|(&(i, j, kind), &id)| {
+            .map(|&(i, j, kind)| {
                 let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 if d.is_multiple_of(2048) && !progress(d as f64 / total.max(1) as f64, "kernel update") {
                     return Err(Error::Cancelled);
                 }
                 let (iu, ju) = (i as usize, j as usize);
+                let id = state.index.get(i, j);
+                // A pair that cannot face each other exchanges nothing whatever its visibility
+                // (`integrate_visible` gives `None`; a stored pair is emptied with `Blocked`).
+                let facing = geom.face_each_other(iu, ju);
+                if !facing && (id.is_none() || matches!(kind, Candidate::VisibilityOnly)) {
+                    // (A static or rigid pair's facing never changes: if stored, it is already empty.)
+                    return Ok(None);
+                }
+                let old_vis = id.map_or(&Visibility::Blocked, |p| &sys.links.pair(p).visibility);
+                let static_pair = !moved[iu] && !moved[ju];
                 let vis = match &occluders {
-                    Some(o) => o.link_visibility(iu, &patches[iu], ju, &patches[ju]),
+                    _ if !facing => Visibility::Blocked,
+                    Some(o) => {
+                        // An absent pair, or one stored as `Blocked`, was either blocked or has a
+                        // kernel that is zero whatever its mask (the one-sided `g >= 0` vanished at
+                        // every visible sample: then at every sample, as the pair has not moved).
+                        // Re-checking from `Blocked` is exact in the first case and gives a mask
+                        // that still yields the zero kernel in the second.
+                        let relinked = (static_pair && relink_ok(iu, ju))
+                            .then(|| {
+                                o.relink_visibility((&patches[iu], &patches[ju]), old_vis, &moved_triangles)
+                            })
+                            .flatten();
+                        if relinked.is_some() {
+                            visibility_relinked.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        }
+                        relinked.unwrap_or_else(|| {
+                            visibility_checks.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                            o.link_visibility(iu, &patches[iu], ju, &patches[ju])
+                        })
+                    }
                     None => Visibility::Full,
                 };
-                let old_vis = id.map_or(Visibility::Blocked, |p| sys.links.pair(p).visibility.clone());
                 let existing_series =
                     id.and_then(|p| state.series.get(p as usize)).and_then(|s| s.as_deref());
                 let update = match kind {
                     Candidate::VisibilityOnly => {
-                        if vis == old_vis || (id.is_none() && vis == Visibility::Blocked) {
+                        if vis == *old_vis || (id.is_none() && vis == Visibility::Blocked) {
                             return Ok(None);
                         }
                         let c = integrate_visible(&ctx, &geom, iu, ju, &vis);
@@ -231,6 +397,7 @@ pub fn advance(
                             i,
                             j,
                             coefficients: c.map(|c| (c.ij, c.ji, vis)),
+                            delta: Vec::new(),
                             series: SeriesAction::Drop,
                             reason: Reason::Visibility,
                         }
@@ -241,16 +408,17 @@ pub fn advance(
                         let mut reason =
                             if both_translated { Reason::Translation } else { Reason::NonTranslation };
                         if let (true, Some(ser)) = (state.use_series, existing_series) {
-                            match series_check(ser, state, &patches, iu, ju, &vis, &old_vis) {
+                            match series_check(ser, state, &patches, iu, ju, &vis, old_vis) {
                                 Ok(p) => {
                                     let (ab, ba) = ser.eval(p, nb);
-                                    return Ok(Some(PairUpdate {
+                                    return Ok(Some(with_delta(PairUpdate {
                                         i,
                                         j,
                                         coefficients: Some((ab, ba, vis)),
+                                        delta: Vec::new(),
                                         series: SeriesAction::Keep,
                                         reason: Reason::Series,
-                                    }));
+                                    })));
                                 }
                                 Err(why) => reason = why,
                             }
@@ -289,6 +457,7 @@ pub fn advance(
                                     i,
                                     j,
                                     coefficients: Some((ab, ba, vis)),
+                                    delta: Vec::new(),
                                     series: SeriesAction::Set(Box::new(ser)),
                                     reason,
                                 }
@@ -306,6 +475,7 @@ pub fn advance(
                                     i,
                                     j,
                                     coefficients: c.map(|c| (c.ij, c.ji, vis)),
+                                    delta: Vec::new(),
                                     series: SeriesAction::Drop,
                                     reason,
                                 }
@@ -313,22 +483,23 @@ pub fn advance(
                         }
                     }
                 };
-                Ok(Some(update))
+                if id.is_none() && update.coefficients.is_none() {
+                    return Ok(None);
+                }
+                Ok(Some(with_delta(update)))
             })
+            .filter_map(Result::transpose)
             .collect::<Result<_>>()?;
+        stats.visibility_checks = visibility_checks.into_inner();
+        stats.visibility_relinked = visibility_relinked.into_inner();
 
         let zeros = vec![0.0; nb * nb];
-        for (update, id) in updates.into_iter().zip(ids) {
-            let Some(u) = update else { continue };
-            if id.is_none() && u.coefficients.is_none() {
-                continue;
-            }
-            let (old_ij, old_ji) = match id {
-                Some(p) => sys.links.blocks_f64(p, u.i),
-                None => (zeros.clone(), zeros.clone()),
+        for u in updates {
+            let id = state.index.get(u.i, u.j);
+            let (new_ij, new_ji, vis) = match u.coefficients {
+                Some((ref ij, ref ji, vis)) => (&ij[..], &ji[..], vis),
+                None => (&zeros[..], &zeros[..], Visibility::Blocked),
             };
-            let (new_ij, new_ji, vis) =
-                u.coefficients.unwrap_or_else(|| (zeros.clone(), zeros.clone(), Visibility::Blocked));
             match u.reason {
                 Reason::Series => stats.links_series += 1,
                 Reason::Bound => stats.recomputed_bound += 1,
@@ -341,17 +512,25 @@ pub fn advance(
             if u.reason != Reason::Series {
                 stats.links_recomputed += 1;
             }
-            // Delta K b with the previous frame's b, both directions (eq. 9).
-            add_delta(&mut delta_b, sys, u.i as usize, u.j as usize, &new_ij, &old_ij);
-            add_delta(&mut delta_b, sys, u.j as usize, u.i as usize, &new_ji, &old_ji);
+            for (r, d) in [(u.i as usize, &u.delta[..nb]), (u.j as usize, &u.delta[nb..])] {
+                for (acc, x) in delta_b[r * nb..(r + 1) * nb].iter_mut().zip(d) {
+                    for c in 0..3 {
+                        acc[c] += x[c];
+                    }
+                }
+            }
             let p = match id {
                 Some(p) => {
                     let (ab, ba) =
-                        if sys.links.pair(p).a == u.i { (&new_ij, &new_ji) } else { (&new_ji, &new_ij) };
+                        if sys.links.pair(p).a == u.i { (new_ij, new_ji) } else { (new_ji, new_ij) };
                     sys.links.set(p, ab, ba, vis);
                     p
                 }
-                None => sys.links.push(u.i, u.j, &new_ij, &new_ji, vis),
+                None => {
+                    let p = sys.links.push(u.i, u.j, new_ij, new_ji, vis);
+                    state.index.insert(u.i, u.j, p);
+                    p
+                }
             };
             if state.series.len() <= p as usize {
                 state.series.resize_with(p as usize + 1, || None);
@@ -367,7 +546,9 @@ pub fn advance(
                 }
             }
         }
+        state.geometry = Some(geom.into_kept(&ctx));
     }
+    stats.segments_tested = crate::visibility::segments_tested() - segments_before;
     stats.kernel_seconds = start.elapsed().as_secs_f64();
 
     // Emission changes enter as Delta e (eq. 9).
@@ -435,8 +616,8 @@ const _: () = assert!(SERIES_ORDER >= 2);
 /// than the quadratures they save; benches/animation.rs).
 const MIN_SERIES_FRAMES: f64 = 3.0;
 
-/// `delta_b_r += rho_r (G_new - G_old) b_s` for receiver `r`, source `s`.
-fn add_delta(delta_b: &mut [[f64; 3]], sys: &System, r: usize, s: usize, new: &[f64], old: &[f64]) {
+/// `out += rho_r (G_new - G_old) b_s` for receiver `r` (its `nb` coefficients), source `s`.
+fn delta_kb(out: &mut [[f64; 3]], sys: &System, r: usize, s: usize, new: &[f64], old: &[f64]) {
     let nb = sys.basis.len();
     let rho = sys.reflectance[r];
     for k in 0..nb {
@@ -446,7 +627,7 @@ fn add_delta(delta_b: &mut [[f64; 3]], sys: &System, r: usize, s: usize, new: &[
                 continue;
             }
             for c in 0..3 {
-                delta_b[r * nb + k][c] += rho[c] * d * sys.solution.b[s * nb + l][c];
+                out[k][c] += rho[c] * d * sys.solution.b[s * nb + l][c];
             }
         }
     }

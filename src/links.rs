@@ -220,6 +220,18 @@ impl LinkStore {
         g
     }
 
+    /// [`LinkStore::block`] widened to f64 into `out` (`nb * nb`), without allocating.
+    pub fn block_into(&self, p: PairId, receiver: ElementId, out: &mut [f64]) {
+        let nb = self.nb;
+        let (shooter, slot) = self.slot(p, receiver);
+        for l in 0..nb {
+            let col = &self.columns[shooter * nb + l][slot * nb..(slot + 1) * nb];
+            for (k, &x) in col.iter().enumerate() {
+                out[k * nb + l] = x as f64;
+            }
+        }
+    }
+
     /// The other element of pair `p`.
     #[inline]
     pub fn other(&self, p: PairId, e: ElementId) -> ElementId {

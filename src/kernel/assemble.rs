@@ -23,6 +23,34 @@ pub struct ElementGeometry<'a> {
     info: Vec<ElementInfo>,
 }
 
+/// An [`ElementGeometry`] without its patches, kept between animation frames.
+pub struct KeptGeometry {
+    key: GeometryKey,
+    samples: Vec<Vec<Samples>>,
+    rules: Vec<usize>,
+    info: Vec<ElementInfo>,
+}
+
+/// What the samples depend on besides the patches.
+#[derive(Clone, Copy, PartialEq)]
+struct GeometryKey {
+    order: usize,
+    rule: usize,
+    vis_axis: usize,
+    adaptive: bool,
+}
+
+impl GeometryKey {
+    fn of(ctx: &PairContext) -> Self {
+        Self {
+            order: ctx.basis.order(),
+            rule: ctx.rule.len(),
+            vis_axis: ctx.vis_axis,
+            adaptive: ctx.adaptive,
+        }
+    }
+}
+
 /// Per-element geometry that every pair of the element needs.
 struct ElementInfo {
     /// Bounding sphere (centre, radius).
@@ -61,6 +89,43 @@ impl<'a> ElementGeometry<'a> {
         Self { patches, samples, rules, info }
     }
 
+    /// [`ElementGeometry::new`] for `patches`, taking from `kept` (the geometry of the previous
+    /// frame, [`ElementGeometry::into_kept`]) every element not in `moved`: an element's samples
+    /// depend on its patch alone. Without `kept`, or when it was made for another context, all
+    /// elements are computed.
+    pub fn reusing(
+        kept: Option<KeptGeometry>,
+        patches: &'a [Patch],
+        moved: &[bool],
+        ctx: &PairContext,
+    ) -> Self {
+        let Some(mut kept) = kept.filter(|k| {
+            k.key == GeometryKey::of(ctx) && k.info.len() == patches.len() && moved.len() == patches.len()
+        }) else {
+            return Self::new(patches, ctx);
+        };
+        let redo: Vec<usize> = (0..patches.len()).filter(|&e| moved[e]).collect();
+        for (r, &n) in kept.rules.iter().enumerate() {
+            let rule = GaussLegendre::new(n);
+            let fresh: Vec<Samples> = redo
+                .par_iter()
+                .map(|&e| Samples::new(&patches[e], &Rect::UNIT, &rule, ctx.basis, ctx.vis_axis))
+                .collect();
+            for (&e, s) in redo.iter().zip(fresh) {
+                kept.samples[r][e] = s;
+            }
+        }
+        for &e in &redo {
+            kept.info[e] = ElementInfo::new(&patches[e]);
+        }
+        Self { patches, samples: kept.samples, rules: kept.rules, info: kept.info }
+    }
+
+    /// What [`ElementGeometry::reusing`] takes to the next frame (no borrow of the patches).
+    pub fn into_kept(self, ctx: &PairContext) -> KeptGeometry {
+        KeptGeometry { key: GeometryKey::of(ctx), samples: self.samples, rules: self.rules, info: self.info }
+    }
+
     /// Element `e`'s whole-domain samples with `n` points per axis.
     pub fn samples(&self, e: usize, n: usize) -> &Samples {
         let r = self.rules.iter().position(|&m| m == n).expect("rule prepared");
@@ -68,7 +133,7 @@ impl<'a> ElementGeometry<'a> {
     }
 
     /// `may_face(i, j) && may_face(j, i)` for elements `i` and `j`.
-    fn face_each_other(&self, i: usize, j: usize) -> bool {
+    pub fn face_each_other(&self, i: usize, j: usize) -> bool {
         self.info[i].may_face(&self.patches[j]) && self.info[j].may_face(&self.patches[i])
     }
 }

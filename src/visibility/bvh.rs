@@ -228,7 +228,7 @@ fn centroid(t: &Triangle) -> DVec3 {
     (t.v[0] + t.v[1] + t.v[2]) / 3.0
 }
 
-fn slab_hit(b: &Aabb, o: DVec3, inv: DVec3, t_min: f64, t_max: f64) -> bool {
+pub(crate) fn slab_hit(b: &Aabb, o: DVec3, inv: DVec3, t_min: f64, t_max: f64) -> bool {
     let t0 = (b.min - o) * inv;
     let t1 = (b.max - o) * inv;
     // NaN (0 * inf on a slab boundary) is ignored by min/max, which keeps the test conservative.

@@ -10,9 +10,18 @@ pub mod shaft;
 
 use glam::DVec3;
 
-use crate::geometry::Patch;
+use crate::geometry::{Aabb, Patch};
 use bvh::{Bvh, Triangle};
 use shaft::Shaft;
+
+/// Sample segments tested by [`Occluders::cast`] in this process (all threads and sessions): a
+/// count for benches and frame statistics that timing noise does not blur.
+static SEGMENTS_TESTED: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// [`SEGMENTS_TESTED`] so far; differences of two readings count what happened in between.
+pub fn segments_tested() -> u64 {
+    SEGMENTS_TESTED.load(std::sync::atomic::Ordering::Relaxed)
+}
 
 /// Candidate lists longer than this go through the BVH instead.
 const BRUTE_FORCE_CANDIDATES: usize = 24;
@@ -242,6 +251,96 @@ impl Occluders {
         })
     }
 
+    /// Whether element `e`'s plane culls occluders in [`Occluders::link_visibility`] (some
+    /// occluder lies wholly behind it). Links between elements that cull nothing have the masks
+    /// of plain any-hit rays against every occluder but their own two elements.
+    pub fn culls(&self, e: usize) -> bool {
+        self.culling_planes[e].is_some()
+    }
+
+    /// [`Occluders::link_visibility`] of a link whose elements `i` and `j` did not move, from its
+    /// visibility `old` in the previous frame, when only the elements of `moved` moved: a segment
+    /// between two fixed samples changes its verdict only through the moved triangles. A segment
+    /// visible before is blocked now iff it hits a moved triangle at its new position; one blocked
+    /// before stays blocked if it hits a moved triangle now, or if it missed them all before (then
+    /// a fixed occluder blocked it). `None` when a segment was blocked only by the movers' old
+    /// positions (whether a fixed occluder blocks it too needs the whole traversal), or when
+    /// too many moved triangles lie in the shaft for one batch.
+    ///
+    /// Requires that neither element culls (see [`Occluders::culls`]) in this frame or the
+    /// previous one, so that both frames' masks are any-hit masks over all occluders.
+    pub fn relink_visibility(
+        &self,
+        (pi, pj): (&Patch, &Patch),
+        old: &Visibility,
+        moved: &MovedTriangles,
+    ) -> Option<Visibility> {
+        let shaft = Shaft::new(&pi.bounds(), &pj.bounds());
+        let eps = 1e-9 * self.scale;
+        // Only the moved triangles the shaft may hold can meet a segment of the link.
+        let in_shaft = |list: &[([DVec3; 3], [DVec3; 3])]| -> Option<(CandidateTriangles, Aabb)> {
+            let mut tris = CandidateTriangles::empty();
+            let mut bounds = Aabb::EMPTY;
+            for (e, v) in list {
+                if shaft.may_contain_triangle(v, eps) {
+                    if tris.n == BRUTE_FORCE_CANDIDATES {
+                        return None;
+                    }
+                    tris.push(e);
+                    bounds = bounds.union(Aabb::from_points(v));
+                }
+            }
+            // Grown so that the slab test below is conservative against rounding.
+            Some((tris, Aabb { min: bounds.min - DVec3::splat(eps), max: bounds.max + DVec3::splat(eps) }))
+        };
+        let ((was, was_bounds), (now, now_bounds)) = (in_shaft(&moved.old)?, in_shaft(&moved.new)?);
+        if was.n == 0 && now.n == 0 {
+            return Some(old.clone());
+        }
+        let m = self.samples_per_axis;
+        let cells = m * m;
+        SEGMENTS_TESTED.fetch_add((cells * cells) as u64, std::sync::atomic::Ordering::Relaxed);
+        let (xi, xj) = (sample_points(pi, m), sample_points(pj, m));
+        // A segment that misses a list's bounds misses its triangles.
+        let hits = |tris: &CandidateTriangles, bounds: &Aabb, from: &FromOrigin, a: DVec3, d: DVec3| {
+            tris.n > 0
+                && bvh::slab_hit(bounds, a, d.recip(), 0.0, 1.0)
+                && tris.any_hit(from, d, 1e-9, 1.0 - 1e-9)
+        };
+        let mut bits = [0u64; 4];
+        let mut visible = 0;
+        for (r, a) in xi[..cells].iter().enumerate() {
+            let from_now = now.from(*a);
+            let mut from_was = None;
+            for (s, b) in xj[..cells].iter().enumerate() {
+                let d = *b - *a;
+                let hit_now = hits(&now, &now_bounds, &from_now, *a, d);
+                let seen = if old.at(r, s, cells) == 1.0 {
+                    !hit_now
+                } else if hit_now {
+                    false
+                } else if !hits(&was, &was_bounds, from_was.get_or_insert_with(|| was.from(*a)), *a, d) {
+                    // Blocked before by a fixed occluder, which still blocks it.
+                    false
+                } else {
+                    return None;
+                };
+                if seen {
+                    let k = r * cells + s;
+                    bits[k / 64] |= 1 << (k % 64);
+                    visible += 1;
+                }
+            }
+        }
+        Some(if visible == cells * cells {
+            Visibility::Full
+        } else if visible == 0 {
+            Visibility::Blocked
+        } else {
+            Visibility::Partial(Box::new(bits))
+        })
+    }
+
     /// [`Occluders::link_visibility`] of the links `(i, j)` for every `(j, pj)` of `js`, appended to
     /// `out` in order. Sources near each other (a strip of a wall) share one traversal: the
     /// triangles the shaft from `i` to all of them may hold are a superset of each link's, and
@@ -309,13 +408,8 @@ impl Occluders {
     ) -> Visibility {
         let m = self.samples_per_axis;
         let cells = m * m;
-        let mut xi = [DVec3::ZERO; 16];
-        let mut xj = [DVec3::ZERO; 16];
-        for c in 0..cells {
-            let (s, t) = (((c / m) as f64 + 0.5) / m as f64, ((c % m) as f64 + 0.5) / m as f64);
-            xi[c] = pi.point(s, t);
-            xj[c] = pj.point(s, t);
-        }
+        SEGMENTS_TESTED.fetch_add((cells * cells) as u64, std::sync::atomic::Ordering::Relaxed);
+        let (xi, xj) = (sample_points(pi, m), sample_points(pj, m));
         let (xi, xj) = (&xi[..cells], &xj[..cells]);
         let mut bits = [0u64; 4];
         let mut visible = 0;
@@ -359,6 +453,39 @@ impl Occluders {
     }
 }
 
+/// The visibility samples of an element: cell centres of an `m x m` grid (at most 16).
+fn sample_points(p: &Patch, m: usize) -> [DVec3; 16] {
+    let mut x = [DVec3::ZERO; 16];
+    for c in 0..m * m {
+        let (s, t) = (((c / m) as f64 + 0.5) / m as f64, ((c % m) as f64 + 0.5) / m as f64);
+        x[c] = p.point(s, t);
+    }
+    x
+}
+
+/// The occluder triangles of the elements that moved this frame, at their previous and at their
+/// new positions, for [`Occluders::relink_visibility`].
+pub struct MovedTriangles {
+    /// `v0, v1 - v0, v2 - v0` as [`Occluders`] stores them (the same rounding, hence the same
+    /// decisions of the segment test), then the vertices for the shaft test.
+    old: Vec<([DVec3; 3], [DVec3; 3])>,
+    new: Vec<([DVec3; 3], [DVec3; 3])>,
+}
+
+impl MovedTriangles {
+    /// `moved` yields each moved element's patch at the previous and at the new frame. Elements on
+    /// the scene's hull are included: they never block a segment, so testing them changes nothing.
+    pub fn new<'a>(moved: impl Iterator<Item = (&'a Patch, &'a Patch)>) -> Self {
+        let tri = |v: [DVec3; 3]| ([v[0], v[1] - v[0], v[2] - v[0]], v);
+        let (mut old, mut new) = (Vec::new(), Vec::new());
+        for (a, b) in moved {
+            old.extend(a.triangles().into_iter().map(tri));
+            new.extend(b.triangles().into_iter().map(tri));
+        }
+        Self { old, new }
+    }
+}
+
 thread_local! {
     /// Candidate triangles of the link being cast on this thread (reused, no per-link allocation).
     static CANDIDATES: std::cell::RefCell<Vec<usize>> = const { std::cell::RefCell::new(Vec::new()) };
@@ -396,6 +523,22 @@ impl CandidateTriangles {
             }
         }
         out
+    }
+
+    fn empty() -> Self {
+        let zero = [[0.0; BRUTE_FORCE_CANDIDATES]; 3];
+        Self { n: 0, v0: zero, e1: zero, e2: zero }
+    }
+
+    /// Appends a triangle given as `v0, v1 - v0, v2 - v0`; there must be room.
+    fn push(&mut self, [v0, e1, e2]: &[DVec3; 3]) {
+        let k = self.n;
+        for c in 0..3 {
+            self.v0[c][k] = v0[c];
+            self.e1[c][k] = e1[c];
+            self.e2[c][k] = e2[c];
+        }
+        self.n += 1;
     }
 
     fn from(&self, o: DVec3) -> FromOrigin {

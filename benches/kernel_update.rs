@@ -1,0 +1,153 @@
+//! The kernel update of the animation (everything in `animation::advance` before the solve) on
+//! the moving-light Cornell box of issue 3: `cargo bench --bench kernel_update [-- OPTIONS]`.
+//!
+//! Options: `--frames N` (default 16), `--subdiv N` (default 14: 1,079 patches), `--exact`
+//! (no series), `--save PATH` / `--check PATH` (write, or compare against, every frame's link
+//! store and solution: the link store must match bit for bit, the solution within 1e-6 of peak).
+//!
+//! Prints per frame `kernel_seconds` and the counts that do not depend on timing noise (pairs
+//! whose shafts were tested against the swept box, link visibility checks, segments tested).
+
+use std::collections::BTreeMap;
+use std::io::Write;
+
+use galerkin_radiosity::animation::{self, AnimationState, Outcome};
+use galerkin_radiosity::scene::Settings;
+use galerkin_radiosity::scenes;
+use galerkin_radiosity::system::{System, no_progress};
+
+fn arg(args: &[String], name: &str) -> Option<String> {
+    args.iter().position(|a| a == name).and_then(|k| args.get(k + 1).cloned())
+}
+
+/// Every stored pair by `(min, max)` element: visibility and both blocks' f32 bits (oriented
+/// from the smaller element), so stores built in different pair orders compare equal.
+fn link_snapshot(sys: &System) -> BTreeMap<(u32, u32), Vec<u32>> {
+    let links = &sys.links;
+    let mut out = BTreeMap::new();
+    for p in 0..links.len() as u32 {
+        let pair = links.pair(p);
+        let (a, b) = (pair.a.min(pair.b), pair.a.max(pair.b));
+        let mut v: Vec<u32> =
+            links.block(p, a).iter().chain(links.block(p, b).iter()).map(|x| x.to_bits()).collect();
+        v.push(match &pair.visibility {
+            galerkin_radiosity::visibility::Visibility::Full => 1,
+            galerkin_radiosity::visibility::Visibility::Blocked => 0,
+            galerkin_radiosity::visibility::Visibility::Partial(bits) => {
+                bits.iter().fold(2u32, |h, w| h.wrapping_mul(31).wrapping_add((w ^ (w >> 32)) as u32))
+            }
+        });
+        // A pair emptied to zero is the same as no pair.
+        if v[..v.len() - 1].iter().any(|&x| f32::from_bits(x) != 0.0) {
+            out.insert((a, b), v);
+        }
+    }
+    out
+}
+
+fn hash(words: impl Iterator<Item = u64>) -> u64 {
+    words.fold(0xcbf29ce484222325u64, |h, w| (h ^ w).wrapping_mul(0x100000001b3))
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let frames: i64 = arg(&args, "--frames").map_or(16, |v| v.parse().unwrap());
+    let subdiv: usize = arg(&args, "--subdiv").map_or(14, |v| v.parse().unwrap());
+    let exact = args.iter().any(|a| a == "--exact");
+    let save = arg(&args, "--save");
+    let check = arg(&args, "--check");
+    let settings = Settings { basis_order: 2, corner_gather: false, ..Settings::default() };
+    let scene = scenes::cornell_box_moving_light(subdiv, 48, settings);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(scene.settings.threads).build().unwrap();
+    pool.install(|| {
+        let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
+        sys.solve(scene.settings.tolerance, &|| false).unwrap();
+        let mut state = AnimationState::new(sys.elements.len(), !exact);
+        // Per frame: link hash, then the solution's coefficients.
+        let mut record: Vec<(u64, Vec<f64>)> = Vec::new();
+        println!(
+            "{} patches, method {}, {} threads",
+            sys.elements.len(),
+            if exact { "exact" } else { "series" },
+            rayon::current_num_threads()
+        );
+        println!("| frame | kernel s | solve s | shaft tests | candidates | vis checks | relinked | segments | recomputed | series |");
+        println!("|---|---|---|---|---|---|---|---|---|---|");
+        let mut sums = [0.0f64; 9];
+        for f in 2..=frames {
+            let Outcome::Updated(u) = animation::advance(&mut sys, &mut state, &scene, f as f64, &no_progress).unwrap()
+            else {
+                panic!("topology changed")
+            };
+            println!(
+                "| {f} | {:.4} | {:.4} | {} | {} | {} | {} | {} | {} | {} |",
+                u.kernel_seconds,
+                u.solve_seconds,
+                u.shaft_tests,
+                u.candidates,
+                u.visibility_checks,
+                u.visibility_relinked,
+                u.segments_tested,
+                u.links_recomputed,
+                u.links_series
+            );
+            for (s, x) in sums.iter_mut().zip([
+                u.kernel_seconds,
+                u.solve_seconds,
+                u.shaft_tests as f64,
+                u.candidates as f64,
+                u.visibility_checks as f64,
+                u.visibility_relinked as f64,
+                u.segments_tested as f64,
+                u.links_recomputed as f64,
+                u.links_series as f64,
+            ]) {
+                *s += x;
+            }
+            if save.is_some() || check.is_some() {
+                let snap = link_snapshot(&sys);
+                let h = hash(snap.iter().flat_map(|(&(a, b), v)| {
+                    std::iter::once(((a as u64) << 32) | b as u64).chain(v.iter().map(|&x| x as u64))
+                }));
+                let b: Vec<f64> = sys.solution.b.iter().flat_map(|c| c.iter().copied()).collect();
+                record.push((h, b));
+            }
+        }
+        let n = (frames - 1).max(1) as f64;
+        println!(
+            "| mean | {:.4} | {:.4} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} |",
+            sums[0] / n,
+            sums[1] / n,
+            sums[2] / n,
+            sums[3] / n,
+            sums[4] / n,
+            sums[5] / n,
+            sums[6] / n,
+            sums[7] / n,
+            sums[8] / n
+        );
+        if let Some(path) = save {
+            let mut f = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+            for (h, b) in &record {
+                writeln!(f, "{h} {}", b.iter().map(|x| format!("{:e}", x)).collect::<Vec<_>>().join(" ")).unwrap();
+            }
+            println!("saved {path}");
+        }
+        if let Some(path) = check {
+            let text = std::fs::read_to_string(&path).unwrap();
+            for (k, (line, (h, b))) in text.lines().zip(&record).enumerate() {
+                let mut words = line.split(' ');
+                let want_h: u64 = words.next().unwrap().parse().unwrap();
+                let want: Vec<f64> = words.map(|w| w.parse().unwrap()).collect();
+                let peak = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+                let worst = want.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+                println!(
+                    "frame {}: links {}, solution worst {:.1e} of peak",
+                    k + 2,
+                    if want_h == *h { "identical" } else { "DIFFER" },
+                    worst / peak
+                );
+            }
+        }
+    });
+}
