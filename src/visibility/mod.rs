@@ -162,25 +162,10 @@ impl Occluders {
         out: &mut Vec<bool>,
     ) {
         out.clear();
-        let eps = 1e-9 * self.scale;
-        let point = crate::geometry::Aabb { min: x, max: x };
-        let shaft = Shaft::new(&point, bounds);
+        let shaft = Shaft::new(&crate::geometry::Aabb { min: x, max: x }, bounds);
         // Segments leave `x` to its front: triangles wholly behind its tangent plane cannot block.
-        let behind = |b: &crate::geometry::Aabb| {
-            let (c, h) = (b.centre(), b.diagonal() * 0.5);
-            n.dot(c - x) + n.abs().dot(h) <= 0.5 * eps
-        };
-        let in_shaft = |b: &crate::geometry::Aabb| {
-            b.overlaps(&shaft.bounds) && shaft.may_contain_overlapping_box(b, eps) && !behind(b)
-        };
         CANDIDATES.with_borrow_mut(|candidates| {
-            candidates.clear();
-            self.bvh.for_each_accepted(in_shaft, |t| {
-                let tri = &self.bvh.triangles()[t];
-                if tri.element != i && tri.element != j && shaft.may_contain_triangle(&tri.v, eps) {
-                    candidates.push(t);
-                }
-            });
+            self.shaft_candidates(&shaft, &[(n, n.dot(x))], (i, j), candidates);
             if candidates.is_empty() {
                 out.resize(targets.len(), true);
             } else if candidates.len() <= BRUTE_FORCE_CANDIDATES {
@@ -211,36 +196,16 @@ impl Occluders {
     /// Visibility between elements `i` and `j`; also returns whether any ray was needed.
     pub fn link_visibility(&self, i: usize, pi: &Patch, j: usize, pj: &Patch) -> Visibility {
         let shaft = Shaft::new(&pi.bounds(), &pj.bounds());
-        let eps = 1e-9 * self.scale;
         let planes = [self.culling_planes[i], self.culling_planes[j]];
-        // A box wholly behind one of the two planes holds only triangles the plane test below
-        // drops (half of eps covers the rounding of the box form), so the traversal skips it.
-        let behind = |b: &crate::geometry::Aabb| {
-            let (c, h) = (b.centre(), b.diagonal() * 0.5);
-            planes.iter().flatten().any(|(n, d)| n.dot(c) + n.abs().dot(h) - d <= 0.5 * eps)
-        };
-        let in_shaft = |b: &crate::geometry::Aabb| {
-            b.overlaps(&shaft.bounds) && shaft.may_contain_overlapping_box(b, eps) && !behind(b)
-        };
+        let mut culling = [(DVec3::ZERO, 0.0); 2];
+        let mut count = 0;
+        for p in planes.into_iter().flatten() {
+            culling[count] = p;
+            count += 1;
+        }
         CANDIDATES.with_borrow_mut(|candidates| {
-            candidates.clear();
-            self.bvh.for_each_accepted(in_shaft, |t| {
-                let tri = &self.bvh.triangles()[t];
-                let e = tri.element as usize;
-                if e == i || e == j {
-                    return;
-                }
-                // Segments between the fronts of two planar elements stay in front of both planes.
-                for plane in planes.into_iter().flatten() {
-                    if tri.v.iter().all(|v| plane.0.dot(*v) - plane.1 <= eps) {
-                        return;
-                    }
-                }
-                if shaft.may_contain_triangle(&tri.v, eps) {
-                    candidates.push(t);
-                }
-                // (the traversal already kept only nodes and triangle boxes the shaft may contain)
-            });
+            // Segments between the fronts of two planar elements stay in front of both planes.
+            self.shaft_candidates(&shaft, &culling[..count], (i as u32, j as u32), candidates);
             if candidates.is_empty() {
                 return Visibility::Full;
             }
@@ -249,6 +214,42 @@ impl Occluders {
             let complete = planes == [None, None];
             self.cast(i, pi, j, pj, candidates, complete)
         })
+    }
+
+    /// The occluder triangles, not of the elements `skip`, that `shaft` may hold and that reach in
+    /// front of every plane `(n, d)` of `planes` (segments between points in front of a plane
+    /// stay in front of it), written to `out`.
+    fn shaft_candidates(
+        &self,
+        shaft: &Shaft,
+        planes: &[(DVec3, f64)],
+        skip: (u32, u32),
+        out: &mut Vec<usize>,
+    ) {
+        out.clear();
+        let eps = 1e-9 * self.scale;
+        // A box wholly behind one of the planes holds only triangles the plane test below drops
+        // (half of eps covers the rounding of the box form), so the traversal skips it.
+        let behind = |b: &crate::geometry::Aabb| {
+            let (c, h) = (b.centre(), b.diagonal() * 0.5);
+            planes.iter().any(|(n, d)| n.dot(c) + n.abs().dot(h) - d <= 0.5 * eps)
+        };
+        let in_shaft = |b: &crate::geometry::Aabb| {
+            b.overlaps(&shaft.bounds) && shaft.may_contain_overlapping_box(b, eps) && !behind(b)
+        };
+        self.bvh.for_each_accepted(in_shaft, |t| {
+            let tri = &self.bvh.triangles()[t];
+            if tri.element == skip.0 || tri.element == skip.1 {
+                return;
+            }
+            if planes.iter().any(|(n, d)| tri.v.iter().all(|v| n.dot(*v) - d <= eps)) {
+                return;
+            }
+            // (the traversal already kept only nodes and triangle boxes the shaft may contain)
+            if shaft.may_contain_triangle(&tri.v, eps) {
+                out.push(t);
+            }
+        });
     }
 
     /// Whether element `e`'s plane culls occluders in [`Occluders::link_visibility`] (some
