@@ -59,7 +59,8 @@ fn main() {
 
     let (n, frames) = if quick { (6, 4) } else { (14, 8) };
     // The solver's methods; the corner gather (the same for both) is off, as in benches/animation.rs.
-    let scene = scenes::cornell_box_animated(n, frames, Settings { corner_gather: false, ..Settings::default() });
+    let scene =
+        scenes::cornell_box_animated(n, frames, Settings { corner_gather: false, ..Settings::default() });
     println!(
         "\n## Demo animation ({} patches, order 2, light and block moving): seconds per frame\n",
         scene.face_count()
