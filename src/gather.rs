@@ -97,6 +97,27 @@ struct Row {
     sources: Vec<u32>,
     modes: Vec<Mode>,
     moments: Vec<f32>,
+    /// Sources the point touches, whose part next to it counts with `B` at the foot point.
+    feet: Vec<Foot>,
+}
+
+impl Row {
+    /// Moments held, the feet's included.
+    fn moment_count(&self) -> usize {
+        self.sources.len() + self.feet.iter().map(|f| f.row.moment_count()).sum::<usize>()
+    }
+}
+
+/// Where a corner touches a source (the foot of a block on the floor, a room's edge), nearly all
+/// of that source's form factor comes from a millimetre around the contact, where the source's
+/// own polynomial is worst when the contact line crosses it (a floor face half under the block).
+/// That part of the source (`weight = integral g V dA` over it) counts with `B` gathered at the
+/// foot point instead (`row`, itself without feet).
+#[derive(Clone, Debug)]
+struct Foot {
+    element: u32,
+    weight: f32,
+    row: Row,
 }
 
 /// How a moment's visibility was decided; a different decision recomputes the moment.
@@ -177,7 +198,7 @@ impl CornerGather {
                     return Err(Error::Cancelled);
                 }
                 Ok(match point.at {
-                    Some((e, s, t)) => gather.row(e, s, t, kept),
+                    Some((e, s, t)) => gather.row(e, s, t, kept, true),
                     None => (Row::default(), 0),
                 })
             })
@@ -192,7 +213,7 @@ impl CornerGather {
             .collect();
         let stats = GatherStats {
             points: points.len(),
-            moments: rows.iter().map(|(r, _)| r.sources.len()).sum(),
+            moments: rows.iter().map(|(r, _)| r.moment_count()).sum(),
             recomputed: rows.iter().map(|(_, n)| n).sum(),
         };
         let mut out = Vec::with_capacity(corners_per_object.len());
@@ -254,6 +275,12 @@ fn radiosity(sys: &System, i: usize, row: &Row) -> [f64; 3] {
             }
         }
     }
+    for foot in &row.feet {
+        let b = radiosity(sys, foot.element as usize, &foot.row);
+        for c in 0..3 {
+            irradiance[c] += foot.weight as f64 * b[c];
+        }
+    }
     let (rho, e) = (sys.reflectance[i], sys.emission[i * nb]);
     std::array::from_fn(|c| e[c] + rho[c] * irradiance[c])
 }
@@ -302,6 +329,15 @@ struct Gather<'a> {
     eps: f64,
 }
 
+/// A touched source: the foot point's parameters on it and the radius around the corner that
+/// counts with the foot's `B`.
+#[derive(Clone, Copy, Debug)]
+struct Touch {
+    s: f64,
+    t: f64,
+    radius: f64,
+}
+
 /// The receiving point and what its rays skip.
 struct Receiver {
     x: DVec3,
@@ -314,7 +350,7 @@ struct Receiver {
 impl Gather<'_> {
     /// The sources and moments of the point at local `(s,t)` of element `i`, reusing `previous`
     /// (this point's row of the kept gather) where allowed; also how many moments were computed.
-    fn row(&self, i: usize, s: f64, t: f64, previous: Option<Row>) -> (Row, usize) {
+    fn row(&self, i: usize, s: f64, t: f64, previous: Option<Row>, feet: bool) -> (Row, usize) {
         let sys = self.sys;
         let patch = &self.patches[i];
         let n = patch.area_vector(s, t).normalize_or_zero();
@@ -361,6 +397,8 @@ impl Gather<'_> {
             }
         }
         wanted.sort_unstable_by_key(|w| w.0);
+        let touching: Vec<Option<Touch>> =
+            wanted.iter().map(|&(j, _)| if feet { self.touch(&rx, i, j as usize) } else { None }).collect();
         let nb = sys.basis.len();
         let mut m = vec![0.0; nb];
         // The common case: the same sources, decided the same way: update the row in place.
@@ -368,13 +406,14 @@ impl Gather<'_> {
             p.sources.len() == wanted.len()
                 && wanted.iter().zip(p.sources.iter().zip(&p.modes)).all(|(w, (&j, &mode))| *w == (j, mode))
         };
-        if previous.as_ref().is_some_and(same) {
+        let no_feet = |p: &Row| p.feet.is_empty() && touching.iter().all(Option::is_none);
+        if previous.as_ref().is_some_and(|p| same(p) && no_feet(p)) {
             let mut row = previous.expect("checked above");
             let mut computed = 0;
             for (k, &(j, mode)) in wanted.iter().enumerate() {
                 if !self.unchanged(&rx, j as usize, mode) {
                     m.fill(0.0);
-                    self.moments(&rx, j as usize, &Rect::UNIT, mode, 0, &mut m);
+                    self.moments(&rx, j as usize, &Rect::UNIT, mode, 0, &mut m, None);
                     for (o, v) in row.moments[k * nb..(k + 1) * nb].iter_mut().zip(&m) {
                         *o = *v as f32;
                     }
@@ -388,21 +427,46 @@ impl Gather<'_> {
             sources: Vec::with_capacity(wanted.len()),
             modes: Vec::with_capacity(wanted.len()),
             moments: Vec::with_capacity(wanted.len() * nb),
+            feet: Vec::new(),
         };
         let mut computed = 0;
-        for (j, mode) in wanted {
+        let (previous, mut previous_feet) = match previous {
+            Some(mut p) => {
+                let feet = std::mem::take(&mut p.feet);
+                (Some(p), feet)
+            }
+            None => (None, Vec::new()),
+        };
+        for ((j, mode), touch) in wanted.into_iter().zip(touching) {
+            let old_foot =
+                previous_feet.iter().position(|f| f.element == j).map(|k| previous_feet.swap_remove(k));
             let kept = previous.as_ref().and_then(|p| {
                 let k = p.sources.binary_search(&j).ok()?;
                 (p.modes[k] == mode && self.unchanged(&rx, j as usize, mode))
                     .then(|| &p.moments[k * nb..(k + 1) * nb])
             });
             match kept {
-                Some(old) => row.moments.extend_from_slice(old),
+                Some(old) => {
+                    row.moments.extend_from_slice(old);
+                    // The weight is kept with the moments; the foot's own row updates itself.
+                    if let (Some(t), Some(foot)) = (touch, old_foot) {
+                        let (foot_row, n) = self.row(j as usize, t.s, t.t, Some(foot.row), false);
+                        computed += n;
+                        row.feet.push(Foot { row: foot_row, ..foot });
+                    }
+                }
                 None => {
                     m.fill(0.0);
-                    self.moments(&rx, j as usize, &Rect::UNIT, mode, 0, &mut m);
+                    let mut weight = 0.0;
+                    let ball = touch.map(|t| (t.radius, &mut weight));
+                    self.moments(&rx, j as usize, &Rect::UNIT, mode, 0, &mut m, ball);
                     row.moments.extend(m.iter().map(|&v| v as f32));
                     computed += 1;
+                    if let (Some(t), true) = (touch, weight > 0.0) {
+                        let (foot, n) = self.row(j as usize, t.s, t.t, old_foot.map(|f| f.row), false);
+                        computed += n;
+                        row.feet.push(Foot { element: j, weight: weight as f32, row: foot });
+                    }
                 }
             }
             row.sources.push(j);
@@ -442,11 +506,39 @@ impl Gather<'_> {
     }
 
     /// Adds `integral g(x,y) V(x,y) Gamma_l(y) dA_y` over `rect` of source `j` to `out[l]`.
-    fn moments(&self, rx: &Receiver, j: usize, rect: &Rect, mode: Mode, depth: u32, out: &mut [f64]) {
+    /// With `ball = Some((r, weight))`, the part of the source within `r` of the corner adds its
+    /// `integral g V dA` to `weight` instead (see [`Foot`]).
+    #[allow(clippy::too_many_arguments)]
+    fn moments(
+        &self,
+        rx: &Receiver,
+        j: usize,
+        rect: &Rect,
+        mode: Mode,
+        depth: u32,
+        out: &mut [f64],
+        ball: Option<(f64, &mut f64)>,
+    ) {
         let patch = &self.patches[j];
         let sub = patch.sub_patch(rect);
         let (centre, radius) = sub.bounding_sphere();
-        if rx.x.distance(centre) >= GAUSS_RATIO * radius {
+        let distance = rx.x.distance(centre);
+        if let Some((r, weight)) = ball {
+            if distance + radius <= r || (depth >= MAX_DEPTH && distance <= r) {
+                // Gamma_0 = 1 on the unit square: the l = 0 moment is the plain integral.
+                let mut m = vec![0.0; out.len()];
+                self.moments(rx, j, rect, mode, depth, &mut m, None);
+                *weight += m[0];
+                return;
+            }
+            if distance - radius < r && depth < MAX_DEPTH {
+                for q in rect.quadrants() {
+                    self.moments(rx, j, &q, mode, depth + 1, out, Some((r, &mut *weight)));
+                }
+                return;
+            }
+        }
+        if distance >= GAUSS_RATIO * radius {
             if depth == 0 {
                 self.gauss(rx, j, &self.nodes[j], &sub.bounds(), mode, out);
             } else {
@@ -467,8 +559,25 @@ impl Gather<'_> {
             return;
         }
         for q in rect.quadrants() {
-            self.moments(rx, j, &q, mode, depth + 1, out);
+            self.moments(rx, j, &q, mode, depth + 1, out, None);
         }
+    }
+
+    /// Whether the corner touches source `j`: it lies just in front of `j`'s plane (within a
+    /// hundredth of its element's radius) and its foot, moved that much along the corner's own
+    /// normal so that it lies on the open side, falls on `j`.
+    fn touch(&self, rx: &Receiver, i: usize, j: usize) -> Option<Touch> {
+        let pj = &self.patches[j];
+        let plane = pj.front_plane()?;
+        let offset = 1e-2 * self.patches[i].bounding_sphere().1;
+        let d = plane.normal.dot(rx.x - plane.centre);
+        if !(d > 0.0 && d < offset) || rx.n.dot(plane.normal).abs() > 0.9 {
+            return None;
+        }
+        let foot = rx.x + offset * rx.n;
+        let foot = foot - plane.normal.dot(foot - plane.centre) * plane.normal;
+        let (s, t) = pj.locate(foot);
+        ((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&t)).then_some(Touch { s, t, radius: 3.0 * offset })
     }
 
     /// The Gauss sum over `nodes` of source `j` (inside `bounds`) into `out`.

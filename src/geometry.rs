@@ -135,6 +135,27 @@ impl Patch {
         ds.cross(dt)
     }
 
+    /// The parameters `(s,t)` of the point of the patch nearest to `p` (Gauss-Newton on
+    /// `|X(s,t) - p|^2` from the centre), unclamped: outside `[0,1]^2` when `p` lies beyond an edge.
+    pub fn locate(&self, p: DVec3) -> (f64, f64) {
+        let [p0, p1, p2, p3] = self.corners;
+        let (mut s, mut t) = (0.5, 0.5);
+        for _ in 0..8 {
+            let ds = (1.0 - t) * (p1 - p0) + t * (p2 - p3);
+            let dt = (1.0 - s) * (p3 - p0) + s * (p2 - p1);
+            let r = self.point(s, t) - p;
+            let (a, b, c) = (ds.dot(ds), ds.dot(dt), dt.dot(dt));
+            let det = a * c - b * b;
+            if det.abs() < 1e-300 {
+                break;
+            }
+            let (gs, gt) = (ds.dot(r), dt.dot(r));
+            s -= (c * gs - b * gt) / det;
+            t -= (a * gt - b * gs) / det;
+        }
+        (s, t)
+    }
+
     /// Area by 4x4 Gauss (exact for planar patches, whose `A(s,t)` is bilinear).
     pub fn area(&self) -> f64 {
         let q = GaussLegendre::new(4);
@@ -202,6 +223,20 @@ impl Patch {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn locate_inverts_point() {
+        let q = Patch::from_corners(&[
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(2.0, 0.1, 0.0),
+            DVec3::new(2.2, 1.5, 0.0),
+            DVec3::new(-0.1, 1.0, 0.0),
+        ]);
+        for &(s, t) in &[(0.5, 0.5), (0.01, 0.9), (0.99, 0.02), (1.1, 0.5)] {
+            let (ls, lt) = q.locate(q.point(s, t));
+            assert!((ls - s).abs() < 1e-9 && (lt - t).abs() < 1e-9, "({s},{t}) -> ({ls},{lt})");
+        }
+    }
+
     use super::*;
 
     #[test]
