@@ -31,7 +31,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::geometry::{Aabb, Patch, Rect};
+use crate::geometry::{Aabb, FrontPlane, Patch, Rect};
 use crate::kernel::point::{point_kernel, point_to_polygon};
 use crate::kernel::samples::Samples;
 use crate::links::ElementId;
@@ -59,6 +59,9 @@ const MAX_DEPTH: u32 = 12;
 
 /// `B` at every face corner, per object in face order.
 pub type CornerValues = Vec<Vec<[f64; 3]>>;
+
+/// Moved elements up to this many get a swept box each; more are boxed per object.
+const MAX_SWEPT_BOXES: usize = 32;
 
 /// The corner gather of one frame, kept to update the next one's.
 pub struct CornerGather {
@@ -154,6 +157,7 @@ impl CornerGather {
             (0..patches.len()).map(|e| sys.emission[e * nb].iter().any(|&x| x > 0.0)).collect();
         let emitters: Vec<usize> = (0..patches.len()).filter(|&e| is_emitter[e]).collect();
         let (points, point_of_corner, corners_per_object) = corner_points(sys, scene);
+
         // What moved since `previous`, by object: each object's old and new bounds.
         let previous = previous.filter(|p| p.points == points && p.patches.len() == patches.len());
         let moved: Vec<bool> = match &previous {
@@ -162,16 +166,24 @@ impl CornerGather {
         };
         let mut swept: Vec<Aabb> = Vec::new();
         if let Some(p) = &previous {
-            let mut by_object = std::collections::BTreeMap::new();
-            for e in (0..patches.len()).filter(|&e| moved[e]) {
-                let b = by_object.entry(sys.elements[e].object).or_insert(Aabb::EMPTY);
+            // One box per moved element while they are few (tighter: fewer shafts crossed), else
+            // one per moving object (fewer tests per moment).
+            let movers: Vec<usize> = (0..patches.len()).filter(|&e| moved[e]).collect();
+            let mut boxes = std::collections::BTreeMap::new();
+            for &e in &movers {
+                let key = if movers.len() <= MAX_SWEPT_BOXES { e } else { sys.elements[e].object as usize };
+                let b = boxes.entry(key).or_insert(Aabb::EMPTY);
                 *b = b.union(patches[e].bounds()).union(p.patches[e].bounds());
             }
-            swept.extend(by_object.into_values());
+            swept.extend(boxes.into_values());
         }
         let scale = patches.iter().fold(Aabb::EMPTY, |b, p| b.union(p.bounds())).diagonal().length();
+        let planes: Vec<Option<FrontPlane>> = patches.iter().map(Patch::front_plane).collect();
+        let radii: Vec<f64> = patches.iter().map(|p| p.bounding_sphere().1).collect();
         let gather = Gather {
             sys,
+            planes: &planes,
+            radii: &radii,
             emitters: &emitters,
             is_emitter: &is_emitter,
             patches: &patches,
@@ -204,7 +216,7 @@ impl CornerGather {
             })
             .collect::<Result<_>>()?;
         let values: Vec<[f64; 3]> = points
-            .iter()
+            .par_iter()
             .zip(&rows)
             .map(|(point, (row, _))| match point.at {
                 Some((e, _, _)) => radiosity(sys, e, row),
@@ -317,6 +329,9 @@ struct Gather<'a> {
     emitters: &'a [usize],
     is_emitter: &'a [bool],
     patches: &'a [Patch],
+    /// Per element: its plane (planar ones) and bounding radius.
+    planes: &'a [Option<FrontPlane>],
+    radii: &'a [f64],
     nodes: &'a [Nodes],
     rule: &'a GaussLegendre,
     occluders: Option<&'a Occluders>,
@@ -355,7 +370,7 @@ impl Gather<'_> {
         let patch = &self.patches[i];
         let n = patch.area_vector(s, t).normalize_or_zero();
         let x = patch.point(s, t);
-        let near = self.occluders.is_some_and(|o| o.any_near(x, n, patch.bounding_sphere().1, i as u32));
+        let near = self.occluders.is_some_and(|o| o.any_near(x, n, self.radii[i], i as u32));
         let rx = Receiver { x, n, element: i as u32, cell: cell_of(s, t, self.cells_per_axis) };
         let previous = previous.filter(|p| !self.moved[i] && p.near == near);
         let rays = |open: Mode| if self.occluders.is_some() { open } else { Mode::Open };
@@ -380,8 +395,7 @@ impl Gather<'_> {
         }
         // Direct light makes the sharpest shadows, and a corner can sit in a penumbra that none
         // of its element's visibility samples is in: emitters are always sources, with rays.
-        let faces_corner =
-            |j: usize| j != i && self.patches[j].front_plane().is_none_or(|f| f.any_in_front(patch));
+        let faces_corner = |j: usize| j != i && self.planes[j].is_none_or(|f| f.any_in_front(patch));
         for &j in self.emitters.iter().filter(|&&j| faces_corner(j)) {
             wanted.push((j as u32, rays(Mode::Rays)));
         }
@@ -568,8 +582,8 @@ impl Gather<'_> {
     /// normal so that it lies on the open side, falls on `j`.
     fn touch(&self, rx: &Receiver, i: usize, j: usize) -> Option<Touch> {
         let pj = &self.patches[j];
-        let plane = pj.front_plane()?;
-        let offset = 1e-2 * self.patches[i].bounding_sphere().1;
+        let plane = self.planes[j]?;
+        let offset = 1e-2 * self.radii[i];
         let d = plane.normal.dot(rx.x - plane.centre);
         if !(d > 0.0 && d < offset) || rx.n.dot(plane.normal).abs() > 0.9 {
             return None;
