@@ -19,7 +19,7 @@
 //! of the corner, every element in front is a source and every ray is cast; elsewhere a partial
 //! link reads its visibility mask from the corner's cell, a fully visible link stays visible and
 //! a blocked one blocked. Where the corner touches a source (a block's foot on the floor), the
-//! part of the source next to the contact counts with `B` gathered at the foot point ([`Foot`]).
+//! part of the source next to the contact counts with `B` gathered at the foot point (`Foot`).
 //!
 //! Measured against Cycles (README, "Validation against Cycles"; 819 faces, 4096 spp): corners
 //! from the face polynomials 16.8% relative RMSE at order 2, gathered 2.0% (1.6% at order 1).
