@@ -424,18 +424,33 @@ impl Gather<'_> {
             p.sources.len() == wanted.len()
                 && wanted.iter().zip(p.sources.iter().zip(&p.modes)).all(|(w, (&j, &mode))| *w == (j, mode))
         };
-        let no_feet = |p: &Row| p.feet.is_empty() && touching.iter().all(Option::is_none);
-        if previous.as_ref().is_some_and(|p| same(p) && no_feet(p)) {
+        if previous.as_ref().is_some_and(same) {
             let mut row = previous.expect("checked above");
+            let mut old_feet = std::mem::take(&mut row.feet);
             let mut computed = 0;
-            for (k, &(j, mode)) in wanted.iter().enumerate() {
-                if !self.unchanged(&rx, j as usize, mode) {
-                    m.fill(0.0);
-                    self.moments(&rx, j as usize, &Rect::UNIT, mode, 0, &mut m, None);
-                    for (o, v) in row.moments[k * nb..(k + 1) * nb].iter_mut().zip(&m) {
-                        *o = *v as f32;
+            for (k, (&(j, mode), touch)) in wanted.iter().zip(touching).enumerate() {
+                let old_foot = old_feet.iter().position(|f| f.element == j).map(|k| old_feet.swap_remove(k));
+                if self.unchanged(&rx, j as usize, mode) {
+                    // The weight is kept with the moments; the foot's own row updates itself.
+                    if let (Some(t), Some(foot)) = (touch, old_foot) {
+                        let (foot_row, n) = self.row(j as usize, t.s, t.t, Some(foot.row), false);
+                        computed += n;
+                        row.feet.push(Foot { row: foot_row, ..foot });
                     }
-                    computed += 1;
+                    continue;
+                }
+                m.fill(0.0);
+                let mut weight = 0.0;
+                let ball = touch.map(|t| (t.radius, &mut weight));
+                self.moments(&rx, j as usize, &Rect::UNIT, mode, 0, &mut m, ball);
+                for (o, v) in row.moments[k * nb..(k + 1) * nb].iter_mut().zip(&m) {
+                    *o = *v as f32;
+                }
+                computed += 1;
+                if let (Some(t), true) = (touch, weight > 0.0) {
+                    let (foot, n) = self.row(j as usize, t.s, t.t, old_foot.map(|f| f.row), false);
+                    computed += n;
+                    row.feet.push(Foot { element: j, weight: weight as f32, row: foot });
                 }
             }
             return (row, computed);
