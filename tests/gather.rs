@@ -229,3 +229,34 @@ fn kept_gather_equals_fresh_gather() {
         assert!(worst <= 1e-6, "frame {frame}: {worst}");
     }
 }
+
+/// A bake cancelled while its corners are being gathered leaves the last frame readable, and the
+/// next frame solves as if nothing had happened.
+#[test]
+fn cancel_during_the_gather_keeps_the_last_frame() {
+    use galerkin_radiosity::error::Error;
+    use galerkin_radiosity::session::{Method, Session};
+    let scene = scenes::cornell_box_animated(
+        4,
+        3,
+        Settings { basis_order: 1, tolerance: 1e-6, ..Settings::default() },
+    );
+    let corners = |s: &Session| {
+        s.face_results().unwrap().into_iter().flat_map(|r| r.corner_radiosity).collect::<Vec<_>>()
+    };
+    let mut session = Session::new(scene.clone(), Method::Incremental).unwrap();
+    session.solve_frame(1.0, &no_progress).unwrap();
+    let frame1 = corners(&session);
+    let stop_at_gather = |_: f64, stage: &str| stage != "corner gather";
+    assert!(matches!(session.solve_frame(2.0, &stop_at_gather), Err(Error::Cancelled)));
+    assert_eq!(session.frame(), Some(1.0));
+    assert_eq!(corners(&session), frame1, "the cancelled frame left frame 1's corners");
+    session.solve_frame(2.0, &no_progress).unwrap();
+    let mut full = Session::new(scene, Method::Full).unwrap();
+    full.solve_frame(2.0, &no_progress).unwrap();
+    let (a, b) = (corners(&session), corners(&full));
+    let peak = b.iter().flatten().fold(0.0f32, |m, x| m.max(*x));
+    let worst =
+        a.iter().zip(&b).flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).abs())).fold(0.0, f32::max);
+    assert!(worst <= 1e-3 * peak, "after the cancel: {worst} vs peak {peak}");
+}
