@@ -615,25 +615,41 @@ impl Gather<'_> {
 
     /// The Gauss sum over `nodes` of source `j` (inside `bounds`) into `out`.
     fn gauss(&self, rx: &Receiver, j: usize, nodes: &Nodes, bounds: &Aabb, mode: Mode, out: &mut [f64]) {
-        let mut lit: Vec<(usize, f64)> = (0..nodes.position.len())
-            .map(|k| (k, point_kernel(rx.x, rx.n, nodes.position[k], nodes.normal[k])))
-            .filter(|&(_, g)| g != 0.0)
-            .collect();
+        // At most GAUSS_POINTS^2 nodes: fixed arrays, no allocation per moment.
+        const N: usize = GAUSS_POINTS * GAUSS_POINTS;
+        debug_assert_eq!(nodes.position.len(), N);
+        let mut lit = [(0usize, 0.0f64); N];
+        let mut count = 0;
+        for k in 0..nodes.position.len() {
+            let g = point_kernel(rx.x, rx.n, nodes.position[k], nodes.normal[k]);
+            if g != 0.0 {
+                lit[count] = (k, g);
+                count += 1;
+            }
+        }
+        let mut visible = [true; N];
         match (mode, self.occluders) {
-            (Mode::Rays, Some(o)) if !lit.is_empty() => {
-                let targets: Vec<DVec3> = lit.iter().map(|&(k, _)| nodes.position[k]).collect();
-                let mut visible = Vec::with_capacity(targets.len());
-                o.point_visibility(rx.x, rx.n, (rx.element, j as u32), bounds, &targets, &mut visible);
-                let mut v = visible.into_iter();
-                lit.retain(|_| v.next() == Some(true));
+            (Mode::Rays, Some(o)) if count > 0 => {
+                let targets: [DVec3; N] = std::array::from_fn(|a| nodes.position[lit[a.min(count - 1)].0]);
+                o.point_visibility(
+                    rx.x,
+                    rx.n,
+                    (rx.element, j as u32),
+                    bounds,
+                    &targets[..count],
+                    &mut visible[..count],
+                );
             }
             (Mode::Mask(_), _) => {
-                lit.retain(|&(k, _)| self.visible(rx, j, nodes.position[k], nodes.cell[k], mode));
+                for a in 0..count {
+                    let k = lit[a].0;
+                    visible[a] = self.visible(rx, j, nodes.position[k], nodes.cell[k], mode);
+                }
             }
             _ => {}
         }
         let nb = out.len();
-        for (k, g) in lit {
+        for (&(k, g), _) in lit[..count].iter().zip(&visible).filter(|(_, v)| **v) {
             let w = g * nodes.area_weight[k];
             for l in 0..nb {
                 out[l] += w * nodes.basis[k * nb + l];

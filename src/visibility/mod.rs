@@ -149,7 +149,7 @@ impl Occluders {
     }
 
     /// Which segments from the point `x` (on element `i`, front normal `n`) to `targets` (points
-    /// of element `j`, inside `bounds`) are unobstructed, written to `out` in order. Triangles are
+    /// of element `j`, inside `bounds`) are unobstructed, written to `out` (as long as `targets`). Triangles are
     /// first gathered from the shaft between `x` and `bounds` (usually none: no rays at all);
     /// short lists are tested directly, long ones through the BVH.
     pub fn point_visibility(
@@ -159,21 +159,24 @@ impl Occluders {
         (i, j): (u32, u32),
         bounds: &crate::geometry::Aabb,
         targets: &[DVec3],
-        out: &mut Vec<bool>,
+        out: &mut [bool],
     ) {
-        out.clear();
         let shaft = Shaft::new(&crate::geometry::Aabb { min: x, max: x }, bounds);
         // Segments leave `x` to its front: triangles wholly behind its tangent plane cannot block.
         CANDIDATES.with_borrow_mut(|candidates| {
             self.shaft_candidates(&shaft, &[(n, n.dot(x))], (i, j), candidates);
             if candidates.is_empty() {
-                out.resize(targets.len(), true);
+                out.fill(true);
             } else if candidates.len() <= BRUTE_FORCE_CANDIDATES {
                 let tris = CandidateTriangles::gather(&self.edges, candidates);
                 let from = tris.from(x);
-                out.extend(targets.iter().map(|&y| !tris.any_hit(&from, y - x, 1e-9, 1.0 - 1e-9)));
+                for (o, &y) in out.iter_mut().zip(targets) {
+                    *o = !tris.any_hit(&from, y - x, 1e-9, 1.0 - 1e-9);
+                }
             } else {
-                out.extend(targets.iter().map(|&y| !self.bvh.occluded(x, y - x, 1e-9, 1.0 - 1e-9, i, j)));
+                for (o, &y) in out.iter_mut().zip(targets) {
+                    *o = !self.bvh.occluded(x, y - x, 1e-9, 1.0 - 1e-9, i, j);
+                }
             }
         });
     }
