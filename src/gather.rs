@@ -154,8 +154,10 @@ impl CornerGather {
         let rule = GaussLegendre::new(GAUSS_POINTS);
         let patches: Vec<Patch> = sys.elements.iter().map(|e| e.patch).collect();
         let cells_per_axis = scene.settings.visibility_samples;
-        let nodes: Vec<Nodes> =
-            patches.par_iter().map(|p| Nodes::new(sys, p, &Rect::UNIT, &rule, cells_per_axis)).collect();
+        let nodes: Vec<Samples> = patches
+            .par_iter()
+            .map(|p| Samples::new(p, &Rect::UNIT, &rule, sys.basis, cells_per_axis))
+            .collect();
         let nb = sys.basis.len();
         let is_emitter: Vec<bool> =
             (0..patches.len()).map(|e| sys.emission[e * nb].iter().any(|&x| x > 0.0)).collect();
@@ -301,30 +303,6 @@ fn radiosity(sys: &System, i: usize, row: &Row) -> [f64; 3] {
     std::array::from_fn(|c| e[c] + rho[c] * irradiance[c])
 }
 
-/// Gauss nodes of a source rectangle: position, unit normal, area weight and the basis there.
-struct Nodes {
-    position: Vec<DVec3>,
-    /// Visibility cell of each node in its element.
-    cell: Vec<usize>,
-    normal: Vec<DVec3>,
-    area_weight: Vec<f64>,
-    /// `Gamma_l` at each node, `len x nb`.
-    basis: Vec<f64>,
-}
-
-impl Nodes {
-    fn new(sys: &System, patch: &Patch, rect: &Rect, rule: &GaussLegendre, m: usize) -> Self {
-        let s = Samples::new(patch, rect, rule, sys.basis, m);
-        Nodes {
-            position: s.position,
-            cell: s.cell,
-            normal: s.normal,
-            area_weight: s.area_weight,
-            basis: s.basis,
-        }
-    }
-}
-
 /// What every corner needs: the solved system, its elements' geometry, the occluders, and what
 /// moved since the kept gather.
 struct Gather<'a> {
@@ -336,7 +314,8 @@ struct Gather<'a> {
     /// Per element: its plane (planar ones) and bounding radius.
     planes: &'a [Option<FrontPlane>],
     radii: &'a [f64],
-    nodes: &'a [Nodes],
+    /// Per element: its Gauss nodes over the whole element, the common far case.
+    nodes: &'a [Samples],
     rule: &'a GaussLegendre,
     occluders: Option<&'a Occluders>,
     /// Visibility samples per axis of the link masks.
@@ -418,7 +397,6 @@ impl Gather<'_> {
         let touching: Vec<Option<Touch>> =
             wanted.iter().map(|&(j, _)| if feet { self.touch(&rx, i, j as usize) } else { None }).collect();
         let nb = sys.basis.len();
-        let mut m = vec![0.0; nb];
         // The common case: the same sources, decided the same way: update the row in place.
         let same = |p: &Row| {
             p.sources.len() == wanted.len()
@@ -430,28 +408,12 @@ impl Gather<'_> {
             let mut computed = 0;
             for (k, (&(j, mode), touch)) in wanted.iter().zip(touching).enumerate() {
                 let old_foot = old_feet.iter().position(|f| f.element == j).map(|k| old_feet.swap_remove(k));
-                if self.unchanged(&rx, j as usize, mode) {
-                    // The weight is kept with the moments; the foot's own row updates itself.
-                    if let (Some(t), Some(foot)) = (touch, old_foot) {
-                        let (foot_row, n) = self.row(j as usize, t.s, t.t, Some(foot.row), false);
-                        computed += n;
-                        row.feet.push(Foot { row: foot_row, ..foot });
-                    }
-                    continue;
-                }
-                m.fill(0.0);
-                let mut weight = 0.0;
-                let ball = touch.map(|t| (t.radius, &mut weight));
-                self.moments(&rx, j as usize, &Rect::UNIT, mode, 0, &mut m, ball);
-                for (o, v) in row.moments[k * nb..(k + 1) * nb].iter_mut().zip(&m) {
-                    *o = *v as f32;
-                }
-                computed += 1;
-                if let (Some(t), true) = (touch, weight > 0.0) {
-                    let (foot, n) = self.row(j as usize, t.s, t.t, old_foot.map(|f| f.row), false);
-                    computed += n;
-                    row.feet.push(Foot { element: j, weight: weight as f32, row: foot });
-                }
+                computed += if self.unchanged(&rx, j as usize, mode) {
+                    self.keep_foot(j, touch, old_foot, &mut row.feet)
+                } else {
+                    let moments = &mut row.moments[k * nb..(k + 1) * nb];
+                    self.fresh_entry(&rx, (j, mode), touch, old_foot, moments, &mut row.feet)
+                };
             }
             return (row, computed);
         }
@@ -478,34 +440,59 @@ impl Gather<'_> {
                 (p.modes[k] == mode && self.unchanged(&rx, j as usize, mode))
                     .then(|| &p.moments[k * nb..(k + 1) * nb])
             });
-            match kept {
+            computed += match kept {
                 Some(old) => {
                     row.moments.extend_from_slice(old);
-                    // The weight is kept with the moments; the foot's own row updates itself.
-                    if let (Some(t), Some(foot)) = (touch, old_foot) {
-                        let (foot_row, n) = self.row(j as usize, t.s, t.t, Some(foot.row), false);
-                        computed += n;
-                        row.feet.push(Foot { row: foot_row, ..foot });
-                    }
+                    self.keep_foot(j, touch, old_foot, &mut row.feet)
                 }
                 None => {
-                    m.fill(0.0);
-                    let mut weight = 0.0;
-                    let ball = touch.map(|t| (t.radius, &mut weight));
-                    self.moments(&rx, j as usize, &Rect::UNIT, mode, 0, &mut m, ball);
-                    row.moments.extend(m.iter().map(|&v| v as f32));
-                    computed += 1;
-                    if let (Some(t), true) = (touch, weight > 0.0) {
-                        let (foot, n) = self.row(j as usize, t.s, t.t, old_foot.map(|f| f.row), false);
-                        computed += n;
-                        row.feet.push(Foot { element: j, weight: weight as f32, row: foot });
-                    }
+                    let at = row.moments.len();
+                    row.moments.resize(at + nb, 0.0);
+                    self.fresh_entry(&rx, (j, mode), touch, old_foot, &mut row.moments[at..], &mut row.feet)
                 }
-            }
+            };
             row.sources.push(j);
             row.modes.push(mode);
         }
         (row, computed)
+    }
+
+    /// Computes the moments of source `j` into `moments` and, when the corner touches `j`, its
+    /// foot (updating `old_foot`'s row) into `feet`; returns how many moments were computed.
+    fn fresh_entry(
+        &self,
+        rx: &Receiver,
+        (j, mode): (u32, Mode),
+        touch: Option<Touch>,
+        old_foot: Option<Foot>,
+        moments: &mut [f32],
+        feet: &mut Vec<Foot>,
+    ) -> usize {
+        const MAX_NB: usize = (crate::basis::MAX_ORDER + 1) * (crate::basis::MAX_ORDER + 1);
+        let mut m = [0.0; MAX_NB];
+        let m = &mut m[..moments.len()];
+        let mut weight = 0.0;
+        let ball = touch.map(|t| (t.radius, &mut weight));
+        self.moments(rx, j as usize, &Rect::UNIT, mode, 0, m, ball);
+        for (o, v) in moments.iter_mut().zip(m.iter()) {
+            *o = *v as f32;
+        }
+        let mut computed = 1;
+        if let (Some(t), true) = (touch, weight > 0.0) {
+            let (row, n) = self.row(j as usize, t.s, t.t, old_foot.map(|f| f.row), false);
+            computed += n;
+            feet.push(Foot { element: j, weight: weight as f32, row });
+        }
+        computed
+    }
+
+    /// A kept entry of source `j`: its foot keeps its weight (it goes with the moments) and its
+    /// own row updates itself; returns how many moments that computed.
+    fn keep_foot(&self, j: u32, touch: Option<Touch>, old_foot: Option<Foot>, feet: &mut Vec<Foot>) -> usize {
+        let (Some(t), Some(foot)) = (touch, old_foot) else { return 0 };
+        let (row, computed) = self.row(j as usize, t.s, t.t, Some(foot.row), false);
+        feet.push(Foot { row, ..foot });
+        computed
     }
 
     /// A kept moment of source `j` still holds: the source did not move and, when its visibility
@@ -519,14 +506,8 @@ impl Gather<'_> {
         if mode != Mode::Rays {
             return true;
         }
-        let bounds = self.patches[j].bounds();
-        let point = Aabb { min: rx.x, max: rx.x };
-        let region = bounds.union(point);
-        let mut shaft = None;
-        !self.swept.iter().any(|s| {
-            s.overlaps(&region)
-                && shaft.get_or_insert_with(|| Shaft::new(&point, &bounds)).may_contain_box(s, self.eps)
-        })
+        let (bounds, point) = (self.patches[j].bounds(), Aabb { min: rx.x, max: rx.x });
+        !self.swept.iter().any(|s| Shaft::between_may_contain_box(&point, &bounds, s, self.eps))
     }
 
     /// The link's visibility bits from the corner's cell to each of the source's cells.
@@ -575,7 +556,7 @@ impl Gather<'_> {
             if depth == 0 {
                 self.gauss(rx, j, &self.nodes[j], &sub.bounds(), mode, out);
             } else {
-                let nodes = Nodes::new(self.sys, patch, rect, self.rule, self.cells_per_axis);
+                let nodes = Samples::new(patch, rect, self.rule, self.sys.basis, self.cells_per_axis);
                 self.gauss(rx, j, &nodes, &sub.bounds(), mode, out);
             }
             return;
@@ -614,7 +595,7 @@ impl Gather<'_> {
     }
 
     /// The Gauss sum over `nodes` of source `j` (inside `bounds`) into `out`.
-    fn gauss(&self, rx: &Receiver, j: usize, nodes: &Nodes, bounds: &Aabb, mode: Mode, out: &mut [f64]) {
+    fn gauss(&self, rx: &Receiver, j: usize, nodes: &Samples, bounds: &Aabb, mode: Mode, out: &mut [f64]) {
         // At most GAUSS_POINTS^2 nodes: fixed arrays, no allocation per moment.
         const N: usize = GAUSS_POINTS * GAUSS_POINTS;
         debug_assert_eq!(nodes.position.len(), N);
