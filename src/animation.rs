@@ -312,10 +312,15 @@ pub fn advance(
             MovedTriangles::new((0..n).filter(|&e| moved[e]).map(|e| (old[e], &patches[e])));
         if let Some(o) = &occluders {
             let before = state.culled.take().unwrap_or_else(|| {
-                // First update since the build: the build's occluders are not kept.
-                let built: Vec<Patch> = old.iter().map(|p| **p).collect();
-                let b = Occluders::new(&built, s.visibility_samples);
-                (0..n).map(|e| b.culls(e)).collect()
+                // First update since the build: the system still holds the build's occluders.
+                match &sys.occluders {
+                    Some(b) => (0..n).map(|e| b.culls(e)).collect(),
+                    None => {
+                        let built: Vec<Patch> = old.iter().map(|p| **p).collect();
+                        let b = Occluders::new(&built, s.visibility_samples);
+                        (0..n).map(|e| b.culls(e)).collect()
+                    }
+                }
             });
             state.culled = Some((0..n).map(|e| before[e] || o.culls(e)).collect());
         }
@@ -547,6 +552,8 @@ pub fn advance(
             }
         }
         state.geometry = Some(geom.into_kept(&ctx));
+        // The new placement's occluders serve the corner gather and the next update.
+        sys.occluders = occluders;
     }
     stats.segments_tested = crate::visibility::segments_tested() - segments_before;
     stats.kernel_seconds = start.elapsed().as_secs_f64();

@@ -124,6 +124,9 @@ pub struct System {
     pub corners: Option<Vec<Vec<[f64; 3]>>>,
     /// The last corner gather, which the next one updates.
     gather: Option<CornerGather>,
+    /// The occluders of the elements as placed now (visibility on): kept by the build and each
+    /// animation update for the corner gather and the next update.
+    pub occluders: Option<Occluders>,
     pub stats: SystemStats,
 }
 
@@ -178,6 +181,7 @@ impl System {
             solution,
             corners: None,
             gather: None,
+            occluders,
             stats,
         })
     }
@@ -239,12 +243,9 @@ impl System {
     /// reports those corners.
     pub fn gather_corners(&mut self, scene: &Scene, frame: f64, progress: Progress) -> Result<GatherStats> {
         self.corners = None;
-        let s = &scene.settings;
-        let patches: Vec<Patch> = self.elements.iter().map(|e| e.patch).collect();
-        let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
         let previous = self.gather.take();
         let (corners, kept, stats) =
-            CornerGather::run(self, scene, frame, occluders.as_ref(), previous, progress)?;
+            CornerGather::run(self, scene, frame, self.occluders.as_ref(), previous, progress)?;
         self.corners = Some(corners);
         self.gather = Some(kept);
         Ok(stats)
