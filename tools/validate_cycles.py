@@ -176,8 +176,6 @@ def run(args):
     report["cycles_reference_seconds"] = t_ref
     report["cycles_low"] = {"samples": low, "seconds": t_low, "rmse": err_low}
     report["reference_noise"] = ref_noise
-    (out / "validation.json").write_text(json.dumps(report, indent=2))
-    print(table(report))
     if args.pictures:
         from . import pictures
 
