@@ -28,19 +28,31 @@ struct Node {
 
 const LEAF_SIZE: usize = 4;
 
+/// A traversal of [`Bvh::visit`]: `accept` must be conservative, as in [`Bvh::for_each_accepted`].
+pub trait Visitor {
+    /// Whether the box `b` (centre `c`, half extent `h`) may hold what is looked for.
+    fn accept(&self, b: &Aabb, c: DVec3, h: DVec3) -> bool;
+    /// Called with each triangle (and its index) in an accepted leaf whose bounds are accepted.
+    fn visit(&mut self, index: usize, triangle: &Triangle);
+}
+
 #[derive(Clone, Debug, Default)]
 pub struct Bvh {
     nodes: Vec<Node>,
     triangles: Vec<Triangle>,
     /// Bounds of each triangle, in `triangles` order.
     bounds: Vec<Aabb>,
+    /// Per node, then per triangle: the bounds' centre and half extent, as [`Aabb::centre`] and
+    /// `Aabb::diagonal() * 0.5` form them (for box tests against planes).
+    node_centred: Vec<(DVec3, DVec3)>,
+    triangle_centred: Vec<(DVec3, DVec3)>,
 }
 
 impl Bvh {
     pub fn build(mut triangles: Vec<Triangle>) -> Self {
         let mut nodes = Vec::with_capacity(2 * triangles.len() / LEAF_SIZE + 1);
         if triangles.is_empty() {
-            return Bvh { nodes, triangles, bounds: Vec::new() };
+            return Bvh { nodes, triangles, ..Default::default() };
         }
         nodes.push(Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
         let mut stack = vec![(0usize, 0usize, triangles.len())];
@@ -60,8 +72,11 @@ impl Bvh {
             stack.push((left, lo, lo + mid));
             stack.push((left + 1, lo + mid, hi));
         }
-        let bounds = triangles.iter().map(|t| Aabb::from_points(&t.v)).collect();
-        Bvh { nodes, triangles, bounds }
+        let bounds: Vec<Aabb> = triangles.iter().map(|t| Aabb::from_points(&t.v)).collect();
+        let centred = |b: &Aabb| (b.centre(), b.diagonal() * 0.5);
+        let node_centred = nodes.iter().map(|n| centred(&n.bounds)).collect();
+        let triangle_centred = bounds.iter().map(centred).collect();
+        Bvh { nodes, triangles, bounds, node_centred, triangle_centred }
     }
 
     pub fn triangles(&self) -> &[Triangle] {
@@ -96,6 +111,37 @@ impl Bvh {
                 for i in node.start..node.start + node.count {
                     if accept(&self.bounds[i as usize]) {
                         f(i as usize);
+                    }
+                }
+            } else {
+                stack[sp] = node.start;
+                stack[sp + 1] = node.start + 1;
+                sp += 2;
+            }
+        }
+    }
+
+    /// [`Bvh::for_each_accepted`] with a [`Visitor`], whose box test also gets the centre and half
+    /// extent of each box (inlined whole, also into functions compiled for wider vectors).
+    #[inline(always)]
+    pub fn visit(&self, visitor: &mut impl Visitor) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack = [0u32; 64];
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let k = stack[sp] as usize;
+            let (node, (c, h)) = (&self.nodes[k], self.node_centred[k]);
+            if !visitor.accept(&node.bounds, c, h) {
+                continue;
+            }
+            if node.count > 0 {
+                for i in node.start as usize..(node.start + node.count) as usize {
+                    let (c, h) = self.triangle_centred[i];
+                    if visitor.accept(&self.bounds[i], c, h) {
+                        visitor.visit(i, &self.triangles[i]);
                     }
                 }
             } else {

@@ -168,11 +168,13 @@ impl Occluders {
             if candidates.is_empty() {
                 out.fill(true);
             } else if candidates.len() <= BRUTE_FORCE_CANDIDATES {
-                let tris = CandidateTriangles::gather(&self.edges, candidates);
-                let from = tris.from(x);
-                for (o, &y) in out.iter_mut().zip(targets) {
-                    *o = !tris.any_hit(&from, y - x, 1e-9, 1.0 - 1e-9);
-                }
+                CAST.with_borrow_mut(|(tris, from)| {
+                    tris.gather_into(&self.edges, candidates);
+                    tris.terms_from(x, from);
+                    for (o, &y) in out.iter_mut().zip(targets) {
+                        *o = !tris.any_hit(from, y - x, 1e-9, 1.0 - 1e-9);
+                    }
+                });
             } else {
                 for (o, &y) in out.iter_mut().zip(targets) {
                     *o = !self.bvh.occluded(x, y - x, 1e-9, 1.0 - 1e-9, i, j);
@@ -229,30 +231,62 @@ impl Occluders {
         skip: (u32, u32),
         out: &mut Vec<usize>,
     ) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the CPU has AVX-512F (checked above).
+                unsafe { self.shaft_candidates_avx512(shaft, planes, skip, out) };
+                return;
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU has AVX2 (checked above).
+                unsafe { self.shaft_candidates_avx2(shaft, planes, skip, out) };
+                return;
+            }
+        }
+        self.shaft_candidates_body(shaft, planes, skip, out);
+    }
+
+    /// [`Occluders::shaft_candidates`] compiled for AVX-512: the shaft's plane tests in one
+    /// 8-lane step, the same operations (no fused multiply-add), so the same candidates.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,avx512f")]
+    fn shaft_candidates_avx512(
+        &self,
+        shaft: &Shaft,
+        planes: &[(DVec3, f64)],
+        skip: (u32, u32),
+        out: &mut Vec<usize>,
+    ) {
+        self.shaft_candidates_body(shaft, planes, skip, out);
+    }
+
+    /// [`Occluders::shaft_candidates`] compiled for AVX2 (4 lanes), the same operations.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn shaft_candidates_avx2(
+        &self,
+        shaft: &Shaft,
+        planes: &[(DVec3, f64)],
+        skip: (u32, u32),
+        out: &mut Vec<usize>,
+    ) {
+        self.shaft_candidates_body(shaft, planes, skip, out);
+    }
+
+    #[inline(always)]
+    fn shaft_candidates_body(
+        &self,
+        shaft: &Shaft,
+        planes: &[(DVec3, f64)],
+        skip: (u32, u32),
+        out: &mut Vec<usize>,
+    ) {
         out.clear();
-        let eps = 1e-9 * self.scale;
-        // A box wholly behind one of the planes holds only triangles the plane test below drops
-        // (half of eps covers the rounding of the box form), so the traversal skips it.
-        let behind = |b: &crate::geometry::Aabb| {
-            let (c, h) = (b.centre(), b.diagonal() * 0.5);
-            planes.iter().any(|(n, d)| n.dot(c) + n.abs().dot(h) - d <= 0.5 * eps)
-        };
-        let in_shaft = |b: &crate::geometry::Aabb| {
-            b.overlaps(&shaft.bounds) && shaft.may_contain_overlapping_box(b, eps) && !behind(b)
-        };
-        self.bvh.for_each_accepted(in_shaft, |t| {
-            let tri = &self.bvh.triangles()[t];
-            if tri.element == skip.0 || tri.element == skip.1 {
-                return;
-            }
-            if planes.iter().any(|(n, d)| tri.v.iter().all(|v| n.dot(*v) - d <= eps)) {
-                return;
-            }
-            // (the traversal already kept only nodes and triangle boxes the shaft may contain)
-            if shaft.may_contain_triangle(&tri.v, eps) {
-                out.push(t);
-            }
-        });
+        debug_assert!(planes.len() <= 2);
+        let abs_n = [0, 1].map(|k| planes.get(k).map_or(DVec3::ZERO, |(n, _)| n.abs()));
+        let mut visitor = InShaft { shaft, planes, abs_n, eps: 1e-9 * self.scale, skip, out };
+        self.bvh.visit(&mut visitor);
     }
 
     /// Whether element `e`'s plane culls occluders in [`Occluders::link_visibility`] (some
@@ -281,67 +315,77 @@ impl Occluders {
     ) -> Option<Visibility> {
         let shaft = Shaft::new(&pi.bounds(), &pj.bounds());
         let eps = 1e-9 * self.scale;
-        // Only the moved triangles the shaft may hold can meet a segment of the link.
-        let in_shaft = |list: &[([DVec3; 3], [DVec3; 3])]| -> Option<(CandidateTriangles, Aabb)> {
-            let mut tris = CandidateTriangles::empty();
-            let mut bounds = Aabb::EMPTY;
-            for (e, v) in list {
-                if shaft.may_contain_triangle(v, eps) {
-                    if tris.n == BRUTE_FORCE_CANDIDATES {
-                        return None;
+        SCRATCH.with_borrow_mut(|scratch| {
+            let Scratch { masks, was, now, segments, hit, hit_was } = scratch;
+            // Only the moved triangles the shaft may hold can meet a segment of the link: those
+            // whose three vertices are not all outside one test of `Shaft::may_contain_triangle`.
+            masks.resize(moved.x.len(), 0);
+            shaft.outside_masks([&moved.x, &moved.y, &moved.z], eps, masks);
+            let in_shaft =
+                |list: &[([DVec3; 3], [DVec3; 3])], index: &[[u32; 3]], tris: &mut Vec<[DVec3; 3]>| {
+                    tris.clear();
+                    let mut bounds = Aabb::EMPTY;
+                    for ((e, v), [a, b, c]) in list.iter().zip(index) {
+                        if masks[*a as usize] & masks[*b as usize] & masks[*c as usize] == 0 {
+                            if tris.len() == BRUTE_FORCE_CANDIDATES {
+                                return None;
+                            }
+                            tris.push(*e);
+                            bounds = bounds.union(Aabb::from_points(v));
+                        }
                     }
-                    tris.push(e);
-                    bounds = bounds.union(Aabb::from_points(v));
-                }
-            }
-            // Grown so that the slab test below is conservative against rounding.
-            Some((tris, Aabb { min: bounds.min - DVec3::splat(eps), max: bounds.max + DVec3::splat(eps) }))
-        };
-        let ((was, was_bounds), (now, now_bounds)) = (in_shaft(&moved.old)?, in_shaft(&moved.new)?);
-        if was.n == 0 && now.n == 0 {
-            return Some(old.clone());
-        }
-        let m = self.samples_per_axis;
-        let cells = m * m;
-        SEGMENTS_TESTED.fetch_add((cells * cells) as u64, std::sync::atomic::Ordering::Relaxed);
-        let (xi, xj) = (sample_points(pi, m), sample_points(pj, m));
-        // A segment that misses a list's bounds misses its triangles.
-        let hits = |tris: &CandidateTriangles, bounds: &Aabb, from: &FromOrigin, a: DVec3, d: DVec3| {
-            tris.n > 0
-                && bvh::slab_hit(bounds, a, d.recip(), 0.0, 1.0)
-                && tris.any_hit(from, d, 1e-9, 1.0 - 1e-9)
-        };
-        let mut bits = [0u64; 4];
-        let mut visible = 0;
-        for (r, a) in xi[..cells].iter().enumerate() {
-            let from_now = now.from(*a);
-            let mut from_was = None;
-            for (s, b) in xj[..cells].iter().enumerate() {
-                let d = *b - *a;
-                let hit_now = hits(&now, &now_bounds, &from_now, *a, d);
-                let seen = if old.at(r, s, cells) == 1.0 {
-                    !hit_now
-                } else if hit_now {
-                    false
-                } else if !hits(&was, &was_bounds, from_was.get_or_insert_with(|| was.from(*a)), *a, d) {
-                    // Blocked before by a fixed occluder, which still blocks it.
-                    false
-                } else {
-                    return None;
+                    // Grown so that the slab test below is conservative against rounding.
+                    Some(Aabb { min: bounds.min - DVec3::splat(eps), max: bounds.max + DVec3::splat(eps) })
                 };
-                if seen {
-                    let k = r * cells + s;
-                    bits[k / 64] |= 1 << (k % 64);
-                    visible += 1;
+            let was_bounds = in_shaft(&moved.old, &moved.old_index, was)?;
+            let now_bounds = in_shaft(&moved.new, &moved.new_index, now)?;
+            if was.is_empty() && now.is_empty() {
+                return Some(old.clone());
+            }
+            let m = self.samples_per_axis;
+            let cells = m * m;
+            let count = cells * cells;
+            SEGMENTS_TESTED.fetch_add(count as u64, std::sync::atomic::Ordering::Relaxed);
+            segments.set(&sample_points(pi, m)[..cells], &sample_points(pj, m)[..cells]);
+            // Segment k hits a list if it meets the list's bounds (a segment that misses them
+            // misses its triangles) and one of its triangles.
+            let hits = |tris: &[[DVec3; 3]], bounds: &Aabb, segments: &Segments, out: &mut Vec<u64>| {
+                out.clear();
+                out.resize(count, 0);
+                if tris.is_empty() {
+                    return;
+                }
+                segments_hit(tris, segments, out);
+                for (k, h) in out.iter_mut().enumerate().filter(|(_, h)| **h != 0) {
+                    let (a, d) = (segments.origin(k), segments.direction(k));
+                    *h = bvh::slab_hit(bounds, a, d.recip(), 0.0, 1.0) as u64;
+                }
+            };
+            hits(now, &now_bounds, segments, hit);
+            // A segment visible before is seen now unless it hits a mover now. One blocked before
+            // stays blocked if it hits a mover now, or if it missed every mover before (then a
+            // fixed occluder blocked it); if only the movers' old positions blocked it, the
+            // whole traversal must decide.
+            let open = |k: usize| old.at(k / cells, k % cells, cells) == 1.0;
+            if (0..count).any(|k| !open(k) && hit[k] == 0) {
+                hits(was, &was_bounds, segments, hit_was);
+                if (0..count).any(|k| !open(k) && hit[k] == 0 && hit_was[k] != 0) {
+                    return None;
                 }
             }
-        }
-        Some(if visible == cells * cells {
-            Visibility::Full
-        } else if visible == 0 {
-            Visibility::Blocked
-        } else {
-            Visibility::Partial(Box::new(bits))
+            let mut bits = [0u64; 4];
+            let mut visible = 0;
+            for k in (0..count).filter(|&k| open(k) && hit[k] == 0) {
+                bits[k / 64] |= 1 << (k % 64);
+                visible += 1;
+            }
+            Some(if visible == count {
+                Visibility::Full
+            } else if visible == 0 {
+                Visibility::Blocked
+            } else {
+                Visibility::Partial(Box::new(bits))
+            })
         })
     }
 
@@ -418,24 +462,26 @@ impl Occluders {
         let mut bits = [0u64; 4];
         let mut visible = 0;
         if candidates.len() <= BRUTE_FORCE_CANDIDATES || complete {
-            // Batches of candidates; a ray blocked by one batch is not tested against the next.
-            let mut blocked = [false; 256];
-            for batch in candidates.chunks(BRUTE_FORCE_CANDIDATES) {
-                let tris = CandidateTriangles::gather(&self.edges, batch);
-                for (r, a) in xi.iter().enumerate() {
-                    let from = tris.from(*a);
-                    for (s, b) in xj.iter().enumerate() {
-                        let k = r * cells + s;
-                        if !blocked[k] && tris.any_hit(&from, *b - *a, 1e-9, 1.0 - 1e-9) {
-                            blocked[k] = true;
-                        }
+            // Every segment against every candidate, vectorised over the segments; a segment's
+            // verdict is whether any candidate blocks it, in whatever order they are tested.
+            SCRATCH.with_borrow_mut(|scratch| {
+                let Scratch { now: tris, segments, hit, .. } = scratch;
+                segments.set(xi, xj);
+                hit.clear();
+                hit.resize(cells * cells, 0);
+                for batch in candidates.chunks(8) {
+                    tris.clear();
+                    tris.extend(batch.iter().map(|&t| self.edges[t]));
+                    segments_hit(tris, segments, hit);
+                    if hit.iter().all(|&h| h != 0) {
+                        break;
                     }
                 }
-            }
-            for (k, _) in blocked[..cells * cells].iter().enumerate().filter(|(_, b)| !**b) {
-                bits[k / 64] |= 1 << (k % 64);
-                visible += 1;
-            }
+                for (k, _) in hit.iter().enumerate().filter(|(_, h)| **h == 0) {
+                    bits[k / 64] |= 1 << (k % 64);
+                    visible += 1;
+                }
+            });
         } else {
             for (r, a) in xi.iter().enumerate() {
                 for (s, b) in xj.iter().enumerate() {
@@ -457,12 +503,53 @@ impl Occluders {
     }
 }
 
+/// The traversal of [`Occluders::shaft_candidates`].
+struct InShaft<'a> {
+    shaft: &'a Shaft,
+    planes: &'a [(DVec3, f64)],
+    /// `|n|` of each of `planes`.
+    abs_n: [DVec3; 2],
+    eps: f64,
+    skip: (u32, u32),
+    out: &'a mut Vec<usize>,
+}
+
+impl bvh::Visitor for InShaft<'_> {
+    #[inline(always)]
+    fn accept(&self, b: &Aabb, c: DVec3, h: DVec3) -> bool {
+        // A box wholly behind one of the planes holds only triangles the plane test below drops
+        // (half of eps covers the rounding of the box form), so the traversal skips it.
+        let behind = || {
+            self.planes.iter().zip(self.abs_n).any(|((n, d), a)| n.dot(c) + a.dot(h) - d <= 0.5 * self.eps)
+        };
+        b.overlaps(&self.shaft.bounds) && self.shaft.may_contain_centred_box(c, h, self.eps) && !behind()
+    }
+
+    #[inline(always)]
+    fn visit(&mut self, t: usize, tri: &Triangle) {
+        if tri.element == self.skip.0 || tri.element == self.skip.1 {
+            return;
+        }
+        let eps = self.eps;
+        if self.planes.iter().any(|(n, d)| tri.v.iter().all(|v| n.dot(*v) - d <= eps)) {
+            return;
+        }
+        // (the traversal already kept only nodes and triangle boxes the shaft may contain)
+        if self.shaft.may_contain_triangle(&tri.v, eps) {
+            self.out.push(t);
+        }
+    }
+}
+
 /// The visibility samples of an element: cell centres of an `m x m` grid (at most 16).
 fn sample_points(p: &Patch, m: usize) -> [DVec3; 16] {
     let mut x = [DVec3::ZERO; 16];
-    for c in 0..m * m {
-        let (s, t) = (((c / m) as f64 + 0.5) / m as f64, ((c % m) as f64 + 0.5) / m as f64);
-        x[c] = p.point(s, t);
+    // Cell `c = a * m + b` at `s = (a + 1/2) / m`, `t = (b + 1/2) / m` (no integer division).
+    for a in 0..m {
+        for b in 0..m {
+            let (s, t) = ((a as f64 + 0.5) / m as f64, (b as f64 + 0.5) / m as f64);
+            x[a * m + b] = p.point(s, t);
+        }
     }
     x
 }
@@ -471,9 +558,17 @@ fn sample_points(p: &Patch, m: usize) -> [DVec3; 16] {
 /// new positions, for [`Occluders::relink_visibility`].
 pub struct MovedTriangles {
     /// `v0, v1 - v0, v2 - v0` as [`Occluders`] stores them (the same rounding, hence the same
-    /// decisions of the segment test), then the vertices for the shaft test.
+    /// decisions of the segment test), then the vertices for the bounds.
     old: Vec<([DVec3; 3], [DVec3; 3])>,
     new: Vec<([DVec3; 3], [DVec3; 3])>,
+    /// The distinct vertices of both lists by coordinate, for the shaft test (a quad's two
+    /// triangles share two vertices, neighbouring quads their edges).
+    x: Vec<f64>,
+    y: Vec<f64>,
+    z: Vec<f64>,
+    /// Per triangle of `old` and of `new`, its vertices' indices in `x`, `y`, `z`.
+    old_index: Vec<[u32; 3]>,
+    new_index: Vec<[u32; 3]>,
 }
 
 impl MovedTriangles {
@@ -486,7 +581,161 @@ impl MovedTriangles {
             old.extend(a.triangles().into_iter().map(tri));
             new.extend(b.triangles().into_iter().map(tri));
         }
-        Self { old, new }
+        Self::from_lists(old, new)
+    }
+
+    fn from_lists(old: Vec<([DVec3; 3], [DVec3; 3])>, new: Vec<([DVec3; 3], [DVec3; 3])>) -> Self {
+        let mut vertices: Vec<[u64; 3]> = Vec::new();
+        let mut seen: std::collections::HashMap<[u64; 3], u32> = std::collections::HashMap::new();
+        let mut index = |list: &[([DVec3; 3], [DVec3; 3])]| -> Vec<[u32; 3]> {
+            list.iter()
+                .map(|(_, v)| {
+                    v.map(|p| {
+                        // Bitwise equal only: a shared vertex has the very coordinates of each copy.
+                        let key = p.to_array().map(f64::to_bits);
+                        *seen.entry(key).or_insert_with(|| {
+                            vertices.push(key);
+                            (vertices.len() - 1) as u32
+                        })
+                    })
+                })
+                .collect()
+        };
+        let (old_index, new_index) = (index(&old), index(&new));
+        let coordinate = |c: usize| vertices.iter().map(|q| f64::from_bits(q[c])).collect();
+        let (x, y, z) = (coordinate(0), coordinate(1), coordinate(2));
+        Self { old, new, x, y, z, old_index, new_index }
+    }
+}
+
+/// Per-thread buffers of [`Occluders::relink_visibility`] and [`Occluders::cast`] (no
+/// allocation, zeroing or copying per link).
+struct Scratch {
+    /// Per moved vertex, the shaft tests it fails ([`Shaft::outside_masks`]).
+    masks: Vec<u32>,
+    /// Triangles as `v0, v1 - v0, v2 - v0`: the moved ones in the shaft at their previous and new
+    /// positions; the candidates being cast.
+    was: Vec<[DVec3; 3]>,
+    now: Vec<[DVec3; 3]>,
+    segments: Segments,
+    /// Per segment, non-zero when it hits.
+    hit: Vec<u64>,
+    hit_was: Vec<u64>,
+}
+
+/// The segments of a link, from each receiver sample to each source sample, by coordinate.
+struct Segments {
+    n: usize,
+    /// Origins and directions `b - a`: segment `r * cells + s` from receiver sample `r`.
+    o: [[f64; 256]; 3],
+    d: [[f64; 256]; 3],
+}
+
+impl Scratch {
+    const fn new() -> Self {
+        let segments = Segments { n: 0, o: [[0.0; 256]; 3], d: [[0.0; 256]; 3] };
+        Scratch {
+            masks: Vec::new(),
+            was: Vec::new(),
+            now: Vec::new(),
+            segments,
+            hit: Vec::new(),
+            hit_was: Vec::new(),
+        }
+    }
+}
+
+impl Segments {
+    fn set(&mut self, from: &[DVec3], to: &[DVec3]) {
+        self.n = from.len() * to.len();
+        for (r, a) in from.iter().enumerate() {
+            let range = r * to.len()..(r + 1) * to.len();
+            for c in 0..3 {
+                for ((o, d), b) in
+                    self.o[c][range.clone()].iter_mut().zip(&mut self.d[c][range.clone()]).zip(to)
+                {
+                    *o = a[c];
+                    // (`b - a` as glam forms it)
+                    *d = b[c] - a[c];
+                }
+            }
+        }
+    }
+
+    fn origin(&self, k: usize) -> DVec3 {
+        DVec3::new(self.o[0][k], self.o[1][k], self.o[2][k])
+    }
+
+    fn direction(&self, k: usize) -> DVec3 {
+        DVec3::new(self.d[0][k], self.d[1][k], self.d[2][k])
+    }
+}
+
+/// Sets `hit[k]` (leaves it set) when segment `k`, `o + t d` for `t in (1e-9, 1 - 1e-9)`, hits one
+/// of `tris` (each `v0, v1 - v0, v2 - v0`): [`bvh::segment_hits`] for each pair, the same operations
+/// in the same order, vectorised over the segments.
+fn segments_hit(tris: &[[DVec3; 3]], segments: &Segments, hit: &mut [u64]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F (checked above).
+            unsafe { segments_hit_avx512(tris, segments, hit) };
+            return;
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked above).
+            unsafe { segments_hit_avx2(tris, segments, hit) };
+            return;
+        }
+    }
+    segments_hit_body(tris, segments, hit);
+}
+
+/// [`segments_hit`] compiled for AVX-512: 8 lanes, the same operations (no fused multiply-add).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f")]
+fn segments_hit_avx512(tris: &[[DVec3; 3]], segments: &Segments, hit: &mut [u64]) {
+    segments_hit_body(tris, segments, hit);
+}
+
+/// [`segments_hit`] compiled for AVX2: 4 lanes, the same operations.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn segments_hit_avx2(tris: &[[DVec3; 3]], segments: &Segments, hit: &mut [u64]) {
+    segments_hit_body(tris, segments, hit);
+}
+
+#[inline(always)]
+fn segments_hit_body(tris: &[[DVec3; 3]], segments: &Segments, hit: &mut [u64]) {
+    let n = hit.len().min(segments.n);
+    let [ox, oy, oz] = &segments.o;
+    let [dx, dy, dz] = &segments.d;
+    let (ox, oy, oz, dx, dy, dz) = (&ox[..n], &oy[..n], &oz[..n], &dx[..n], &dy[..n], &dz[..n]);
+    let (t_min, t_max) = (1e-9, 1.0 - 1e-9);
+    for [v0, e1, e2] in tris {
+        for k in 0..n {
+            // s = o - v0; q = s x e1 (as glam's cross)
+            let (sx, sy, sz) = (ox[k] - v0.x, oy[k] - v0.y, oz[k] - v0.z);
+            let qx = sy * e1.z - e1.y * sz;
+            let qy = sz * e1.x - e1.z * sx;
+            let qz = sx * e1.y - e1.x * sy;
+            // p = d x e2; det = e1 . p
+            let px = dy[k] * e2.z - e2.y * dz[k];
+            let py = dz[k] * e2.x - e2.z * dx[k];
+            let pz = dx[k] * e2.y - e2.x * dy[k];
+            let det = e1.x * px + e1.y * py + e1.z * pz;
+            let inv_det = 1.0 / det;
+            let u = (sx * px + sy * py + sz * pz) * inv_det;
+            let v = (dx[k] * qx + dy[k] * qy + dz[k] * qz) * inv_det;
+            let h = (e2.x * qx + e2.y * qy + e2.z * qz) * inv_det;
+            // Non-short-circuit `&`, so the loop has no branches. (A NaN `det` fails on `u`.)
+            let blocks = (det.abs() >= 1e-300)
+                & (0.0..=1.0).contains(&u)
+                & !(v < 0.0 || u + v > 1.0)
+                & (h > t_min)
+                & (h < t_max);
+            hit[k] |= blocks as u64;
+        }
     }
 }
 
@@ -495,6 +744,11 @@ thread_local! {
     static CANDIDATES: std::cell::RefCell<Vec<usize>> = const { std::cell::RefCell::new(Vec::new()) };
     /// Candidate triangles of a group of links ([`Occluders::group_visibility`]).
     static GROUP: std::cell::RefCell<Vec<usize>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// Candidate triangles of the batch being cast and one origin's terms ([`Occluders::cast`]).
+    static CAST: std::cell::RefCell<(CandidateTriangles, FromOrigin)> =
+        const { std::cell::RefCell::new((CandidateTriangles::empty(), FromOrigin::empty())) };
+    /// Per-thread buffers of [`Occluders::relink_visibility`] and [`Occluders::cast`].
+    static SCRATCH: std::cell::RefCell<Scratch> = const { std::cell::RefCell::new(Scratch::new()) };
 }
 
 /// Up to [`BRUTE_FORCE_CANDIDATES`] triangles by coordinate, for Moeller-Trumbore against many
@@ -514,40 +768,48 @@ struct FromOrigin {
     q: [[f64; BRUTE_FORCE_CANDIDATES]; 3],
 }
 
-impl CandidateTriangles {
-    fn gather(edges: &[[DVec3; 3]], candidates: &[usize]) -> Self {
+impl FromOrigin {
+    const fn empty() -> Self {
         let zero = [[0.0; BRUTE_FORCE_CANDIDATES]; 3];
-        let mut out = Self { n: candidates.len(), v0: zero, e1: zero, e2: zero };
-        for (k, &t) in candidates.iter().enumerate() {
-            let [v0, e1, e2] = edges[t];
-            for c in 0..3 {
-                out.v0[c][k] = v0[c];
-                out.e1[c][k] = e1[c];
-                out.e2[c][k] = e2[c];
-            }
-        }
+        Self { s: zero, q: zero }
+    }
+}
+
+impl CandidateTriangles {
+    #[cfg(test)]
+    fn gather(edges: &[[DVec3; 3]], candidates: &[usize]) -> Self {
+        let mut out = Self::empty();
+        out.gather_into(edges, candidates);
         out
     }
 
-    fn empty() -> Self {
+    /// The triangles `candidates` (at most [`BRUTE_FORCE_CANDIDATES`]) of `edges`, replacing these.
+    fn gather_into(&mut self, edges: &[[DVec3; 3]], candidates: &[usize]) {
+        self.n = candidates.len();
+        for (k, &t) in candidates.iter().enumerate() {
+            let [v0, e1, e2] = edges[t];
+            for c in 0..3 {
+                self.v0[c][k] = v0[c];
+                self.e1[c][k] = e1[c];
+                self.e2[c][k] = e2[c];
+            }
+        }
+    }
+
+    const fn empty() -> Self {
         let zero = [[0.0; BRUTE_FORCE_CANDIDATES]; 3];
         Self { n: 0, v0: zero, e1: zero, e2: zero }
     }
 
-    /// Appends a triangle given as `v0, v1 - v0, v2 - v0`; there must be room.
-    fn push(&mut self, [v0, e1, e2]: &[DVec3; 3]) {
-        let k = self.n;
-        for c in 0..3 {
-            self.v0[c][k] = v0[c];
-            self.e1[c][k] = e1[c];
-            self.e2[c][k] = e2[c];
-        }
-        self.n += 1;
+    #[cfg(test)]
+    fn from(&self, o: DVec3) -> FromOrigin {
+        let mut f = FromOrigin::empty();
+        self.terms_from(o, &mut f);
+        f
     }
 
-    fn from(&self, o: DVec3) -> FromOrigin {
-        let zero = [[0.0; BRUTE_FORCE_CANDIDATES]; 3];
-        let mut f = FromOrigin { s: zero, q: zero };
+    /// [`CandidateTriangles::from`] into `f` (its first `n` entries).
+    fn terms_from(&self, o: DVec3, f: &mut FromOrigin) {
         let [e1x, e1y, e1z] = &self.e1;
         for k in 0..self.n {
             let (sx, sy, sz) = (o.x - self.v0[0][k], o.y - self.v0[1][k], o.z - self.v0[2][k]);
@@ -559,7 +821,6 @@ impl CandidateTriangles {
             f.q[1][k] = sz * e1x[k] - e1z[k] * sx;
             f.q[2][k] = sx * e1y[k] - e1x[k] * sy;
         }
-        f
     }
 
     /// True if the segment `o + t d`, `t in (t_min, t_max)`, hits one of the triangles
@@ -595,6 +856,48 @@ impl CandidateTriangles {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The Moeller-Trumbore vectorised over segments gives the decisions of `segment_hits` for
+    /// every segment and triangle, including segments through vertices and along edges.
+    #[test]
+    fn segments_hit_matches_segment_hits() {
+        let f = |k: usize, a: f64| ((k as f64 * a).sin() * 43758.5453).fract().abs();
+        let grid = |k: usize, a: f64| (f(k, a) * 4.0).floor() * 0.25;
+        let mut segments = Segments { n: 0, o: [[0.0; 256]; 3], d: [[0.0; 256]; 3] };
+        let (mut hits, mut misses) = (0, 0);
+        for round in 0..100 {
+            let tris: Vec<bvh::Triangle> = (0..1 + round % 13)
+                .map(|t| {
+                    let k = round * 97 + t * 7;
+                    let z = grid(k, 0.7) - 0.5;
+                    let v = |o: usize| {
+                        DVec3::new(grid(k + o, 1.1), grid(k + o, 2.3), z + 0.25 * grid(k + o, 3.7))
+                    };
+                    bvh::Triangle { v: [v(0), v(1), v(2)], element: t as u32 }
+                })
+                .collect();
+            let edges: Vec<[DVec3; 3]> =
+                tris.iter().map(|t| [t.v[0], t.v[1] - t.v[0], t.v[2] - t.v[0]]).collect();
+            let cells = [1, 4, 9, 16][round % 4];
+            let point = |k: usize, z: f64| DVec3::new(grid(k, 5.1), grid(k, 6.3), z);
+            let from: Vec<DVec3> = (0..cells).map(|r| point(round * 31 + r, -1.0)).collect();
+            let to: Vec<DVec3> = (0..cells).map(|r| point(round * 37 + r + 1000, 1.0)).collect();
+            segments.set(&from, &to);
+            let mut hit = vec![0u64; cells * cells];
+            segments_hit(&edges, &segments, &mut hit);
+            for (k, &h) in hit.iter().enumerate() {
+                let (o, d) = (from[k / cells], to[k % cells] - from[k / cells]);
+                let want = tris.iter().any(|t| bvh::segment_hits(t, o, d, 1e-9, 1.0 - 1e-9));
+                assert_eq!(h != 0, want, "round {round} segment {k}");
+                if want {
+                    hits += 1;
+                } else {
+                    misses += 1;
+                }
+            }
+        }
+        assert!(hits > 500 && misses > 500, "{hits} hits, {misses} misses");
+    }
 
     /// The batched Moeller-Trumbore gives the decisions of `segment_hits`, including segments
     /// through vertices and along edges (coordinates on a coarse binary grid).

@@ -6,32 +6,37 @@ use glam::DVec3;
 
 use crate::geometry::Aabb;
 
-/// At most one plane per pair of faces on different axes: 3 axis pairs x 2 x 2 sides.
-const MAX_PLANES: usize = 12;
+/// At most one plane per pair of faces on different axes where A defines one face of the union
+/// box and B the other, hence at most 8: with `a_k` of axis `k`'s two faces defined by A alone and
+/// `b_k <= 2 - a_k` by B alone, the pairs number `sum a_k * sum b_k - sum a_k b_k`, at most 9 only
+/// when every `a_k` is 0 or 2, which makes `sum a_k` even (then 8).
+const MAX_PLANES: usize = 8;
 
 #[derive(Clone, Debug)]
 pub struct Shaft {
     pub bounds: Aabb,
-    /// Planes `n . p > d` is outside, the first `count` of them (no heap: one shaft per link).
-    planes: [(DVec3, f64); MAX_PLANES],
-    /// `|n|` per plane, for the box test.
-    abs_normals: [DVec3; MAX_PLANES],
+    /// Planes `n . p > d` is outside, the first `count` of them (no heap: one shaft per link),
+    /// by coordinate so that the box and point tests take all lanes at once: `n` and `d`. Lanes
+    /// past `count` hold `n = 0, d = +inf`, which never leave anything out.
     count: usize,
+    n: [[f64; MAX_PLANES]; 3],
+    d: [f64; MAX_PLANES],
 }
 
 impl Shaft {
     pub fn new(a: &Aabb, b: &Aabb) -> Self {
         let bounds = a.union(*b);
-        let mut planes = [(DVec3::ZERO, 0.0); MAX_PLANES];
-        let mut abs_normals = [DVec3::ZERO; MAX_PLANES];
-        let mut count = 0;
+        let mut shaft = Shaft { bounds, count: 0, n: [[0.0; MAX_PLANES]; 3], d: [f64::INFINITY; MAX_PLANES] };
         for_each_plane(a, b, |n, d| {
-            planes[count] = (n, d);
-            abs_normals[count] = n.abs();
-            count += 1;
+            let k = shaft.count;
+            for c in 0..3 {
+                shaft.n[c][k] = n[c];
+            }
+            shaft.d[k] = d;
+            shaft.count += 1;
             true
         });
-        Shaft { bounds, planes, abs_normals, count }
+        shaft
     }
 
     /// `Shaft::new(a, b).may_contain_box(x, eps)`, the same decision, without building the
@@ -53,16 +58,14 @@ impl Shaft {
         inside
     }
 
-    fn planes(&self) -> &[(DVec3, f64)] {
-        &self.planes[..self.count]
-    }
-
     /// False only if the triangle lies wholly outside the shaft (a conservative test).
+    #[inline(always)]
     pub fn may_contain_triangle(&self, v: &[DVec3; 3], eps: f64) -> bool {
         self.may_contain_points(v, eps)
     }
 
     /// False only if the convex hull of `v` lies wholly outside the shaft (a conservative test).
+    #[inline(always)]
     pub fn may_contain_points(&self, v: &[DVec3], eps: f64) -> bool {
         for axis in 0..3 {
             if v.iter().all(|p| p[axis] < self.bounds.min[axis] - eps)
@@ -71,7 +74,74 @@ impl Shaft {
                 return false;
             }
         }
-        !self.planes().iter().any(|(n, d)| v.iter().all(|p| n.dot(*p) > d + eps))
+        // Some plane with every point outside, `n . p > d + eps` (all planes at once).
+        let mut outside = [true; MAX_PLANES];
+        for p in v {
+            for k in 0..MAX_PLANES {
+                let dot = (self.n[0][k] * p.x) + (self.n[1][k] * p.y) + (self.n[2][k] * p.z);
+                outside[k] &= dot > self.d[k] + eps;
+            }
+        }
+        !outside.iter().fold(false, |a, &o| a | o)
+    }
+
+    /// Per point `(x[k], y[k], z[k])`, the tests of [`Shaft::may_contain_points`] it lies outside
+    /// of, as bits of `out[k]` (the union box's six faces, then the planes): the hull of some
+    /// points lies wholly outside the shaft, by the same comparisons, iff the AND of their masks
+    /// is not zero. Points shared by several triangles are tested once.
+    pub fn outside_masks(&self, xyz: [&[f64]; 3], eps: f64, out: &mut [u32]) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the CPU has AVX-512F (checked above).
+                unsafe { self.outside_masks_avx512(xyz, eps, out) };
+                return;
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU has AVX2 (checked above).
+                unsafe { self.outside_masks_avx2(xyz, eps, out) };
+                return;
+            }
+        }
+        self.outside_masks_body(xyz, eps, out);
+    }
+
+    /// [`Shaft::outside_masks`] compiled for AVX-512: 8 lanes, the same operations (no fused
+    /// multiply-add), so the same masks.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,avx512f")]
+    fn outside_masks_avx512(&self, xyz: [&[f64]; 3], eps: f64, out: &mut [u32]) {
+        self.outside_masks_body(xyz, eps, out);
+    }
+
+    /// [`Shaft::outside_masks`] compiled for AVX2: 4 lanes, the same operations.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn outside_masks_avx2(&self, xyz: [&[f64]; 3], eps: f64, out: &mut [u32]) {
+        self.outside_masks_body(xyz, eps, out);
+    }
+
+    #[inline(always)]
+    fn outside_masks_body(&self, [x, y, z]: [&[f64]; 3], eps: f64, out: &mut [u32]) {
+        let n = out.len();
+        let (x, y, z) = (&x[..n], &y[..n], &z[..n]);
+        let (lo, hi) = (self.bounds.min - DVec3::splat(eps), self.bounds.max + DVec3::splat(eps));
+        for k in 0..n {
+            out[k] = (x[k] < lo.x) as u32
+                | ((x[k] > hi.x) as u32) << 1
+                | ((y[k] < lo.y) as u32) << 2
+                | ((y[k] > hi.y) as u32) << 3
+                | ((z[k] < lo.z) as u32) << 4
+                | ((z[k] > hi.z) as u32) << 5;
+        }
+        for p in 0..self.count {
+            let (nx, ny, nz, limit) = (self.n[0][p], self.n[1][p], self.n[2][p], self.d[p] + eps);
+            for k in 0..n {
+                // `n.dot(point)`, in glam's order.
+                let dot = (nx * x[k]) + (ny * y[k]) + (nz * z[k]);
+                out[k] |= ((dot > limit) as u32) << (6 + p);
+            }
+        }
     }
 
     /// False only if the box lies wholly outside the shaft: outside the union box, or wholly on
@@ -84,12 +154,23 @@ impl Shaft {
     }
 
     /// [`Shaft::may_contain_box`] for a box already known to overlap [`Shaft::bounds`].
-    #[inline]
+    #[inline(always)]
     pub fn may_contain_overlapping_box(&self, b: &Aabb, eps: f64) -> bool {
-        let c = b.centre();
-        let h = b.diagonal() * 0.5;
-        let (planes, abs) = (&self.planes[..self.count], &self.abs_normals[..self.count]);
-        !planes.iter().zip(abs).any(|((n, d), a)| n.dot(c) - a.dot(h) > d + eps)
+        self.may_contain_centred_box(b.centre(), b.diagonal() * 0.5, eps)
+    }
+
+    /// [`Shaft::may_contain_overlapping_box`] of the box with centre `c = b.centre()` and half
+    /// extent `h = b.diagonal() * 0.5`: whether no plane has the box's nearest corner outside,
+    /// `n . c - |n| . h > d + eps` (all planes at once).
+    #[inline(always)]
+    pub fn may_contain_centred_box(&self, c: DVec3, h: DVec3, eps: f64) -> bool {
+        let mut outside = false;
+        for k in 0..MAX_PLANES {
+            let nc = (self.n[0][k] * c.x) + (self.n[1][k] * c.y) + (self.n[2][k] * c.z);
+            let ah = (self.n[0][k].abs() * h.x) + (self.n[1][k].abs() * h.y) + (self.n[2][k].abs() * h.z);
+            outside |= nc - ah > self.d[k] + eps;
+        }
+        !outside
     }
 }
 
@@ -194,5 +275,37 @@ mod tests {
             }
         }
         assert!(inside > 100 && outside > 100, "{inside} inside, {outside} outside");
+    }
+
+    /// The per-point masks decide as `may_contain_triangle` does, also for points on the planes.
+    #[test]
+    fn outside_masks_are_may_contain_triangle() {
+        let f = |k: usize, a: f64| ((k as f64 * a).sin() * 43758.5453).fract().abs() * 4.0;
+        let boxed = |k: usize, s: f64| {
+            let p = DVec3::new(f(k, 1.1), f(k, 2.3), f(k, 3.7));
+            Aabb { min: p, max: p + DVec3::new(f(k, 5.1), f(k, 6.3), f(k, 7.9)) * s }
+        };
+        let (mut inside, mut outside) = (0, 0);
+        for k in 0..2000 {
+            let shaft = Shaft::new(&boxed(2 * k, 0.5), &boxed(2 * k + 1, 0.5));
+            // Points on a coarse grid (some on the shaft's faces and planes), three per triangle.
+            let points: Vec<DVec3> = (0..12)
+                .map(|p| DVec3::new(f(k * 13 + p, 1.3), f(k * 13 + p, 2.9), f(k * 13 + p, 4.1)).floor())
+                .collect();
+            let coordinate = |c: usize| points.iter().map(|p| p[c]).collect::<Vec<f64>>();
+            let (x, y, z) = (coordinate(0), coordinate(1), coordinate(2));
+            let mut masks = vec![0; points.len()];
+            shaft.outside_masks([&x, &y, &z], 1e-9, &mut masks);
+            for t in 0..points.len() - 2 {
+                let want = shaft.may_contain_triangle(&[points[t], points[t + 1], points[t + 2]], 1e-9);
+                assert_eq!(masks[t] & masks[t + 1] & masks[t + 2] == 0, want, "case {k} triangle {t}");
+                if want {
+                    inside += 1;
+                } else {
+                    outside += 1;
+                }
+            }
+        }
+        assert!(inside > 1000 && outside > 1000, "{inside} inside, {outside} outside");
     }
 }
