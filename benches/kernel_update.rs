@@ -71,37 +71,45 @@ fn main() {
             if exact { "exact" } else { "series" },
             rayon::current_num_threads()
         );
-        println!("| frame | kernel s | solve s | shaft tests | candidates | vis checks | relinked | segments | recomputed | series |");
-        println!("|---|---|---|---|---|---|---|---|---|---|");
-        let mut sums = [0.0f64; 9];
+        // Columns: the update's time and its parts, the solve, then counts that do not depend on
+        // timing noise.
+        let columns = |u: &animation::UpdateStats| -> [(&str, f64); 12] {
+            [
+                ("kernel s", u.kernel_seconds),
+                ("scan s", u.scan_seconds),
+                ("pairs s", u.pairs_seconds),
+                ("apply s", u.apply_seconds),
+                ("solve s", u.solve_seconds),
+                ("shaft tests", u.shaft_tests as f64),
+                ("candidates", u.candidates as f64),
+                ("vis checks", u.visibility_checks as f64),
+                ("relinked", u.visibility_relinked as f64),
+                ("segments", u.segments_tested as f64),
+                ("recomputed", u.links_recomputed as f64),
+                ("series", u.links_series as f64),
+            ]
+        };
+        let row = |label: String, values: &[f64]| {
+            let cells: Vec<String> = values
+                .iter()
+                .enumerate()
+                .map(|(k, v)| if k < 5 { format!("{v:.4}") } else { format!("{v:.0}") })
+                .collect();
+            println!("| {label} | {} |", cells.join(" | "));
+        };
+        let names = columns(&Default::default()).map(|(name, _)| name);
+        println!("| frame | {} |", names.join(" | "));
+        println!("|---{}|", "|---".repeat(names.len()));
+        let mut sums = [0.0f64; 12];
         for f in 2..=frames {
-            let Outcome::Updated(u) = animation::advance(&mut sys, &mut state, &scene, f as f64, &no_progress).unwrap()
+            let Outcome::Updated(u) =
+                animation::advance(&mut sys, &mut state, &scene, f as f64, &no_progress).unwrap()
             else {
                 panic!("topology changed")
             };
-            println!(
-                "| {f} | {:.4} | {:.4} | {} | {} | {} | {} | {} | {} | {} |",
-                u.kernel_seconds,
-                u.solve_seconds,
-                u.shaft_tests,
-                u.candidates,
-                u.visibility_checks,
-                u.visibility_relinked,
-                u.segments_tested,
-                u.links_recomputed,
-                u.links_series
-            );
-            for (s, x) in sums.iter_mut().zip([
-                u.kernel_seconds,
-                u.solve_seconds,
-                u.shaft_tests as f64,
-                u.candidates as f64,
-                u.visibility_checks as f64,
-                u.visibility_relinked as f64,
-                u.segments_tested as f64,
-                u.links_recomputed as f64,
-                u.links_series as f64,
-            ]) {
+            let values = columns(&u).map(|(_, v)| v);
+            row(f.to_string(), &values);
+            for (s, x) in sums.iter_mut().zip(values) {
                 *s += x;
             }
             if save.is_some() || check.is_some() {
@@ -114,22 +122,12 @@ fn main() {
             }
         }
         let n = (frames - 1).max(1) as f64;
-        println!(
-            "| mean | {:.4} | {:.4} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} |",
-            sums[0] / n,
-            sums[1] / n,
-            sums[2] / n,
-            sums[3] / n,
-            sums[4] / n,
-            sums[5] / n,
-            sums[6] / n,
-            sums[7] / n,
-            sums[8] / n
-        );
+        row("mean".into(), &sums.map(|x| x / n));
         if let Some(path) = save {
             let mut f = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
             for (h, b) in &record {
-                writeln!(f, "{h} {}", b.iter().map(|x| format!("{:e}", x)).collect::<Vec<_>>().join(" ")).unwrap();
+                writeln!(f, "{h} {}", b.iter().map(|x| format!("{:e}", x)).collect::<Vec<_>>().join(" "))
+                    .unwrap();
             }
             println!("saved {path}");
         }

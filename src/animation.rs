@@ -27,7 +27,7 @@ use glam::DVec3;
 use crate::error::{Error, Result};
 use crate::geometry::{Aabb, Patch};
 use crate::kernel::PairContext;
-use crate::kernel::assemble::{ElementGeometry, KeptGeometry, integrate_visible};
+use crate::kernel::assemble::{ElementGeometry, KeptGeometry, integrate_visible_into};
 use crate::kernel::series::{self, PairSeries, SERIES_MAX_T, SERIES_ORDER};
 use crate::links::{LinkStore, PairId};
 use crate::quadrature::GaussLegendre;
@@ -71,6 +71,12 @@ pub struct UpdateStats {
     /// Sample segments tested against occluders (`m^4` per link that needed rays).
     pub segments_tested: u64,
     pub kernel_seconds: f64,
+    /// Parts of `kernel_seconds`: placing the elements and finding the candidates; deciding
+    /// each candidate's visibility and kernel (series, quadrature, expansion); writing the
+    /// store and forming `Delta K b`.
+    pub scan_seconds: f64,
+    pub pairs_seconds: f64,
+    pub apply_seconds: f64,
     pub solve_seconds: f64,
     pub shots: usize,
 }
@@ -194,16 +200,45 @@ enum SeriesAction {
     Set(Box<PairSeries>),
 }
 
-/// The new state of one changed pair.
+/// How a changed pair gets its new kernel.
+enum Kernel<'s> {
+    /// The stored series at displacement `p`.
+    Series(&'s PairSeries, f64),
+    /// Just (re-)expanded at the current position.
+    Expanded(Box<PairSeries>),
+    /// Quadrature (eq. 6) with the pair's visibility.
+    Exact,
+}
+
+/// A candidate that changed: its new visibility and how to get its kernel.
+struct Decision<'s> {
+    i: u32,
+    j: u32,
+    id: Option<PairId>,
+    vis: Visibility,
+    kernel: Kernel<'s>,
+    reason: Reason,
+}
+
+/// The new state of one changed pair (its blocks are in its [`UpdateBatch`]).
 struct PairUpdate {
     i: u32,
     j: u32,
-    /// `(G_ij, G_ji, visibility)`, or `None` when the pair no longer exchanges light.
-    coefficients: Option<(Vec<f64>, Vec<f64>, Visibility)>,
-    /// `Delta K b` it adds (eq. 9): `nb` coefficients for receiver `i`, then `nb` for `j`.
-    delta: Vec<[f64; 3]>,
+    id: Option<PairId>,
+    /// `Blocked` when the pair no longer exchanges light.
+    vis: Visibility,
     series: SeriesAction,
     reason: Reason,
+}
+
+/// The updates of a run of candidates: per update, its new blocks `[G_ij | G_ji]` (f32, as
+/// stored, `2 nb^2`) in one flat array.
+#[derive(Default)]
+struct UpdateBatch {
+    updates: Vec<PairUpdate>,
+    blocks: Vec<f32>,
+    /// The f64 blocks being computed.
+    scratch: Vec<f64>,
 }
 
 /// Relative motion of the frame for the candidates with a moved element.
@@ -272,6 +307,16 @@ pub fn advance(
         let geom = ElementGeometry::reusing(state.geometry.take(), &patches, &moved, &ctx);
         let shaft_eps = 1e-9 * scene_scale;
         let bounds: Vec<Aabb> = patches.iter().map(Patch::bounds).collect();
+        // Per element, 3 bits "min <= swept max" and 3 bits "max >= swept min" (x, y, z): a
+        // pair's union box overlaps the swept box when the two codes together have all six.
+        let codes: Vec<u8> = bounds
+            .iter()
+            .map(|b| {
+                let lo = b.min.cmple(swept.max).bitmask() as u8;
+                let hi = swept.min.cmple(b.max).bitmask() as u8;
+                lo | hi << 3
+            })
+            .collect();
         state.index.sync(&sys.links);
         // Per element i, its candidates (i, j > i) and how many shafts it tested.
         let per_element: Vec<(Vec<PairCandidate>, usize)> = (0..n)
@@ -290,10 +335,10 @@ pub fn advance(
                     if !s.visibility {
                         continue;
                     }
-                    let (bi, bj) = (&bounds[i], &bounds[j]);
-                    if !bi.union(*bj).overlaps(&swept) {
-                        continue;
+                    if codes[i] | codes[j] != 0b11_1111 {
+                        continue; // The pair's box misses the swept box.
                     }
+                    let (bi, bj) = (&bounds[i], &bounds[j]);
                     tests += 1;
                     if Shaft::between_may_contain_box(bi, bj, &swept, shaft_eps) {
                         found.push((i as u32, j as u32, Candidate::VisibilityOnly));
@@ -324,187 +369,183 @@ pub fn advance(
             });
             state.culled = Some((0..n).map(|e| before[e] || o.culls(e)).collect());
         }
+        stats.scan_seconds = start.elapsed().as_secs_f64();
         let relink_ok = |i: usize, j: usize| state.culled.as_ref().is_some_and(|c| !c[i] && !c[j]);
         let visibility_checks = std::sync::atomic::AtomicUsize::new(0);
         let visibility_relinked = std::sync::atomic::AtomicUsize::new(0);
         let total = candidates.len();
         let done = std::sync::atomic::AtomicUsize::new(0);
-        // Delta K b of an update with the previous frame's b, both directions (eq. 9), computed
-        // here in parallel: the old blocks are strided reads of the column store.
-        let with_delta = |mut u: PairUpdate| {
-            let mut old = [0.0; 2 * 256];
-            let zeros = [0.0; 256];
-            let (old_ij, old_ji) = old[..2 * nb * nb].split_at_mut(nb * nb);
-            if let Some(p) = state.index.get(u.i, u.j) {
-                sys.links.block_into(p, u.i, old_ij);
-                sys.links.block_into(p, u.j, old_ji);
+        // Per candidate: its visibility and how its kernel is obtained (`decide`), then its new
+        // blocks (`emit`), written into the batch of its run of candidates.
+        let decide = |(i, j, kind): PairCandidate| -> Result<Option<Decision>> {
+            let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            if d.is_multiple_of(2048) && !progress(d as f64 / total.max(1) as f64, "kernel update") {
+                return Err(Error::Cancelled);
             }
-            let (new_ij, new_ji) = match &u.coefficients {
-                Some((ij, ji, _)) => (&ij[..], &ji[..]),
-                None => (&zeros[..nb * nb], &zeros[..nb * nb]),
+            let (iu, ju) = (i as usize, j as usize);
+            let id = state.index.get(i, j);
+            // A pair that cannot face each other exchanges nothing whatever its visibility
+            // (`integrate_visible` gives `None`; a stored pair is emptied with `Blocked`).
+            let facing = geom.face_each_other(iu, ju);
+            if !facing && (id.is_none() || matches!(kind, Candidate::VisibilityOnly)) {
+                // (A static or rigid pair's facing never changes: if stored, it is already empty.)
+                return Ok(None);
+            }
+            let old_vis = id.map_or(&Visibility::Blocked, |p| &sys.links.pair(p).visibility);
+            let static_pair = !moved[iu] && !moved[ju];
+            let vis = match &occluders {
+                _ if !facing => Visibility::Blocked,
+                Some(o) => {
+                    // An absent pair, or one stored as `Blocked`, was either blocked or has a
+                    // kernel that is zero whatever its mask (the one-sided `g >= 0` vanished at
+                    // every visible sample: then at every sample, as the pair has not moved).
+                    // Re-checking from `Blocked` is exact in the first case and gives a mask
+                    // that still yields the zero kernel in the second.
+                    let relinked = (static_pair && relink_ok(iu, ju))
+                        .then(|| o.relink_visibility((&patches[iu], &patches[ju]), old_vis, &moved_triangles))
+                        .flatten();
+                    if relinked.is_some() {
+                        visibility_relinked.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    }
+                    relinked.unwrap_or_else(|| {
+                        visibility_checks.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        o.link_visibility(iu, &patches[iu], ju, &patches[ju])
+                    })
+                }
+                None => Visibility::Full,
             };
-            u.delta = vec![[0.0; 3]; 2 * nb];
-            let (di, dj) = u.delta.split_at_mut(nb);
-            delta_kb(di, sys, u.i as usize, u.j as usize, new_ij, old_ij);
-            delta_kb(dj, sys, u.j as usize, u.i as usize, new_ji, old_ji);
-            u
+            let existing_series = id.and_then(|p| state.series.get(p as usize)).and_then(|s| s.as_deref());
+            let decision = match kind {
+                Candidate::VisibilityOnly => {
+                    if vis == *old_vis || (id.is_none() && vis == Visibility::Blocked) {
+                        return Ok(None);
+                    }
+                    Decision { i, j, id, vis, kernel: Kernel::Exact, reason: Reason::Visibility }
+                }
+                Candidate::Moved => {
+                    let motion = shift[ju] - shift[iu];
+                    let both_translated = translated[iu] && translated[ju];
+                    let mut reason =
+                        if both_translated { Reason::Translation } else { Reason::NonTranslation };
+                    if let (true, Some(ser)) = (state.use_series, existing_series) {
+                        match series_check(ser, state, &patches, iu, ju, &vis, old_vis) {
+                            Ok(p) => {
+                                let kernel = Kernel::Series(ser, p);
+                                return Ok(Some(Decision { i, j, id, vis, kernel, reason: Reason::Series }));
+                            }
+                            Err(why) => reason = why,
+                        }
+                    }
+                    // Exact (eq. 6), re-expanded along this frame's motion when the series applies.
+                    // Expanding costs about SERIES_ORDER + 1 quadratures: only worth it when the
+                    // pair stays within the bound for a few frames at this frame's speed.
+                    let r_min = (state.use_series && both_translated && vis != Visibility::Blocked)
+                        .then(|| series::eligible(&patches[iu], &patches[ju]))
+                        .flatten()
+                        .filter(|r| SERIES_MAX_T * r >= MIN_SERIES_FRAMES * motion.length());
+                    match r_min {
+                        Some(r_min) => {
+                            let (ci, ri) = patches[iu].bounding_sphere();
+                            let (cj, rj) = patches[ju].bounding_sphere();
+                            let npts = ctx.points_for(ci.distance(cj) / (ri + rj));
+                            let dir = motion.normalize();
+                            let terms = series::expand(
+                                basis,
+                                ctx.vis_axis,
+                                geom.samples(iu, npts),
+                                geom.samples(ju, npts),
+                                &vis,
+                                dir,
+                            );
+                            let ser = PairSeries {
+                                dir,
+                                ref_a: patches[iu].corners[0],
+                                ref_b: patches[ju].corners[0],
+                                r_min,
+                                epochs: (state.epochs[iu], state.epochs[ju]),
+                                terms,
+                            };
+                            Decision { i, j, id, vis, kernel: Kernel::Expanded(Box::new(ser)), reason }
+                        }
+                        None => {
+                            if reason == Reason::Translation
+                                && state.use_series
+                                && existing_series.is_none()
+                                && !series::mutually_in_front(&patches[iu], &patches[ju])
+                            {
+                                reason = Reason::HalfSpace;
+                            }
+                            Decision { i, j, id, vis, kernel: Kernel::Exact, reason }
+                        }
+                    }
+                }
+            };
+            Ok(Some(decision))
         };
-        let updates: Vec<PairUpdate> = candidates
-            .par_iter()
-            .map(|&(i, j, kind)| {
-                let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if d.is_multiple_of(2048) && !progress(d as f64 / total.max(1) as f64, "kernel update") {
-                    return Err(Error::Cancelled);
+        // The new blocks of a decided pair, rounded to the store's f32 (Delta K b, below, is then
+        // the change of the stored kernel).
+        let emit = |batch: &mut UpdateBatch, d: Decision| {
+            let n2 = nb * nb;
+            let (iu, ju) = (d.i as usize, d.j as usize);
+            batch.scratch.resize(2 * n2, 0.0);
+            let scratch = &mut batch.scratch[..];
+            let (series, exchanges) = match d.kernel {
+                Kernel::Series(ser, p) => {
+                    ser.eval_into(p, scratch);
+                    (SeriesAction::Keep, true)
                 }
-                let (iu, ju) = (i as usize, j as usize);
-                let id = state.index.get(i, j);
-                // A pair that cannot face each other exchanges nothing whatever its visibility
-                // (`integrate_visible` gives `None`; a stored pair is emptied with `Blocked`).
-                let facing = geom.face_each_other(iu, ju);
-                if !facing && (id.is_none() || matches!(kind, Candidate::VisibilityOnly)) {
-                    // (A static or rigid pair's facing never changes: if stored, it is already empty.)
-                    return Ok(None);
+                Kernel::Expanded(ser) => {
+                    ser.eval_into(0.0, scratch);
+                    (SeriesAction::Set(ser), true)
                 }
-                let old_vis = id.map_or(&Visibility::Blocked, |p| &sys.links.pair(p).visibility);
-                let static_pair = !moved[iu] && !moved[ju];
-                let vis = match &occluders {
-                    _ if !facing => Visibility::Blocked,
-                    Some(o) => {
-                        // An absent pair, or one stored as `Blocked`, was either blocked or has a
-                        // kernel that is zero whatever its mask (the one-sided `g >= 0` vanished at
-                        // every visible sample: then at every sample, as the pair has not moved).
-                        // Re-checking from `Blocked` is exact in the first case and gives a mask
-                        // that still yields the zero kernel in the second.
-                        let relinked = (static_pair && relink_ok(iu, ju))
-                            .then(|| {
-                                o.relink_visibility((&patches[iu], &patches[ju]), old_vis, &moved_triangles)
-                            })
-                            .flatten();
-                        if relinked.is_some() {
-                            visibility_relinked.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        }
-                        relinked.unwrap_or_else(|| {
-                            visibility_checks.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                            o.link_visibility(iu, &patches[iu], ju, &patches[ju])
-                        })
+                Kernel::Exact => {
+                    let (ij, ji) = scratch.split_at_mut(n2);
+                    let exchanges = integrate_visible_into(&ctx, &geom, iu, ju, &d.vis, ij, ji);
+                    if !exchanges {
+                        scratch.fill(0.0);
                     }
-                    None => Visibility::Full,
-                };
-                let existing_series =
-                    id.and_then(|p| state.series.get(p as usize)).and_then(|s| s.as_deref());
-                let update = match kind {
-                    Candidate::VisibilityOnly => {
-                        if vis == *old_vis || (id.is_none() && vis == Visibility::Blocked) {
-                            return Ok(None);
-                        }
-                        let c = integrate_visible(&ctx, &geom, iu, ju, &vis);
-                        PairUpdate {
-                            i,
-                            j,
-                            coefficients: c.map(|c| (c.ij, c.ji, vis)),
-                            delta: Vec::new(),
-                            series: SeriesAction::Drop,
-                            reason: Reason::Visibility,
-                        }
-                    }
-                    Candidate::Moved => {
-                        let motion = shift[ju] - shift[iu];
-                        let both_translated = translated[iu] && translated[ju];
-                        let mut reason =
-                            if both_translated { Reason::Translation } else { Reason::NonTranslation };
-                        if let (true, Some(ser)) = (state.use_series, existing_series) {
-                            match series_check(ser, state, &patches, iu, ju, &vis, old_vis) {
-                                Ok(p) => {
-                                    let (ab, ba) = ser.eval(p, nb);
-                                    return Ok(Some(with_delta(PairUpdate {
-                                        i,
-                                        j,
-                                        coefficients: Some((ab, ba, vis)),
-                                        delta: Vec::new(),
-                                        series: SeriesAction::Keep,
-                                        reason: Reason::Series,
-                                    })));
-                                }
-                                Err(why) => reason = why,
-                            }
-                        }
-                        // Exact (eq. 6), re-expanded along this frame's motion when the series applies.
-                        // Expanding costs about SERIES_ORDER + 1 quadratures: only worth it when the
-                        // pair stays within the bound for a few frames at this frame's speed.
-                        let r_min = (state.use_series && both_translated && vis != Visibility::Blocked)
-                            .then(|| series::eligible(&patches[iu], &patches[ju]))
-                            .flatten()
-                            .filter(|r| SERIES_MAX_T * r >= MIN_SERIES_FRAMES * motion.length());
-                        match r_min {
-                            Some(r_min) => {
-                                let (ci, ri) = patches[iu].bounding_sphere();
-                                let (cj, rj) = patches[ju].bounding_sphere();
-                                let npts = ctx.points_for(ci.distance(cj) / (ri + rj));
-                                let dir = motion.normalize();
-                                let terms = series::expand(
-                                    basis,
-                                    ctx.vis_axis,
-                                    geom.samples(iu, npts),
-                                    geom.samples(ju, npts),
-                                    &vis,
-                                    dir,
-                                );
-                                let ser = PairSeries {
-                                    dir,
-                                    ref_a: patches[iu].corners[0],
-                                    ref_b: patches[ju].corners[0],
-                                    r_min,
-                                    epochs: (state.epochs[iu], state.epochs[ju]),
-                                    terms,
-                                };
-                                let (ab, ba) = ser.eval(0.0, nb);
-                                PairUpdate {
-                                    i,
-                                    j,
-                                    coefficients: Some((ab, ba, vis)),
-                                    delta: Vec::new(),
-                                    series: SeriesAction::Set(Box::new(ser)),
-                                    reason,
-                                }
-                            }
-                            None => {
-                                if reason == Reason::Translation
-                                    && state.use_series
-                                    && existing_series.is_none()
-                                    && !series::mutually_in_front(&patches[iu], &patches[ju])
-                                {
-                                    reason = Reason::HalfSpace;
-                                }
-                                let c = integrate_visible(&ctx, &geom, iu, ju, &vis);
-                                PairUpdate {
-                                    i,
-                                    j,
-                                    coefficients: c.map(|c| (c.ij, c.ji, vis)),
-                                    delta: Vec::new(),
-                                    series: SeriesAction::Drop,
-                                    reason,
-                                }
-                            }
-                        }
-                    }
-                };
-                if id.is_none() && update.coefficients.is_none() {
-                    return Ok(None);
+                    (SeriesAction::Drop, exchanges)
                 }
-                Ok(Some(with_delta(update)))
+            };
+            if d.id.is_none() && !exchanges {
+                return;
+            }
+            batch.blocks.extend(scratch.iter().map(|&x| x as f32));
+            let vis = if exchanges { d.vis } else { Visibility::Blocked };
+            batch.updates.push(PairUpdate { i: d.i, j: d.j, id: d.id, vis, series, reason: d.reason });
+        };
+        // Fixed runs of candidates, each into its own batch (no merging copies).
+        let run = candidates.len().div_ceil(8 * rayon::current_num_threads()).max(64);
+        let batches = candidates
+            .par_chunks(run)
+            .map(|run| {
+                // (Room for every candidate's blocks: most produce none, and untouched pages cost nothing.)
+                let mut batch =
+                    UpdateBatch { blocks: Vec::with_capacity(run.len() * 2 * nb * nb), ..Default::default() };
+                for &c in run {
+                    if let Some(d) = decide(c)? {
+                        emit(&mut batch, d);
+                    }
+                }
+                Ok(batch)
             })
-            .filter_map(Result::transpose)
-            .collect::<Result<_>>()?;
+            .collect::<Result<Vec<UpdateBatch>>>()?;
+        let mut batches = batches;
+        stats.pairs_seconds = start.elapsed().as_secs_f64() - stats.scan_seconds;
         stats.visibility_checks = visibility_checks.into_inner();
         stats.visibility_relinked = visibility_relinked.into_inner();
 
-        let zeros = vec![0.0; nb * nb];
-        for u in updates {
-            let id = state.index.get(u.i, u.j);
-            let (new_ij, new_ji, vis) = match u.coefficients {
-                Some((ref ij, ref ji, vis)) => (&ij[..], &ji[..], vis),
-                None => (&zeros[..], &zeros[..], Visibility::Blocked),
-            };
+        // Apply: new pairs are appended one by one (rare), stored pairs rewritten in parallel.
+        let n2 = nb * nb;
+        let updates: Vec<Vec<PairUpdate>> =
+            batches.iter_mut().map(|b| std::mem::take(&mut b.updates)).collect();
+        let mut rewrites: Vec<(PairId, u32, &[f32])> = Vec::with_capacity(updates.iter().map(Vec::len).sum());
+        let mut fresh: Vec<(u32, u32, &[f32])> = Vec::new();
+        let in_order = batches
+            .iter()
+            .zip(updates)
+            .flat_map(|(b, us)| us.into_iter().enumerate().map(move |(k, u)| (b, k, u)));
+        for (batch, k, u) in in_order {
             match u.reason {
                 Reason::Series => stats.links_series += 1,
                 Reason::Bound => stats.recomputed_bound += 1,
@@ -517,23 +558,18 @@ pub fn advance(
             if u.reason != Reason::Series {
                 stats.links_recomputed += 1;
             }
-            for (r, d) in [(u.i as usize, &u.delta[..nb]), (u.j as usize, &u.delta[nb..])] {
-                for (acc, x) in delta_b[r * nb..(r + 1) * nb].iter_mut().zip(d) {
-                    for c in 0..3 {
-                        acc[c] += x[c];
-                    }
-                }
-            }
-            let p = match id {
+            let blocks = &batch.blocks[2 * n2 * k..][..2 * n2];
+            let p = match u.id {
                 Some(p) => {
-                    let (ab, ba) =
-                        if sys.links.pair(p).a == u.i { (new_ij, new_ji) } else { (new_ji, new_ij) };
-                    sys.links.set(p, ab, ba, vis);
+                    sys.links.set_visibility(p, u.vis);
+                    rewrites.push((p, u.i, blocks));
                     p
                 }
                 None => {
-                    let p = sys.links.push(u.i, u.j, new_ij, new_ji, vis);
+                    let wide: Vec<f64> = blocks.iter().map(|&x| x as f64).collect();
+                    let p = sys.links.push(u.i, u.j, &wide[..n2], &wide[n2..], u.vis);
                     state.index.insert(u.i, u.j, p);
+                    fresh.push((u.i, u.j, blocks));
                     p
                 }
             };
@@ -551,6 +587,44 @@ pub fn advance(
                 }
             }
         }
+        let replaced = sys.links.replace_blocks(&rewrites);
+        // Delta K b with the previous frame's b, both receivers of each changed pair (eq. 9).
+        let zeros = vec![0.0f32; n2];
+        let changes = rewrites
+            .par_iter()
+            .enumerate()
+            .map(|(k, &(p, i, new))| (i, sys.links.other(p, i), new, replaced.get(k, 0), replaced.get(k, 1)))
+            .chain(fresh.par_iter().map(|&(i, j, new)| (i, j, new, &zeros[..], &zeros[..])))
+            // (Each run sums into a whole Delta b: long runs, few of them.)
+            .with_min_len(2048);
+        let sys_ref = &*sys;
+        let delta_k_b = changes
+            .fold(
+                || vec![[0.0f64; 3]; n * nb],
+                |mut acc, (i, j, new, old_ij, old_ji)| {
+                    let (i, j) = (i as usize, j as usize);
+                    delta_kb(&mut acc[i * nb..(i + 1) * nb], sys_ref, i, j, &new[..n2], old_ij);
+                    delta_kb(&mut acc[j * nb..(j + 1) * nb], sys_ref, j, i, &new[n2..], old_ji);
+                    acc
+                },
+            )
+            .reduce(
+                || vec![[0.0f64; 3]; n * nb],
+                |mut a, b| {
+                    for (x, y) in a.iter_mut().zip(&b) {
+                        for c in 0..3 {
+                            x[c] += y[c];
+                        }
+                    }
+                    a
+                },
+            );
+        for (acc, x) in delta_b.iter_mut().zip(&delta_k_b) {
+            for c in 0..3 {
+                acc[c] += x[c];
+            }
+        }
+        stats.apply_seconds = start.elapsed().as_secs_f64() - stats.scan_seconds - stats.pairs_seconds;
         state.geometry = Some(geom.into_kept(&ctx));
         // The new placement's occluders serve the corner gather and the next update.
         sys.occluders = occluders;
@@ -624,18 +698,20 @@ const _: () = assert!(SERIES_ORDER >= 2);
 const MIN_SERIES_FRAMES: f64 = 3.0;
 
 /// `out += rho_r (G_new - G_old) b_s` for receiver `r` (its `nb` coefficients), source `s`.
-fn delta_kb(out: &mut [[f64; 3]], sys: &System, r: usize, s: usize, new: &[f64], old: &[f64]) {
+fn delta_kb(out: &mut [[f64; 3]], sys: &System, r: usize, s: usize, new: &[f32], old: &[f32]) {
     let nb = sys.basis.len();
     let rho = sys.reflectance[r];
-    for k in 0..nb {
-        for l in 0..nb {
-            let d = new[k * nb + l] - old[k * nb + l];
-            if d == 0.0 {
-                continue;
-            }
+    let b = &sys.solution.b[s * nb..(s + 1) * nb];
+    for (o, (new, old)) in out.iter_mut().zip(new.chunks_exact(nb).zip(old.chunks_exact(nb))) {
+        let mut acc = [0.0f64; 3];
+        for ((&x, &y), b) in new.iter().zip(old).zip(b) {
+            let d = x as f64 - y as f64;
             for c in 0..3 {
-                out[k][c] += rho[c] * d * sys.solution.b[s * nb + l][c];
+                acc[c] += d * b[c];
             }
+        }
+        for c in 0..3 {
+            o[c] += rho[c] * acc[c];
         }
     }
 }

@@ -205,6 +205,66 @@ impl LinkStore {
         self.pairs[p as usize].visibility = visibility;
     }
 
+    /// Replaces the coefficients of many stored pairs at once: for each `(p, r, g)`,
+    /// `g = [G_r,other | G_other,r]` (f32, `nb x nb` row-major each), with the columns written in
+    /// parallel, one shooter per task. Returns the blocks they replaced, read while writing (the
+    /// same cache lines). Visibility is left as it is ([`LinkStore::set_visibility`]).
+    pub fn replace_blocks(&mut self, items: &[(PairId, ElementId, &[f32])]) -> ReplacedBlocks {
+        use rayon::prelude::*;
+        let nb = self.nb;
+        let n2 = nb * nb;
+        // The writes by shooter (a counting sort): (item, slot, half of the item's blocks).
+        let n = self.receivers.len();
+        let mut start = vec![0usize; n + 1];
+        for &(p, ..) in items {
+            let pair = &self.pairs[p as usize];
+            start[pair.a as usize + 1] += 1;
+            start[pair.b as usize + 1] += 1;
+        }
+        for e in 0..n {
+            start[e + 1] += start[e];
+        }
+        let mut fill = start.clone();
+        let mut writes = vec![(0u32, 0u32, 0u32); 2 * items.len()];
+        let mut position = vec![0u32; 2 * items.len()];
+        for (k, &(p, r, _)) in items.iter().enumerate() {
+            let other = self.other(p, r);
+            for (half, receiver) in [(0, r), (1, other)] {
+                let (shooter, slot) = self.slot(p, receiver);
+                writes[fill[shooter]] = (k as u32, slot as u32, half);
+                position[2 * k + half as usize] = fill[shooter] as u32;
+                fill[shooter] += 1;
+            }
+        }
+        // The old blocks in write order, so that each shooter's task owns a contiguous part.
+        let mut old = vec![0.0f32; 2 * items.len() * n2];
+        let mut parts = Vec::with_capacity(n);
+        let mut rest = &mut old[..];
+        for e in 0..n {
+            let (part, tail) = rest.split_at_mut((start[e + 1] - start[e]) * n2);
+            parts.push(part);
+            rest = tail;
+        }
+        self.columns.par_chunks_mut(nb).zip(parts).enumerate().for_each(|(e, (cols, old))| {
+            let writes = &writes[start[e]..start[e + 1]];
+            for (&(k, slot, half), old) in writes.iter().zip(old.chunks_exact_mut(n2)) {
+                let g = &items[k as usize].2[half as usize * n2..][..n2];
+                let slot = slot as usize;
+                for (l, col) in cols.iter_mut().enumerate() {
+                    for (kk, dst) in col[slot * nb..(slot + 1) * nb].iter_mut().enumerate() {
+                        old[kk * nb + l] = *dst;
+                        *dst = g[kk * nb + l];
+                    }
+                }
+            }
+        });
+        ReplacedBlocks { n2, old, position }
+    }
+
+    pub fn set_visibility(&mut self, p: PairId, visibility: Visibility) {
+        self.pairs[p as usize].visibility = visibility;
+    }
+
     /// The block with `receiver` as receiver, `G_receiver,other`, row-major (row = receiver
     /// function), copied out of the column store.
     pub fn block(&self, p: PairId, receiver: ElementId) -> Vec<f32> {
@@ -265,5 +325,69 @@ impl LinkStore {
         let ab = self.block(p, a).iter().map(|&x| x as f64).collect();
         let ba = self.block(p, b).iter().map(|&x| x as f64).collect();
         (ab, ba)
+    }
+}
+
+/// The blocks [`LinkStore::replace_blocks`] replaced.
+pub struct ReplacedBlocks {
+    n2: usize,
+    /// In write order.
+    old: Vec<f32>,
+    /// Per item and half (`2 k + half`): its place in `old`.
+    position: Vec<u32>,
+}
+
+impl ReplacedBlocks {
+    /// The old block of item `k`: half 0 is `G_r,other`, half 1 `G_other,r` (row-major).
+    pub fn get(&self, k: usize, half: usize) -> &[f32] {
+        &self.old[self.position[2 * k + half] as usize * self.n2..][..self.n2]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A block whose entries name it: `pair`, receiver and index.
+    fn block(nb: usize, pair: usize, receiver: u32, scale: f64) -> Vec<f64> {
+        (0..nb * nb).map(|x| scale * (1000 * pair + 100 * receiver as usize + x) as f64).collect()
+    }
+
+    #[test]
+    fn replace_blocks_writes_the_new_and_returns_the_old_in_either_orientation() {
+        let nb = 4;
+        let n2 = nb * nb;
+        let mut store = LinkStore::new(4, nb);
+        let pairs = [(0u32, 1u32), (2, 1), (0, 3), (3, 2)];
+        for (k, &(a, b)) in pairs.iter().enumerate() {
+            store.push(a, b, &block(nb, k, a, 1.0), &block(nb, k, b, 1.0), Visibility::Full);
+        }
+        // Pair 1 given from its `a` side, pair 3 from its `b` side, pair 0 left alone.
+        let new: Vec<(PairId, ElementId, Vec<f32>)> = [(1u32, 2u32), (3, 2)]
+            .iter()
+            .map(|&(p, r)| {
+                let other = store.other(p, r);
+                let g: Vec<f32> = block(nb, p as usize, r, -1.0)
+                    .into_iter()
+                    .chain(block(nb, p as usize, other, -1.0))
+                    .map(|x| x as f32)
+                    .collect();
+                (p, r, g)
+            })
+            .collect();
+        let items: Vec<(PairId, ElementId, &[f32])> = new.iter().map(|(p, r, g)| (*p, *r, &g[..])).collect();
+        let before: Vec<Vec<f32>> = items
+            .iter()
+            .flat_map(|&(p, r, _)| [store.block(p, r), store.block(p, store.other(p, r))])
+            .collect();
+        let untouched = (store.block(0, 0), store.block(0, 1), store.block(2, 0), store.block(2, 3));
+        let replaced = store.replace_blocks(&items);
+        for (k, &(p, r, g)) in items.iter().enumerate() {
+            assert_eq!(store.block(p, r), g[..n2]);
+            assert_eq!(store.block(p, store.other(p, r)), g[n2..]);
+            assert_eq!(replaced.get(k, 0), &before[2 * k][..]);
+            assert_eq!(replaced.get(k, 1), &before[2 * k + 1][..]);
+        }
+        assert_eq!(untouched, (store.block(0, 0), store.block(0, 1), store.block(2, 0), store.block(2, 3)));
     }
 }

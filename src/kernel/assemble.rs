@@ -5,7 +5,7 @@ use rayon::prelude::*;
 
 use glam::DVec3;
 
-use super::pair::{FAR, MID, PairCoefficients, PairContext, integrate_pair, integrate_pair_into};
+use super::pair::{FAR, MID, PairCoefficients, PairContext, integrate_pair_into};
 use super::samples::Samples;
 use crate::geometry::{FrontPlane, Patch, Rect};
 use crate::links::{LinkRow, LinkStore};
@@ -170,12 +170,31 @@ pub fn integrate_visible(
     j: usize,
     vis: &Visibility,
 ) -> Option<PairCoefficients> {
+    let mut c = PairCoefficients::zeros(ctx.basis.len());
+    integrate_visible_into(ctx, geom, i, j, vis, &mut c.ij, &mut c.ji).then_some(c)
+}
+
+/// [`integrate_visible`] into the caller's blocks (`nb x nb` each, overwritten): false when the
+/// pair exchanges nothing.
+pub fn integrate_visible_into(
+    ctx: &PairContext,
+    geom: &ElementGeometry,
+    i: usize,
+    j: usize,
+    vis: &Visibility,
+    ij: &mut [f64],
+    ji: &mut [f64],
+) -> bool {
     let (pi, pj) = (&geom.patches[i], &geom.patches[j]);
     if *vis == Visibility::Blocked || !may_face(pi, pj) || !may_face(pj, pi) {
-        return None;
+        return false;
     }
-    let c = integrate_pair(ctx, pi, pj, |second, n| geom.samples(if second { j } else { i }, n), vis);
-    (!c.is_zero()).then_some(c)
+    ij.fill(0.0);
+    ji.fill(0.0);
+    let spheres = (pi.bounding_sphere(), pj.bounding_sphere());
+    let whole = |second: bool, n| geom.samples(if second { j } else { i }, n);
+    integrate_pair_into(ctx, pi, pj, spheres, whole, vis, ij, ji);
+    ij.iter().chain(ji.iter()).any(|&x| x != 0.0)
 }
 
 /// One pair for [`assemble`] whose visibility is known: both blocks written to `ij` and `ji`

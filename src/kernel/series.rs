@@ -138,17 +138,23 @@ impl PairSeries {
     /// `sum_n p^n Phi_n` (eq. 16 plus the reference kernel), both blocks.
     pub fn eval(&self, p: f64, nb: usize) -> (Vec<f64>, Vec<f64>) {
         let n2 = nb * nb;
-        let mut ab = vec![0.0; n2];
-        let mut ba = vec![0.0; n2];
+        let mut both = vec![0.0; 2 * n2];
+        self.eval_into(p, &mut both);
+        let ba = both.split_off(n2);
+        (both, ba)
+    }
+
+    /// [`PairSeries::eval`] into `[G_ab | G_ba]` (`2 nb^2`, overwritten).
+    pub fn eval_into(&self, p: f64, out: &mut [f64]) {
+        let len = out.len();
+        debug_assert_eq!(self.terms.len(), (SERIES_ORDER + 1) * len);
         // Horner in p over the terms, highest first.
-        for n in (0..=SERIES_ORDER).rev() {
-            let t = &self.terms[n * 2 * n2..(n + 1) * 2 * n2];
-            for k in 0..n2 {
-                ab[k] = ab[k] * p + t[k] as f64;
-                ba[k] = ba[k] * p + t[n2 + k] as f64;
+        out.fill(0.0);
+        for t in self.terms.chunks_exact(len).rev() {
+            for (o, &x) in out.iter_mut().zip(t) {
+                *o = *o * p + x as f64;
             }
         }
-        (ab, ba)
     }
 }
 
