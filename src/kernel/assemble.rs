@@ -185,30 +185,7 @@ pub fn integrate_visible_into(
     ij: &mut [f64],
     ji: &mut [f64],
 ) -> bool {
-    let (pi, pj) = (&geom.patches[i], &geom.patches[j]);
-    if *vis == Visibility::Blocked || !may_face(pi, pj) || !may_face(pj, pi) {
-        return false;
-    }
-    ij.fill(0.0);
-    ji.fill(0.0);
-    let spheres = (pi.bounding_sphere(), pj.bounding_sphere());
-    let whole = |second: bool, n| geom.samples(if second { j } else { i }, n);
-    integrate_pair_into(ctx, pi, pj, spheres, whole, vis, ij, ji);
-    ij.iter().chain(ji.iter()).any(|&x| x != 0.0)
-}
-
-/// One pair for [`assemble`] whose visibility is known: both blocks written to `ij` and `ji`
-/// (zeroed here), or false when it exchanges nothing. The same decisions as [`compute_pair`].
-fn assemble_pair(
-    ctx: &PairContext,
-    geom: &ElementGeometry,
-    i: usize,
-    j: usize,
-    vis: &Visibility,
-    ij: &mut [f64],
-    ji: &mut [f64],
-) -> bool {
-    if *vis == Visibility::Blocked {
+    if *vis == Visibility::Blocked || !geom.face_each_other(i, j) {
         return false;
     }
     ij.fill(0.0);
@@ -217,7 +194,7 @@ fn assemble_pair(
     let spheres = (geom.info[i].sphere, geom.info[j].sphere);
     let whole = |second: bool, n| geom.samples(if second { j } else { i }, n);
     integrate_pair_into(ctx, pi, pj, spheres, whole, vis, ij, ji);
-    !ij.iter().chain(ji.iter()).all(|&x| x == 0.0)
+    ij.iter().chain(ji.iter()).any(|&x| x != 0.0)
 }
 
 /// Sources per shared visibility traversal ([`Occluders::group_visibility`]): consecutive
@@ -259,7 +236,7 @@ pub fn assemble(
                     None => vis.extend(group.iter().map(|_| Visibility::Full)),
                 }
                 for (&(j, _), v) in group.iter().zip(vis.drain(..)) {
-                    if assemble_pair(ctx, geom, i, j, &v, ij, ji) {
+                    if integrate_visible_into(ctx, geom, i, j, &v, ij, ji) {
                         row.sources.push(j as u32);
                         row.coeffs.extend(ij.iter().chain(ji.iter()).map(|&x| x as f32));
                         row.visibility.push(v);
