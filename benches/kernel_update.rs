@@ -1,7 +1,8 @@
 //! The kernel update of the animation (everything in `animation::advance` before the solve) on
 //! the moving-light Cornell box of issue 3: `cargo bench --bench kernel_update [-- OPTIONS]`.
 //!
-//! Options: `--frames N` (default 16), `--subdiv N` (default 14: 1,079 patches), `--exact`
+//! Options: `--frames N` (default 16), `--subdiv N` (default 14: 1,079 patches), `--demo` (the
+//! demo animation instead: light and short block moving), `--exact`
 //! (no series), `--save PATH` / `--check PATH` (write, or compare against, every frame's link
 //! store and solution: the link store must match bit for bit, the solution within 1e-6 of peak).
 //!
@@ -57,7 +58,11 @@ fn main() {
     let save = arg(&args, "--save");
     let check = arg(&args, "--check");
     let settings = Settings { basis_order: 2, corner_gather: false, ..Settings::default() };
-    let scene = scenes::cornell_box_moving_light(subdiv, 48, settings);
+    let scene = if args.iter().any(|a| a == "--demo") {
+        scenes::cornell_box_animated(subdiv, 48, settings)
+    } else {
+        scenes::cornell_box_moving_light(subdiv, 48, settings)
+    };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(scene.settings.threads).build().unwrap();
     pool.install(|| {
         let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();

@@ -29,7 +29,7 @@ use crate::geometry::{Aabb, Patch};
 use crate::kernel::PairContext;
 use crate::kernel::assemble::{ElementGeometry, KeptGeometry, integrate_visible_into};
 use crate::kernel::series::{self, PairSeries, SERIES_MAX_T, SERIES_ORDER};
-use crate::links::{LinkStore, PairId};
+use crate::links::{LinkStore, PairId, ReplacedBlocks};
 use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
 use crate::solver;
@@ -102,6 +102,10 @@ pub struct AnimationState {
     /// Per element: whether its plane has culled occluders ([`Occluders::culls`]) in any frame
     /// since the build; `None` before the first update.
     culled: Option<Vec<bool>>,
+    /// Buffers of the last update, reused so that a frame does not fault in fresh pages: the
+    /// batches' blocks and the blocks the store replaced.
+    block_pool: Vec<Vec<f32>>,
+    replaced: ReplacedBlocks,
 }
 
 impl AnimationState {
@@ -113,6 +117,8 @@ impl AnimationState {
             index: PairIndex::default(),
             geometry: None,
             culled: None,
+            block_pool: Vec::new(),
+            replaced: ReplacedBlocks::default(),
         }
     }
 
@@ -375,6 +381,8 @@ pub fn advance(
         let visibility_relinked = std::sync::atomic::AtomicUsize::new(0);
         let total = candidates.len();
         let done = std::sync::atomic::AtomicUsize::new(0);
+        let mut pool = std::mem::take(&mut state.block_pool);
+        let mut replaced = std::mem::take(&mut state.replaced);
         // Per candidate: its visibility and how its kernel is obtained (`decide`), then its new
         // blocks (`emit`), written into the batch of its run of candidates.
         let decide = |(i, j, kind): PairCandidate| -> Result<Option<Decision>> {
@@ -516,12 +524,13 @@ pub fn advance(
         };
         // Fixed runs of candidates, each into its own batch (no merging copies).
         let run = candidates.len().div_ceil(8 * rayon::current_num_threads()).max(64);
+        pool.resize_with(candidates.len().div_ceil(run), Vec::new);
         let batches = candidates
             .par_chunks(run)
-            .map(|run| {
-                // (Room for every candidate's blocks: most produce none, and untouched pages cost nothing.)
-                let mut batch =
-                    UpdateBatch { blocks: Vec::with_capacity(run.len() * 2 * nb * nb), ..Default::default() };
+            .zip(pool.into_par_iter())
+            .map(|(run, mut blocks)| {
+                blocks.clear();
+                let mut batch = UpdateBatch { blocks, ..Default::default() };
                 for &c in run {
                     if let Some(d) = decide(c)? {
                         emit(&mut batch, d);
@@ -587,7 +596,7 @@ pub fn advance(
                 }
             }
         }
-        let replaced = sys.links.replace_blocks(&rewrites);
+        sys.links.replace_blocks(&rewrites, &mut replaced);
         // Delta K b with the previous frame's b, both receivers of each changed pair (eq. 9).
         let zeros = vec![0.0f32; n2];
         let changes = rewrites
@@ -624,6 +633,9 @@ pub fn advance(
                 acc[c] += x[c];
             }
         }
+        drop((rewrites, fresh));
+        state.block_pool = batches.into_iter().map(|b| b.blocks).collect();
+        state.replaced = replaced;
         stats.apply_seconds = start.elapsed().as_secs_f64() - stats.scan_seconds - stats.pairs_seconds;
         state.geometry = Some(geom.into_kept(&ctx));
         // The new placement's occluders serve the corner gather and the next update.

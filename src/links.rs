@@ -207,9 +207,10 @@ impl LinkStore {
 
     /// Replaces the coefficients of many stored pairs at once: for each `(p, r, g)`,
     /// `g = [G_r,other | G_other,r]` (f32, `nb x nb` row-major each), with the columns written in
-    /// parallel, one shooter per task. Returns the blocks they replaced, read while writing (the
-    /// same cache lines). Visibility is left as it is ([`LinkStore::set_visibility`]).
-    pub fn replace_blocks(&mut self, items: &[(PairId, ElementId, &[f32])]) -> ReplacedBlocks {
+    /// parallel, one shooter per task. The blocks they replace, read from the cache lines being
+    /// written, go to `replaced` (whose buffers are reused from call to call). Visibility is left
+    /// as it is ([`LinkStore::set_visibility`]).
+    pub fn replace_blocks(&mut self, items: &[(PairId, ElementId, &[f32])], replaced: &mut ReplacedBlocks) {
         use rayon::prelude::*;
         let nb = self.nb;
         let n2 = nb * nb;
@@ -226,20 +227,24 @@ impl LinkStore {
         }
         let mut fill = start.clone();
         let mut writes = vec![(0u32, 0u32, 0u32); 2 * items.len()];
-        let mut position = vec![0u32; 2 * items.len()];
+        replaced.n2 = n2;
+        replaced.position.clear();
+        replaced.position.resize(2 * items.len(), 0);
         for (k, &(p, r, _)) in items.iter().enumerate() {
             let other = self.other(p, r);
             for (half, receiver) in [(0, r), (1, other)] {
                 let (shooter, slot) = self.slot(p, receiver);
                 writes[fill[shooter]] = (k as u32, slot as u32, half);
-                position[2 * k + half as usize] = fill[shooter] as u32;
+                replaced.position[2 * k + half as usize] = fill[shooter] as u32;
                 fill[shooter] += 1;
             }
         }
         // The old blocks in write order, so that each shooter's task owns a contiguous part.
-        let mut old = vec![0.0f32; 2 * items.len() * n2];
+        let len = 2 * items.len() * n2;
+        replaced.old.clear();
+        replaced.old.reserve(len);
         let mut parts = Vec::with_capacity(n);
-        let mut rest = &mut old[..];
+        let mut rest = &mut replaced.old.spare_capacity_mut()[..len];
         for e in 0..n {
             let (part, tail) = rest.split_at_mut((start[e + 1] - start[e]) * n2);
             parts.push(part);
@@ -252,13 +257,15 @@ impl LinkStore {
                 let slot = slot as usize;
                 for (l, col) in cols.iter_mut().enumerate() {
                     for (kk, dst) in col[slot * nb..(slot + 1) * nb].iter_mut().enumerate() {
-                        old[kk * nb + l] = *dst;
+                        old[kk * nb + l].write(*dst);
                         *dst = g[kk * nb + l];
                     }
                 }
             }
         });
-        ReplacedBlocks { n2, old, position }
+        // SAFETY: the parts cover the first `len` spare entries, one `n2` chunk per write, and
+        // every chunk had all of its `nb x nb` entries written above.
+        unsafe { replaced.old.set_len(len) };
     }
 
     pub fn set_visibility(&mut self, p: PairId, visibility: Visibility) {
@@ -329,6 +336,7 @@ impl LinkStore {
 }
 
 /// The blocks [`LinkStore::replace_blocks`] replaced.
+#[derive(Default)]
 pub struct ReplacedBlocks {
     n2: usize,
     /// In write order.
@@ -381,7 +389,8 @@ mod tests {
             .flat_map(|&(p, r, _)| [store.block(p, r), store.block(p, store.other(p, r))])
             .collect();
         let untouched = (store.block(0, 0), store.block(0, 1), store.block(2, 0), store.block(2, 3));
-        let replaced = store.replace_blocks(&items);
+        let mut replaced = ReplacedBlocks::default();
+        store.replace_blocks(&items, &mut replaced);
         for (k, &(p, r, g)) in items.iter().enumerate() {
             assert_eq!(store.block(p, r), g[..n2]);
             assert_eq!(store.block(p, store.other(p, r)), g[n2..]);
