@@ -7,8 +7,9 @@
 //! the new kernel propagates the rest, starting from the previous solution (3.4).
 //!
 //! Which pairs change: every pair whose two elements moved relative to each other, and every pair
-//! whose shaft the moving elements' swept bounds (old and new positions) may enter or leave: the
-//! visibility changes the seed left to a separate shadow algorithm (issue 3, item 4). A static
+//! whose shaft the bounds a moving object sweeps (old and new positions, a box per object) may
+//! enter or leave: the visibility changes the seed left to a separate shadow algorithm (issue 3,
+//! item 4). A static
 //! pair's segments do not move, so its mask is re-checked against the moved triangles alone
 //! (old and new positions, [`Occluders::relink_visibility`]); the shaft traversal remains for
 //! pairs with a moved element and for the rare segment only the movers' old position blocked.
@@ -294,9 +295,17 @@ pub fn advance(
             state.epochs[e] = state.epochs[e].wrapping_add(1);
         }
     }
-    let swept = (0..n)
-        .filter(|&e| moved[e])
-        .fold(Aabb::EMPTY, |b, e| b.union(old[e].bounds()).union(patches[e].bounds()));
+    // The bounds each moving object sweeps (old and new position), one box per object while
+    // they are few: a light at the ceiling and a block on the floor together would span the room.
+    let mut swept_by_object = std::collections::BTreeMap::new();
+    for e in (0..n).filter(|&e| moved[e]) {
+        let b = swept_by_object.entry(sys.elements[e].object).or_insert(Aabb::EMPTY);
+        *b = b.union(old[e].bounds()).union(patches[e].bounds());
+    }
+    let mut swept: Vec<Aabb> = swept_by_object.into_values().collect();
+    if swept.len() > MAX_SWEPT_BOXES {
+        swept = vec![swept.iter().fold(Aabb::EMPTY, |a, b| a.union(*b))];
+    }
     let mut stats =
         UpdateStats { moved_elements: moved.iter().filter(|&&m| m).count(), ..Default::default() };
     let mut delta_b = vec![[0.0f64; 3]; n * nb];
@@ -313,14 +322,14 @@ pub fn advance(
         let geom = ElementGeometry::reusing(state.geometry.take(), &patches, &moved, &ctx);
         let shaft_eps = 1e-9 * scene_scale;
         let bounds: Vec<Aabb> = patches.iter().map(Patch::bounds).collect();
-        // Per element, 3 bits "min <= swept max" and 3 bits "max >= swept min" (x, y, z): a
-        // pair's union box overlaps the swept box when the two codes together have all six.
-        let codes: Vec<u8> = bounds
+        // Per swept box and element, 3 bits "min <= swept max" and 3 bits "max >= swept min"
+        // (x, y, z): a pair's union box overlaps the swept box when its two codes have all six.
+        let codes: Vec<Vec<u8>> = swept
             .iter()
-            .map(|b| {
-                let lo = b.min.cmple(swept.max).bitmask() as u8;
-                let hi = swept.min.cmple(b.max).bitmask() as u8;
-                lo | hi << 3
+            .map(|x| {
+                let code =
+                    |b: &Aabb| (b.min.cmple(x.max).bitmask() | x.min.cmple(b.max).bitmask() << 3) as u8;
+                bounds.iter().map(code).collect()
             })
             .collect();
         state.index.sync(&sys.links);
@@ -341,13 +350,16 @@ pub fn advance(
                     if !s.visibility {
                         continue;
                     }
-                    if codes[i] | codes[j] != 0b11_1111 {
-                        continue; // The pair's box misses the swept box.
-                    }
                     let (bi, bj) = (&bounds[i], &bounds[j]);
-                    tests += 1;
-                    if Shaft::between_may_contain_box(bi, bj, &swept, shaft_eps) {
-                        found.push((i as u32, j as u32, Candidate::VisibilityOnly));
+                    for (x, code) in swept.iter().zip(&codes) {
+                        if code[i] | code[j] != 0b11_1111 {
+                            continue; // The pair's box misses this swept box.
+                        }
+                        tests += 1;
+                        if Shaft::between_may_contain_box(bi, bj, x, shaft_eps) {
+                            found.push((i as u32, j as u32, Candidate::VisibilityOnly));
+                            break;
+                        }
                     }
                 }
                 (found, tests)
@@ -703,6 +715,9 @@ fn series_check(
 }
 
 const _: () = assert!(SERIES_ORDER >= 2);
+
+/// Moving objects up to which each gets its own swept box (each box costs a test per pair).
+const MAX_SWEPT_BOXES: usize = 4;
 
 /// A pair is expanded only if, at the current speed, the series would serve at least this many
 /// frames before `p` reaches `SERIES_MAX_T r_min` (measured: below 3, re-expansions cost more
