@@ -199,7 +199,10 @@ impl CornerGather {
             cells_per_axis,
             moved: &moved,
             swept: &swept,
+            swept_union: swept.iter().fold(Aabb::EMPTY, |u, b| u.union(*b)),
+            union_eps: union_eps(&patches, &swept, 1e-9 * scale.max(1e-300)),
             eps: 1e-9 * scale.max(1e-300),
+            links: (0..patches.len()).map(|_| std::sync::OnceLock::new()).collect(),
         };
         let total = points.len();
         let done = std::sync::atomic::AtomicUsize::new(0);
@@ -221,12 +224,32 @@ impl CornerGather {
                 })
             })
             .collect::<Result<_>>()?;
+        // Four points at a time: their sums interleave (each in its own order, as one at a time).
         let values: Vec<[f64; 3]> = points
-            .par_iter()
-            .zip(&rows)
-            .map(|(point, (row, _))| match point.at {
-                Some((e, _, _)) => radiosity(sys, e, row),
-                None => scene.emission_at(point.material as usize, frame),
+            .par_chunks(4)
+            .zip(rows.par_chunks(4))
+            .flat_map_iter(|(points, rows)| {
+                let gathered: Vec<(usize, usize)> =
+                    points.iter().enumerate().filter_map(|(k, p)| Some((k, p.at?.0))).collect();
+                let mut out: Vec<[f64; 3]> = points
+                    .iter()
+                    .map(|p| match p.at {
+                        Some(_) => [0.0; 3],
+                        None => scene.emission_at(p.material as usize, frame),
+                    })
+                    .collect();
+                if let [a, b, c, d] = gathered[..] {
+                    let irradiance =
+                        source_irradiance(sys, [&rows[a.0].0, &rows[b.0].0, &rows[c.0].0, &rows[d.0].0]);
+                    for ((k, e), irradiance) in [a, b, c, d].into_iter().zip(irradiance) {
+                        out[k] = finish(sys, e, &rows[k].0, irradiance);
+                    }
+                } else {
+                    for (k, e) in gathered {
+                        out[k] = radiosity(sys, e, &rows[k].0);
+                    }
+                }
+                out
             })
             .collect();
         let stats = GatherStats {
@@ -280,19 +303,57 @@ fn corner_points(sys: &System, scene: &Scene) -> (Vec<CornerPoint>, Vec<usize>, 
     (points, point_of_corner, per_object)
 }
 
+/// `eps` plus a margin for testing the union of the swept boxes against a corner-source shaft:
+/// `n.c - |n|.h > d + eps` evaluated in f64 errs by a few ulps of the largest coordinate, so a
+/// union box outside by `union_eps` has every box inside it outside by `eps` as computed too.
+fn union_eps(patches: &[Patch], swept: &[Aabb], eps: f64) -> f64 {
+    let extent = patches
+        .iter()
+        .map(Patch::bounds)
+        .chain(swept.iter().copied())
+        .fold(0.0f64, |m, b| m.max(b.min.abs().max_element()).max(b.max.abs().max_element()));
+    eps + 1e-10 * extent
+}
+
 /// `B = E_i + rho_i sum_j sum_l m_j^l b_j^l` at a point of element `i`.
 fn radiosity(sys: &System, i: usize, row: &Row) -> [f64; 3] {
+    let [irradiance] = source_irradiance(sys, [row]);
+    finish(sys, i, row, irradiance)
+}
+
+/// `sum_j sum_l m_j^l b_j^l` of each of `K` rows, each summed in its own order (sources, then
+/// basis functions), the rows interleaved so that their chains of additions overlap.
+fn source_irradiance<const K: usize>(sys: &System, rows: [&Row; K]) -> [[f64; 3]; K] {
     let nb = sys.basis.len();
-    let mut irradiance = [0.0; 3];
-    for (k, &j) in row.sources.iter().enumerate() {
+    let b = &sys.solution.b;
+    let mut irradiance = [[0.0; 3]; K];
+    let add = |irradiance: &mut [f64; 3], row: &Row, k: usize| {
         let m = &row.moments[k * nb..(k + 1) * nb];
-        let b = &sys.solution.b[j as usize * nb..(j as usize + 1) * nb];
+        let j = row.sources[k] as usize;
+        let b = &b[j * nb..(j + 1) * nb];
         for l in 0..nb {
             for c in 0..3 {
                 irradiance[c] += m[l] as f64 * b[l][c];
             }
         }
+    };
+    let common = rows.iter().map(|r| r.sources.len()).min().unwrap_or(0);
+    for k in 0..common {
+        for (irradiance, row) in irradiance.iter_mut().zip(rows) {
+            add(irradiance, row, k);
+        }
     }
+    for (irradiance, row) in irradiance.iter_mut().zip(rows) {
+        for k in common..row.sources.len() {
+            add(irradiance, row, k);
+        }
+    }
+    irradiance
+}
+
+/// [`radiosity`] from the sources' part of the irradiance: the feet's added, then `E + rho` times it.
+fn finish(sys: &System, i: usize, row: &Row, mut irradiance: [f64; 3]) -> [f64; 3] {
+    let nb = sys.basis.len();
     for foot in &row.feet {
         let b = radiosity(sys, foot.element as usize, &foot.row);
         for c in 0..3 {
@@ -301,6 +362,31 @@ fn radiosity(sys: &System, i: usize, row: &Row) -> [f64; 3] {
     }
     let (rho, e) = (sys.reflectance[i], sys.emission[i * nb]);
     std::array::from_fn(|c| e[c] + rho[c] * irradiance[c])
+}
+
+/// The link's visibility bits from the corner's cell to each of the source's `cells` cells: bit `s`
+/// is `vis.at(corner, s)` (`vis.at(s, corner)` when the corner's element is `b`) is not zero.
+fn mask_row(vis: &Visibility, cells: usize, corner: usize, corner_is_a: bool) -> u16 {
+    if let Visibility::Partial(words) = vis
+        && cells <= 16
+    {
+        // The bits `Visibility::at` reads, without going through f64: the corner's row is
+        // `cells` consecutive bits (one shift while they sit in one word), its column every
+        // `cells`-th bit.
+        let bit = |i: usize| (words[i / 64] >> (i % 64)) & 1;
+        if corner_is_a {
+            let first = corner * cells;
+            if first % 64 + cells <= 64 {
+                return ((words[first / 64] >> (first % 64)) & ((1u64 << cells) - 1)) as u16;
+            }
+            return (0..cells).fold(0u16, |m, s| m | (bit(first + s) as u16) << s);
+        }
+        return (0..cells).fold(0u16, |m, s| m | (bit(s * cells + corner) as u16) << s);
+    }
+    (0..cells).fold(0u16, |bits, s| {
+        let seen = if corner_is_a { vis.at(corner, s, cells) } else { vis.at(s, corner, cells) };
+        bits | (u16::from(seen > 0.0) << s)
+    })
 }
 
 /// What every corner needs: the solved system, its elements' geometry, the occluders, and what
@@ -324,7 +410,33 @@ struct Gather<'a> {
     moved: &'a [bool],
     /// Old-and-new bounds of each moving object.
     swept: &'a [Aabb],
+    /// The union of `swept`, and a margin past `eps` within which a plane test of the union
+    /// box cannot round differently from one of a box inside it (see `unchanged`).
+    swept_union: Aabb,
+    union_eps: f64,
     eps: f64,
+    /// Per element, built on first use: its linked sources (see [`ElementLinks`]).
+    links: Vec<std::sync::OnceLock<ElementLinks>>,
+}
+
+/// The sources linked with one element, emitters left out, sorted by element, with the kind of
+/// their visibility (read once per element and frame, shared by the element's corners).
+/// `None` if some source has two links (then each corner sorts its own list, as it always did).
+type ElementLinks = Option<Vec<Linked>>;
+
+/// One linked source: the other element, the pair and the kind of its visibility.
+#[derive(Clone, Copy, Debug)]
+struct Linked {
+    j: u32,
+    pair: u32,
+    kind: VisKind,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum VisKind {
+    Full,
+    Blocked,
+    Partial,
 }
 
 /// A touched source: the foot point's parameters on it and the radius around the corner that
@@ -356,8 +468,189 @@ impl Gather<'_> {
         let near = self.occluders.is_some_and(|o| o.any_near(x, n, self.radii[i], i as u32));
         let rx = Receiver { x, n, element: i as u32, cell: cell_of(s, t, self.cells_per_axis) };
         let previous = previous.filter(|p| !self.moved[i] && p.near == near);
+        let faces_corner = |j: usize| j != i && self.planes[j].is_none_or(|f| f.any_in_front(patch));
+        let wanted = match self.element_links(i) {
+            Some(links) => self.wanted_merged(&rx, i, near, links, faces_corner),
+            None => self.wanted_sorted(&rx, i, near, faces_corner),
+        };
+        // Touched sources are found when a foot is needed (a fresh moment, a kept foot).
+        let touch = |j: u32| if feet { self.touch(&rx, i, j as usize) } else { None };
+        let nb = sys.basis.len();
+        // The common case: the same sources, decided the same way: update the row in place.
+        let same = |p: &Row| {
+            p.sources.len() == wanted.len()
+                && wanted.iter().zip(p.sources.iter().zip(&p.modes)).all(|(w, (&j, &mode))| *w == (j, mode))
+        };
+        if previous.as_ref().is_some_and(same) {
+            let mut row = previous.expect("checked above");
+            let mut old_feet = std::mem::take(&mut row.feet);
+            let mut computed = 0;
+            for (k, &(j, mode)) in wanted.iter().enumerate() {
+                let old_foot = old_feet.iter().position(|f| f.element == j).map(|k| old_feet.swap_remove(k));
+                computed += if self.unchanged(&rx, j as usize, mode) {
+                    match old_foot {
+                        Some(_) => self.keep_foot(j, touch(j), old_foot, &mut row.feet),
+                        None => 0,
+                    }
+                } else {
+                    let moments = &mut row.moments[k * nb..(k + 1) * nb];
+                    self.fresh_entry(&rx, (j, mode), touch(j), old_foot, moments, &mut row.feet)
+                };
+            }
+            return (row, computed);
+        }
+        let mut row = Row {
+            near,
+            sources: Vec::with_capacity(wanted.len()),
+            modes: Vec::with_capacity(wanted.len()),
+            moments: Vec::with_capacity(wanted.len() * nb),
+            feet: Vec::new(),
+        };
+        let mut computed = 0;
+        let (previous, mut previous_feet) = match previous {
+            Some(mut p) => {
+                let feet = std::mem::take(&mut p.feet);
+                (Some(p), feet)
+            }
+            None => (None, Vec::new()),
+        };
+        // Both lists are sorted: with each kept source once, a cursor finds what the binary
+        // search would (with repeats, which one it finds is the search's choice).
+        let unique = previous.as_ref().is_some_and(|p| p.sources.windows(2).all(|w| w[0] < w[1]));
+        let mut cursor = 0;
+        for (j, mode) in wanted {
+            let old_foot =
+                previous_feet.iter().position(|f| f.element == j).map(|k| previous_feet.swap_remove(k));
+            let kept = previous.as_ref().and_then(|p| {
+                let k = if unique {
+                    while p.sources.get(cursor).is_some_and(|&s| s < j) {
+                        cursor += 1;
+                    }
+                    (p.sources.get(cursor) == Some(&j)).then_some(cursor)?
+                } else {
+                    p.sources.binary_search(&j).ok()?
+                };
+                (p.modes[k] == mode && self.unchanged(&rx, j as usize, mode))
+                    .then(|| &p.moments[k * nb..(k + 1) * nb])
+            });
+            computed += match kept {
+                Some(old) => {
+                    row.moments.extend_from_slice(old);
+                    match old_foot {
+                        Some(_) => self.keep_foot(j, touch(j), old_foot, &mut row.feet),
+                        None => 0,
+                    }
+                }
+                None => {
+                    let at = row.moments.len();
+                    row.moments.resize(at + nb, 0.0);
+                    self.fresh_entry(
+                        &rx,
+                        (j, mode),
+                        touch(j),
+                        old_foot,
+                        &mut row.moments[at..],
+                        &mut row.feet,
+                    )
+                }
+            };
+            row.sources.push(j);
+            row.modes.push(mode);
+        }
+        (row, computed)
+    }
+
+    /// The sources of element `i`'s links (see [`ElementLinks`]), read on first use.
+    fn element_links(&self, i: usize) -> Option<&[Linked]> {
+        let links = self.links[i].get_or_init(|| {
+            let sys = self.sys;
+            let mut out: Vec<Linked> = Vec::with_capacity(sys.links.pairs_of(i as ElementId).len());
+            for &p in sys.links.pairs_of(i as ElementId) {
+                let j = sys.links.other(p, i as ElementId);
+                if self.is_emitter[j as usize] {
+                    continue;
+                }
+                let kind = match sys.links.pair(p).visibility {
+                    Visibility::Full => VisKind::Full,
+                    Visibility::Blocked => VisKind::Blocked,
+                    Visibility::Partial(_) => VisKind::Partial,
+                };
+                out.push(Linked { j, pair: p, kind });
+            }
+            out.sort_unstable_by_key(|l| l.j);
+            out.windows(2).all(|w| w[0].j < w[1].j).then_some(out)
+        });
+        links.as_deref()
+    }
+
+    /// How the visibility of linked source `l` is decided from the (not near) corner `rx` of
+    /// element `i`; `None` leaves it out (blocked).
+    fn link_mode(&self, rx: &Receiver, i: usize, l: &Linked) -> Option<Mode> {
+        if self.occluders.is_none() {
+            return Some(Mode::Open);
+        }
+        match l.kind {
+            VisKind::Full => Some(Mode::Open),
+            VisKind::Blocked => None,
+            VisKind::Partial => {
+                let pair = self.sys.links.pair(l.pair);
+                Some(Mode::Mask(self.mask_row(&pair.visibility, rx.cell, pair.a == i as u32)))
+            }
+        }
+    }
+
+    /// The sources of the corner `rx` of element `i` and how each one's visibility is decided,
+    /// sorted by element, from `links` (sorted, each source once): [`Gather::wanted_sorted`]'s
+    /// list, merged instead of sorted.
+    fn wanted_merged(
+        &self,
+        rx: &Receiver,
+        i: usize,
+        near: bool,
+        links: &[Linked],
+        faces_corner: impl Fn(usize) -> bool,
+    ) -> Vec<(u32, Mode)> {
+        if near {
+            // Every linked source, and every other element facing the corner, all with rays
+            // (near implies occluders).
+            let mut wanted = Vec::with_capacity(links.len().max(self.patches.len() / 2));
+            let mut next = links.iter().map(|l| l.j).peekable();
+            for j in 0..self.patches.len() {
+                let linked = next.next_if_eq(&(j as u32)).is_some();
+                if linked || faces_corner(j) {
+                    wanted.push((j as u32, Mode::Rays));
+                }
+            }
+            // (links to elements past the last one cannot exist)
+            debug_assert!(next.peek().is_none());
+            return wanted;
+        }
+        let emitter_mode = if self.occluders.is_some() { Mode::Rays } else { Mode::Open };
+        let mut emitters = self.emitters.iter().filter(|&&j| faces_corner(j)).map(|&j| j as u32).peekable();
+        let mut wanted = Vec::with_capacity(links.len() + self.emitters.len());
+        for l in links {
+            while let Some(e) = emitters.next_if(|&e| e < l.j) {
+                wanted.push((e, emitter_mode));
+            }
+            if let Some(mode) = self.link_mode(rx, i, l) {
+                wanted.push((l.j, mode));
+            }
+        }
+        wanted.extend(emitters.map(|e| (e, emitter_mode)));
+        wanted
+    }
+
+    /// The sources of the corner `rx` of element `i` and how each one's visibility is decided,
+    /// sorted by element, straight from the link store.
+    fn wanted_sorted(
+        &self,
+        rx: &Receiver,
+        i: usize,
+        near: bool,
+        faces_corner: impl Fn(usize) -> bool,
+    ) -> Vec<(u32, Mode)> {
+        let sys = self.sys;
         let rays = |open: Mode| if self.occluders.is_some() { open } else { Mode::Open };
-        // The sources and how each one's visibility is decided.
         let mut wanted: Vec<(u32, Mode)> = Vec::new();
         for &p in sys.links.pairs_of(i as ElementId) {
             let pair = sys.links.pair(p);
@@ -378,7 +671,6 @@ impl Gather<'_> {
         }
         // Direct light makes the sharpest shadows, and a corner can sit in a penumbra that none
         // of its element's visibility samples is in: emitters are always sources, with rays.
-        let faces_corner = |j: usize| j != i && self.planes[j].is_none_or(|f| f.any_in_front(patch));
         for &j in self.emitters.iter().filter(|&&j| faces_corner(j)) {
             wanted.push((j as u32, rays(Mode::Rays)));
         }
@@ -394,67 +686,7 @@ impl Gather<'_> {
             }
         }
         wanted.sort_unstable_by_key(|w| w.0);
-        let touching: Vec<Option<Touch>> =
-            wanted.iter().map(|&(j, _)| if feet { self.touch(&rx, i, j as usize) } else { None }).collect();
-        let nb = sys.basis.len();
-        // The common case: the same sources, decided the same way: update the row in place.
-        let same = |p: &Row| {
-            p.sources.len() == wanted.len()
-                && wanted.iter().zip(p.sources.iter().zip(&p.modes)).all(|(w, (&j, &mode))| *w == (j, mode))
-        };
-        if previous.as_ref().is_some_and(same) {
-            let mut row = previous.expect("checked above");
-            let mut old_feet = std::mem::take(&mut row.feet);
-            let mut computed = 0;
-            for (k, (&(j, mode), touch)) in wanted.iter().zip(touching).enumerate() {
-                let old_foot = old_feet.iter().position(|f| f.element == j).map(|k| old_feet.swap_remove(k));
-                computed += if self.unchanged(&rx, j as usize, mode) {
-                    self.keep_foot(j, touch, old_foot, &mut row.feet)
-                } else {
-                    let moments = &mut row.moments[k * nb..(k + 1) * nb];
-                    self.fresh_entry(&rx, (j, mode), touch, old_foot, moments, &mut row.feet)
-                };
-            }
-            return (row, computed);
-        }
-        let mut row = Row {
-            near,
-            sources: Vec::with_capacity(wanted.len()),
-            modes: Vec::with_capacity(wanted.len()),
-            moments: Vec::with_capacity(wanted.len() * nb),
-            feet: Vec::new(),
-        };
-        let mut computed = 0;
-        let (previous, mut previous_feet) = match previous {
-            Some(mut p) => {
-                let feet = std::mem::take(&mut p.feet);
-                (Some(p), feet)
-            }
-            None => (None, Vec::new()),
-        };
-        for ((j, mode), touch) in wanted.into_iter().zip(touching) {
-            let old_foot =
-                previous_feet.iter().position(|f| f.element == j).map(|k| previous_feet.swap_remove(k));
-            let kept = previous.as_ref().and_then(|p| {
-                let k = p.sources.binary_search(&j).ok()?;
-                (p.modes[k] == mode && self.unchanged(&rx, j as usize, mode))
-                    .then(|| &p.moments[k * nb..(k + 1) * nb])
-            });
-            computed += match kept {
-                Some(old) => {
-                    row.moments.extend_from_slice(old);
-                    self.keep_foot(j, touch, old_foot, &mut row.feet)
-                }
-                None => {
-                    let at = row.moments.len();
-                    row.moments.resize(at + nb, 0.0);
-                    self.fresh_entry(&rx, (j, mode), touch, old_foot, &mut row.moments[at..], &mut row.feet)
-                }
-            };
-            row.sources.push(j);
-            row.modes.push(mode);
-        }
-        (row, computed)
+        wanted
     }
 
     /// Computes the moments of source `j` into `moments` and, when the corner touches `j`, its
@@ -507,16 +739,21 @@ impl Gather<'_> {
             return true;
         }
         let (bounds, point) = (self.patches[j].bounds(), Aabb { min: rx.x, max: rx.x });
+        // A box wholly outside the shaft has every box inside it outside: when the union of the
+        // swept boxes is (by the exact bounds test, or by a plane with the rounding margin), so
+        // is each of them, and the per-box tests would all say so.
+        if !self.swept_union.overlaps(&point.union(bounds)) {
+            return true;
+        }
+        if !Shaft::between_may_contain_box(&point, &bounds, &self.swept_union, self.union_eps) {
+            return true;
+        }
         !self.swept.iter().any(|s| Shaft::between_may_contain_box(&point, &bounds, s, self.eps))
     }
 
     /// The link's visibility bits from the corner's cell to each of the source's cells.
     fn mask_row(&self, vis: &Visibility, corner: usize, corner_is_a: bool) -> u16 {
-        let cells = self.cells_per_axis * self.cells_per_axis;
-        (0..cells).fold(0u16, |bits, s| {
-            let seen = if corner_is_a { vis.at(corner, s, cells) } else { vis.at(s, corner, cells) };
-            bits | (u16::from(seen > 0.0) << s)
-        })
+        mask_row(vis, self.cells_per_axis * self.cells_per_axis, corner, corner_is_a)
     }
 
     /// Adds `integral g(x,y) V(x,y) Gamma_l(y) dA_y` over `rect` of source `j` to `out[l]`.
@@ -644,6 +881,43 @@ impl Gather<'_> {
             (Mode::Open, _) | (_, None) => true,
             (Mode::Rays, Some(o)) => o.segment_visible(rx.x, y, rx.element, j as u32),
             (Mode::Mask(bits), _) => bits >> cell & 1 == 1,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The bits read straight from the words are those `Visibility::at` gives, both ways round,
+    /// also for a row that straddles two words.
+    #[test]
+    fn mask_row_is_visibility_at() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        for m in 1..=4 {
+            let cells = m * m;
+            for _ in 0..50 {
+                let vis = Visibility::Partial(Box::new([next(), next(), next(), next()]));
+                for corner in 0..cells {
+                    for corner_is_a in [true, false] {
+                        let want = (0..cells).fold(0u16, |bits, s| {
+                            let seen =
+                                if corner_is_a { vis.at(corner, s, cells) } else { vis.at(s, corner, cells) };
+                            bits | (u16::from(seen > 0.0) << s)
+                        });
+                        assert_eq!(mask_row(&vis, cells, corner, corner_is_a), want, "m {m} corner {corner}");
+                    }
+                }
+            }
+        }
+        for vis in [Visibility::Full, Visibility::Blocked] {
+            assert_eq!(mask_row(&vis, 16, 3, true), if vis == Visibility::Full { 0xffff } else { 0 });
         }
     }
 }
