@@ -75,6 +75,10 @@ pub struct CornerGather {
     rows: Vec<Row>,
     /// The element patches `rows` were computed with.
     patches: Vec<Patch>,
+    /// Their Gauss nodes, with the basis and visibility cells they were made for.
+    nodes: Vec<Samples>,
+    basis: crate::basis::Basis,
+    cells_per_axis: usize,
 }
 
 /// What this frame's gather did.
@@ -154,9 +158,27 @@ impl CornerGather {
         let rule = GaussLegendre::new(GAUSS_POINTS);
         let patches: Vec<Patch> = sys.elements.iter().map(|e| e.patch).collect();
         let cells_per_axis = scene.settings.visibility_samples;
+        // An element that did not move keeps its nodes (the same computation on the same patch).
+        let mut previous = previous;
+        let kept_nodes: Vec<Option<Samples>> = match previous.as_mut() {
+            Some(p)
+                if (p.basis, p.cells_per_axis, p.patches.len())
+                    == (sys.basis, cells_per_axis, patches.len()) =>
+            {
+                let old = std::mem::take(&mut p.nodes);
+                old.into_iter()
+                    .zip(p.patches.iter().zip(&patches))
+                    .map(|(n, (a, b))| (a == b).then_some(n))
+                    .collect()
+            }
+            _ => (0..patches.len()).map(|_| None).collect(),
+        };
         let nodes: Vec<Samples> = patches
             .par_iter()
-            .map(|p| Samples::new(p, &Rect::UNIT, &rule, sys.basis, cells_per_axis))
+            .zip(kept_nodes)
+            .map(|(p, kept)| {
+                kept.unwrap_or_else(|| Samples::new(p, &Rect::UNIT, &rule, sys.basis, cells_per_axis))
+            })
             .collect();
         let nb = sys.basis.len();
         let is_emitter: Vec<bool> =
@@ -210,48 +232,49 @@ impl CornerGather {
             Some(p) => p.rows.into_iter().map(Some).collect(),
             None => vec![None; points.len()],
         };
-        let rows: Vec<(Row, usize)> = points
-            .par_iter()
-            .zip(kept_rows)
-            .map(|(point, kept)| {
-                let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if d.is_multiple_of(256) && !progress(d as f64 / total.max(1) as f64, "corner gather") {
-                    return Err(Error::Cancelled);
-                }
-                Ok(match point.at {
-                    Some((e, s, t)) => gather.row(e, s, t, kept, true),
-                    None => (Row::default(), 0),
-                })
-            })
-            .collect::<Result<_>>()?;
-        // Four points at a time: their sums interleave (each in its own order, as one at a time).
-        let values: Vec<[f64; 3]> = points
+        // Four points at a time: their rows, then their values, the four sums interleaved (each
+        // in its own order, as one at a time); reading kept moments overlaps other chunks' rays.
+        let gathered: Vec<(Row, usize, [f64; 3])> = points
             .par_chunks(4)
-            .zip(rows.par_chunks(4))
-            .flat_map_iter(|(points, rows)| {
-                let gathered: Vec<(usize, usize)> =
-                    points.iter().enumerate().filter_map(|(k, p)| Some((k, p.at?.0))).collect();
-                let mut out: Vec<[f64; 3]> = points
+            .zip(kept_rows.into_par_iter().chunks(4))
+            .flat_map_iter(|(points, kept)| {
+                let d = done.fetch_add(points.len(), std::sync::atomic::Ordering::Relaxed);
+                if d % 256 < points.len() && !progress(d as f64 / total.max(1) as f64, "corner gather") {
+                    return vec![Err(Error::Cancelled)];
+                }
+                let rows: Vec<(Row, usize)> = points
+                    .iter()
+                    .zip(kept)
+                    .map(|(point, kept)| match point.at {
+                        Some((e, s, t)) => gather.row(e, s, t, kept, true),
+                        None => (Row::default(), 0),
+                    })
+                    .collect();
+                let mut values: Vec<[f64; 3]> = points
                     .iter()
                     .map(|p| match p.at {
                         Some(_) => [0.0; 3],
                         None => scene.emission_at(p.material as usize, frame),
                     })
                     .collect();
-                if let [a, b, c, d] = gathered[..] {
+                let at: Vec<(usize, usize)> =
+                    points.iter().enumerate().filter_map(|(k, p)| Some((k, p.at?.0))).collect();
+                if let [a, b, c, d] = at[..] {
                     let irradiance =
                         source_irradiance(sys, [&rows[a.0].0, &rows[b.0].0, &rows[c.0].0, &rows[d.0].0]);
                     for ((k, e), irradiance) in [a, b, c, d].into_iter().zip(irradiance) {
-                        out[k] = finish(sys, e, &rows[k].0, irradiance);
+                        values[k] = finish(sys, e, &rows[k].0, irradiance);
                     }
                 } else {
-                    for (k, e) in gathered {
-                        out[k] = radiosity(sys, e, &rows[k].0);
+                    for (k, e) in at {
+                        values[k] = radiosity(sys, e, &rows[k].0);
                     }
                 }
-                out
+                rows.into_iter().zip(values).map(|((row, n), v)| Ok((row, n, v))).collect()
             })
-            .collect();
+            .collect::<Result<_>>()?;
+        let values: Vec<[f64; 3]> = gathered.iter().map(|g| g.2).collect();
+        let rows: Vec<(Row, usize)> = gathered.into_iter().map(|(r, n, _)| (r, n)).collect();
         let stats = GatherStats {
             points: points.len(),
             moments: rows.iter().map(|(r, _)| r.moment_count()).sum(),
@@ -262,7 +285,8 @@ impl CornerGather {
         for &n in &corners_per_object {
             out.push(it.by_ref().take(n).collect());
         }
-        let kept = CornerGather { points, rows: rows.into_iter().map(|(r, _)| r).collect(), patches };
+        let rows = rows.into_iter().map(|(r, _)| r).collect();
+        let kept = CornerGather { points, rows, patches, nodes, basis: sys.basis, cells_per_axis };
         Ok((out, kept, stats))
     }
 }
