@@ -225,6 +225,16 @@ impl CornerGather {
             union_eps: union_eps(&patches, &swept, 1e-9 * scale.max(1e-300)),
             eps: 1e-9 * scale.max(1e-300),
             links: (0..patches.len()).map(|_| std::sync::OnceLock::new()).collect(),
+            kinds: sys
+                .links
+                .pairs()
+                .par_iter()
+                .map(|p| match p.visibility {
+                    Visibility::Full => VisKind::Full,
+                    Visibility::Blocked => VisKind::Blocked,
+                    Visibility::Partial(_) => VisKind::Partial,
+                })
+                .collect(),
         };
         let total = points.len();
         let done = std::sync::atomic::AtomicUsize::new(0);
@@ -439,6 +449,8 @@ struct Gather<'a> {
     swept_union: Aabb,
     union_eps: f64,
     eps: f64,
+    /// Per pair of the link store, the kind of its visibility.
+    kinds: Vec<VisKind>,
     /// Per element, built on first use: its linked sources (see [`ElementLinks`]).
     links: Vec<std::sync::OnceLock<ElementLinks>>,
 }
@@ -588,20 +600,21 @@ impl Gather<'_> {
     fn element_links(&self, i: usize) -> Option<&[Linked]> {
         let links = self.links[i].get_or_init(|| {
             let sys = self.sys;
-            let mut out: Vec<Linked> = Vec::with_capacity(sys.links.pairs_of(i as ElementId).len());
-            for &p in sys.links.pairs_of(i as ElementId) {
-                let j = sys.links.other(p, i as ElementId);
+            let (pairs, others) =
+                (sys.links.pairs_of(i as ElementId), sys.links.receivers_of(i as ElementId));
+            assert_eq!(pairs.len(), others.len());
+            let mut out: Vec<Linked> = Vec::with_capacity(pairs.len());
+            // (`receivers_of` lists the other element of each pair, in `pairs_of` order: read
+            // in sequence, with the kinds, instead of from the pair records all over the store)
+            for (&p, &j) in pairs.iter().zip(others) {
                 if self.is_emitter[j as usize] {
                     continue;
                 }
-                let kind = match sys.links.pair(p).visibility {
-                    Visibility::Full => VisKind::Full,
-                    Visibility::Blocked => VisKind::Blocked,
-                    Visibility::Partial(_) => VisKind::Partial,
-                };
-                out.push(Linked { j, pair: p, kind });
+                out.push(Linked { j, pair: p, kind: self.kinds[p as usize] });
             }
-            out.sort_unstable_by_key(|l| l.j);
+            if !out.is_sorted_by_key(|l| l.j) {
+                out.sort_unstable_by_key(|l| l.j);
+            }
             out.windows(2).all(|w| w[0].j < w[1].j).then_some(out)
         });
         links.as_deref()
