@@ -857,27 +857,35 @@ impl CandidateTriangles {
 mod tests {
     use super::*;
 
+    /// A pseudo-random coordinate on a coarse binary grid (multiples of 1/4), so that segments
+    /// run through vertices and along edges.
+    fn grid(k: usize, a: f64) -> f64 {
+        (((k as f64 * a).sin() * 43758.5453).fract().abs() * 4.0).floor() * 0.25
+    }
+
+    /// `count` triangles of test `round` on the grid, and their `v0, v1 - v0, v2 - v0`.
+    fn grid_triangles(round: usize, count: usize) -> (Vec<bvh::Triangle>, Vec<[DVec3; 3]>) {
+        let tris: Vec<bvh::Triangle> = (0..count)
+            .map(|t| {
+                let k = round * 97 + t * 7;
+                let z = grid(k, 0.7) - 0.5;
+                let v =
+                    |o: usize| DVec3::new(grid(k + o, 1.1), grid(k + o, 2.3), z + 0.25 * grid(k + o, 3.7));
+                bvh::Triangle { v: [v(0), v(1), v(2)], element: t as u32 }
+            })
+            .collect();
+        let edges = tris.iter().map(|t| [t.v[0], t.v[1] - t.v[0], t.v[2] - t.v[0]]).collect();
+        (tris, edges)
+    }
+
     /// The Moeller-Trumbore vectorised over segments gives the decisions of `segment_hits` for
     /// every segment and triangle, including segments through vertices and along edges.
     #[test]
     fn segments_hit_matches_segment_hits() {
-        let f = |k: usize, a: f64| ((k as f64 * a).sin() * 43758.5453).fract().abs();
-        let grid = |k: usize, a: f64| (f(k, a) * 4.0).floor() * 0.25;
         let mut segments = Segments { n: 0, o: [[0.0; 256]; 3], d: [[0.0; 256]; 3] };
         let (mut hits, mut misses) = (0, 0);
         for round in 0..100 {
-            let tris: Vec<bvh::Triangle> = (0..1 + round % 13)
-                .map(|t| {
-                    let k = round * 97 + t * 7;
-                    let z = grid(k, 0.7) - 0.5;
-                    let v = |o: usize| {
-                        DVec3::new(grid(k + o, 1.1), grid(k + o, 2.3), z + 0.25 * grid(k + o, 3.7))
-                    };
-                    bvh::Triangle { v: [v(0), v(1), v(2)], element: t as u32 }
-                })
-                .collect();
-            let edges: Vec<[DVec3; 3]> =
-                tris.iter().map(|t| [t.v[0], t.v[1] - t.v[0], t.v[2] - t.v[0]]).collect();
+            let (tris, edges) = grid_triangles(round, 1 + round % 13);
             let cells = [1, 4, 9, 16][round % 4];
             let point = |k: usize, z: f64| DVec3::new(grid(k, 5.1), grid(k, 6.3), z);
             let from: Vec<DVec3> = (0..cells).map(|r| point(round * 31 + r, -1.0)).collect();
@@ -903,22 +911,9 @@ mod tests {
     /// through vertices and along edges (coordinates on a coarse binary grid).
     #[test]
     fn batched_segment_tests_match_segment_hits() {
-        let f = |k: usize, a: f64| ((k as f64 * a).sin() * 43758.5453).fract().abs();
-        let grid = |k: usize, a: f64| (f(k, a) * 4.0).floor() * 0.25;
         let (mut hits, mut misses) = (0, 0);
         for round in 0..200 {
-            let tris: Vec<bvh::Triangle> = (0..BRUTE_FORCE_CANDIDATES)
-                .map(|t| {
-                    let k = round * 97 + t * 7;
-                    let z = grid(k, 0.7) - 0.5;
-                    let v = |o: usize| {
-                        DVec3::new(grid(k + o, 1.1), grid(k + o, 2.3), z + 0.25 * grid(k + o, 3.7))
-                    };
-                    bvh::Triangle { v: [v(0), v(1), v(2)], element: t as u32 }
-                })
-                .collect();
-            let edges: Vec<[DVec3; 3]> =
-                tris.iter().map(|t| [t.v[0], t.v[1] - t.v[0], t.v[2] - t.v[0]]).collect();
+            let (tris, edges) = grid_triangles(round, BRUTE_FORCE_CANDIDATES);
             let n = 1 + round % BRUTE_FORCE_CANDIDATES;
             let ids: Vec<usize> = (0..n).collect();
             let batch = CandidateTriangles::gather(&edges, &ids);
