@@ -19,6 +19,7 @@ pub mod quadrature;
 pub mod scene;
 pub mod scenes;
 pub mod session;
+mod simd;
 pub mod solver;
 pub mod system;
 pub mod visibility;

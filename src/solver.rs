@@ -206,62 +206,19 @@ fn receiver_ranges(links: &LinkStore, n: usize, parts: usize) -> Vec<(usize, usi
     ranges
 }
 
-/// Adds to receivers `lo..hi` (outputs indexed from `lo`) what the batch `shots` (grouped by
-/// element, as taken) sends them before reflection, `sum_l G_ij^{kl} u_l`, into `gathered`
-/// (`[receiver][c][k]`), and marks them `touched`.
-fn shoot_range(
-    links: &LinkStore,
-    shots: &[Shot],
-    nb: usize,
-    lo: usize,
-    hi: usize,
-    gathered: &mut [f64],
-    touched: &mut [bool],
-) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU has AVX-512F (checked above).
-            unsafe { shoot_range_avx512(links, shots, nb, lo, hi, gathered, touched) };
-            return;
-        }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (checked above).
-            unsafe { shoot_range_avx2(links, shots, nb, lo, hi, gathered, touched) };
-            return;
-        }
-    }
-    shoot_range_body(links, shots, nb, lo, hi, gathered, touched);
-}
-
-/// [`shoot_range`] compiled for AVX-512 (wider conversions and products), same operations.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,avx512f")]
-fn shoot_range_avx512(
-    links: &LinkStore,
-    shots: &[Shot],
-    nb: usize,
-    lo: usize,
-    hi: usize,
-    gathered: &mut [f64],
-    touched: &mut [bool],
-) {
-    shoot_range_body(links, shots, nb, lo, hi, gathered, touched);
-}
-
-/// [`shoot_range`] compiled for AVX2, same operations.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn shoot_range_avx2(
-    links: &LinkStore,
-    shots: &[Shot],
-    nb: usize,
-    lo: usize,
-    hi: usize,
-    gathered: &mut [f64],
-    touched: &mut [bool],
-) {
-    shoot_range_body(links, shots, nb, lo, hi, gathered, touched);
+crate::simd::multiversion! {
+    /// Adds to receivers `lo..hi` (outputs indexed from `lo`) what the batch `shots` (grouped by
+    /// element, as taken) sends them before reflection, `sum_l G_ij^{kl} u_l`, into `gathered`
+    /// (`[receiver][c][k]`), and marks them `touched`.
+    fn shoot_range(
+        links: &LinkStore,
+        shots: &[Shot],
+        nb: usize,
+        lo: usize,
+        hi: usize,
+        gathered: &mut [f64],
+        touched: &mut [bool],
+    ) = shoot_range_body;
 }
 
 #[inline(always)]

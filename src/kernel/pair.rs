@@ -217,60 +217,18 @@ fn split(
 /// Products `na x nbp` up to this use a stack buffer for `M` in [`gauss_leaf`].
 const STACK_PRODUCT: usize = 256;
 
-/// Tensor Gauss over both sub-domains, as two small matrix products per direction:
-/// `G_ij += Phi_i^T diag(w_i) M diag(wA_j) Phi_j` and `G_ji += Phi_j^T diag(w_j) M^T diag(wA_i) Phi_i`
-/// with `M_ab = g(x_a, y_b) VIS_ab`.
-fn gauss_leaf(
-    ctx: &PairContext,
-    si: &Samples,
-    sj: &Samples,
-    vis: &Visibility,
-    ij: &mut [f64],
-    ji: &mut [f64],
-) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU has AVX-512F (checked above).
-            unsafe { gauss_leaf_avx512(ctx, si, sj, vis, ij, ji) };
-            return;
-        }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (checked above).
-            unsafe { gauss_leaf_avx2(ctx, si, sj, vis, ij, ji) };
-            return;
-        }
-    }
-    gauss_leaf_body(ctx, si, sj, vis, ij, ji);
-}
-
-/// [`gauss_leaf`] compiled for AVX-512: 8 lanes instead of 2 for the vectorised loops. The same
-/// operations (no fused multiply-add), so the same results.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,avx512f")]
-fn gauss_leaf_avx512(
-    ctx: &PairContext,
-    si: &Samples,
-    sj: &Samples,
-    vis: &Visibility,
-    ij: &mut [f64],
-    ji: &mut [f64],
-) {
-    gauss_leaf_body(ctx, si, sj, vis, ij, ji);
-}
-
-/// [`gauss_leaf`] compiled for AVX2 (4 lanes), same operations.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn gauss_leaf_avx2(
-    ctx: &PairContext,
-    si: &Samples,
-    sj: &Samples,
-    vis: &Visibility,
-    ij: &mut [f64],
-    ji: &mut [f64],
-) {
-    gauss_leaf_body(ctx, si, sj, vis, ij, ji);
+crate::simd::multiversion! {
+    /// Tensor Gauss over both sub-domains, as two small matrix products per direction:
+    /// `G_ij += Phi_i^T diag(w_i) M diag(wA_j) Phi_j` and `G_ji += Phi_j^T diag(w_j) M^T diag(wA_i) Phi_i`
+    /// with `M_ab = g(x_a, y_b) VIS_ab`.
+    fn gauss_leaf(
+        ctx: &PairContext,
+        si: &Samples,
+        sj: &Samples,
+        vis: &Visibility,
+        ij: &mut [f64],
+        ji: &mut [f64],
+    ) = gauss_leaf_body;
 }
 
 #[inline(always)]

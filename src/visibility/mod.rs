@@ -164,7 +164,7 @@ impl Occluders {
         let shaft = Shaft::new(&crate::geometry::Aabb { min: x, max: x }, bounds);
         // Segments leave `x` to its front: triangles wholly behind its tangent plane cannot block.
         CANDIDATES.with_borrow_mut(|candidates| {
-            self.shaft_candidates(&shaft, &[(n, n.dot(x))], (i, j), candidates);
+            shaft_candidates(self, &shaft, &[(n, n.dot(x))], (i, j), candidates);
             if candidates.is_empty() {
                 out.fill(true);
             } else if candidates.len() <= BRUTE_FORCE_CANDIDATES {
@@ -210,7 +210,7 @@ impl Occluders {
         }
         CANDIDATES.with_borrow_mut(|candidates| {
             // Segments between the fronts of two planar elements stay in front of both planes.
-            self.shaft_candidates(&shaft, &culling[..count], (i as u32, j as u32), candidates);
+            shaft_candidates(self, &shaft, &culling[..count], (i as u32, j as u32), candidates);
             if candidates.is_empty() {
                 return Visibility::Full;
             }
@@ -219,59 +219,6 @@ impl Occluders {
             let complete = planes == [None, None];
             self.cast(i, pi, j, pj, candidates, complete)
         })
-    }
-
-    /// The occluder triangles, not of the elements `skip`, that `shaft` may hold and that reach in
-    /// front of every plane `(n, d)` of `planes` (segments between points in front of a plane
-    /// stay in front of it), written to `out`.
-    fn shaft_candidates(
-        &self,
-        shaft: &Shaft,
-        planes: &[(DVec3, f64)],
-        skip: (u32, u32),
-        out: &mut Vec<usize>,
-    ) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the CPU has AVX-512F (checked above).
-                unsafe { self.shaft_candidates_avx512(shaft, planes, skip, out) };
-                return;
-            }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU has AVX2 (checked above).
-                unsafe { self.shaft_candidates_avx2(shaft, planes, skip, out) };
-                return;
-            }
-        }
-        self.shaft_candidates_body(shaft, planes, skip, out);
-    }
-
-    /// [`Occluders::shaft_candidates`] compiled for AVX-512: the shaft's plane tests in one
-    /// 8-lane step, the same operations (no fused multiply-add), so the same candidates.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,avx512f")]
-    fn shaft_candidates_avx512(
-        &self,
-        shaft: &Shaft,
-        planes: &[(DVec3, f64)],
-        skip: (u32, u32),
-        out: &mut Vec<usize>,
-    ) {
-        self.shaft_candidates_body(shaft, planes, skip, out);
-    }
-
-    /// [`Occluders::shaft_candidates`] compiled for AVX2 (4 lanes), the same operations.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn shaft_candidates_avx2(
-        &self,
-        shaft: &Shaft,
-        planes: &[(DVec3, f64)],
-        skip: (u32, u32),
-        out: &mut Vec<usize>,
-    ) {
-        self.shaft_candidates_body(shaft, planes, skip, out);
     }
 
     #[inline(always)]
@@ -503,7 +450,7 @@ impl Occluders {
     }
 }
 
-/// The traversal of [`Occluders::shaft_candidates`].
+/// The traversal of [`shaft_candidates`].
 struct InShaft<'a> {
     shaft: &'a Shaft,
     planes: &'a [(DVec3, f64)],
@@ -671,38 +618,24 @@ impl Segments {
     }
 }
 
-/// Sets `hit[k]` (leaves it set) when segment `k`, `o + t d` for `t in (1e-9, 1 - 1e-9)`, hits one
-/// of `tris` (each `v0, v1 - v0, v2 - v0`): [`bvh::segment_hits`] for each pair, the same operations
-/// in the same order, vectorised over the segments.
-fn segments_hit(tris: &[[DVec3; 3]], segments: &Segments, hit: &mut [u64]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU has AVX-512F (checked above).
-            unsafe { segments_hit_avx512(tris, segments, hit) };
-            return;
-        }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (checked above).
-            unsafe { segments_hit_avx2(tris, segments, hit) };
-            return;
-        }
-    }
-    segments_hit_body(tris, segments, hit);
+crate::simd::multiversion! {
+    /// The occluder triangles, not of the elements `skip`, that `shaft` may hold and that reach in
+    /// front of every plane `(n, d)` of `planes` (segments between points in front of a plane
+    /// stay in front of it), written to `out`.
+    fn shaft_candidates(
+        occluders: &Occluders,
+        shaft: &Shaft,
+        planes: &[(DVec3, f64)],
+        skip: (u32, u32),
+        out: &mut Vec<usize>,
+    ) = Occluders::shaft_candidates_body;
 }
 
-/// [`segments_hit`] compiled for AVX-512: 8 lanes, the same operations (no fused multiply-add).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,avx512f")]
-fn segments_hit_avx512(tris: &[[DVec3; 3]], segments: &Segments, hit: &mut [u64]) {
-    segments_hit_body(tris, segments, hit);
-}
-
-/// [`segments_hit`] compiled for AVX2: 4 lanes, the same operations.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn segments_hit_avx2(tris: &[[DVec3; 3]], segments: &Segments, hit: &mut [u64]) {
-    segments_hit_body(tris, segments, hit);
+crate::simd::multiversion! {
+    /// Sets `hit[k]` (leaves it set) when segment `k`, `o + t d` for `t in (1e-9, 1 - 1e-9)`, hits one
+    /// of `tris` (each `v0, v1 - v0, v2 - v0`): [`bvh::segment_hits`] for each pair, the same operations
+    /// in the same order, vectorised over the segments.
+    fn segments_hit(tris: &[[DVec3; 3]], segments: &Segments, hit: &mut [u64]) = segments_hit_body;
 }
 
 #[inline(always)]

@@ -90,35 +90,7 @@ impl Shaft {
     /// points lies wholly outside the shaft, by the same comparisons, iff the AND of their masks
     /// is not zero. Points shared by several triangles are tested once.
     pub fn outside_masks(&self, xyz: [&[f64]; 3], eps: f64, out: &mut [u32]) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the CPU has AVX-512F (checked above).
-                unsafe { self.outside_masks_avx512(xyz, eps, out) };
-                return;
-            }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU has AVX2 (checked above).
-                unsafe { self.outside_masks_avx2(xyz, eps, out) };
-                return;
-            }
-        }
-        self.outside_masks_body(xyz, eps, out);
-    }
-
-    /// [`Shaft::outside_masks`] compiled for AVX-512: 8 lanes, the same operations (no fused
-    /// multiply-add), so the same masks.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,avx512f")]
-    fn outside_masks_avx512(&self, xyz: [&[f64]; 3], eps: f64, out: &mut [u32]) {
-        self.outside_masks_body(xyz, eps, out);
-    }
-
-    /// [`Shaft::outside_masks`] compiled for AVX2: 4 lanes, the same operations.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn outside_masks_avx2(&self, xyz: [&[f64]; 3], eps: f64, out: &mut [u32]) {
-        self.outside_masks_body(xyz, eps, out);
+        outside_masks(self, xyz, eps, out);
     }
 
     #[inline(always)]
@@ -172,6 +144,11 @@ impl Shaft {
         }
         !outside
     }
+}
+
+crate::simd::multiversion! {
+    /// [`Shaft::outside_masks`], vectorised over the points.
+    fn outside_masks(shaft: &Shaft, xyz: [&[f64]; 3], eps: f64, out: &mut [u32]) = Shaft::outside_masks_body;
 }
 
 /// Calls `f(n, d)` for each plane of the shaft between `a` and `b` (`n . p > d` is outside,
