@@ -28,7 +28,7 @@ struct Node {
 
 const LEAF_SIZE: usize = 4;
 
-/// A traversal of [`Bvh::visit`]: `accept` must be conservative, as in [`Bvh::for_each_accepted`].
+/// A traversal of [`Bvh::visit`]: `accept` must be conservative.
 pub trait Visitor {
     /// Whether the box `b` (centre `c`, half extent `h`) may hold what is looked for.
     fn accept(&self, b: &Aabb, c: DVec3, h: DVec3) -> bool;
@@ -95,34 +95,23 @@ impl Bvh {
 
     /// Calls `f` with the index of every triangle in a leaf reached through nodes (and with
     /// triangle bounds) that `accept` keeps: `accept` must be conservative.
-    pub fn for_each_accepted(&self, accept: impl Fn(&Aabb) -> bool, mut f: impl FnMut(usize)) {
-        if self.nodes.is_empty() {
-            return;
-        }
-        let mut stack = [0u32; 64];
-        let mut sp = 1;
-        while sp > 0 {
-            sp -= 1;
-            let node = &self.nodes[stack[sp] as usize];
-            if !accept(&node.bounds) {
-                continue;
+    pub fn for_each_accepted(&self, accept: impl Fn(&Aabb) -> bool, f: impl FnMut(usize)) {
+        /// The two closures as a [`Visitor`] (the centre and half extent go unused).
+        struct Closures<A, F>(A, F);
+        impl<A: Fn(&Aabb) -> bool, F: FnMut(usize)> Visitor for Closures<A, F> {
+            fn accept(&self, b: &Aabb, _: DVec3, _: DVec3) -> bool {
+                (self.0)(b)
             }
-            if node.count > 0 {
-                for i in node.start..node.start + node.count {
-                    if accept(&self.bounds[i as usize]) {
-                        f(i as usize);
-                    }
-                }
-            } else {
-                stack[sp] = node.start;
-                stack[sp + 1] = node.start + 1;
-                sp += 2;
+            fn visit(&mut self, index: usize, _: &Triangle) {
+                (self.1)(index)
             }
         }
+        self.visit(&mut Closures(accept, f));
     }
 
-    /// [`Bvh::for_each_accepted`] with a [`Visitor`], whose box test also gets the centre and half
-    /// extent of each box (inlined whole, also into functions compiled for wider vectors).
+    /// Visits every triangle in a leaf reached through nodes (and with triangle bounds) that the
+    /// visitor accepts; its box test also gets the centre and half extent of each box (inlined
+    /// whole, also into functions compiled for wider vectors).
     #[inline(always)]
     pub fn visit(&self, visitor: &mut impl Visitor) {
         if self.nodes.is_empty() {
