@@ -189,22 +189,6 @@ impl LinkStore {
         });
     }
 
-    /// Replaces a pair's coefficients (`ab`, `ba`, f64 row-major) and visibility.
-    pub fn set(&mut self, p: PairId, ab: &[f64], ba: &[f64], visibility: Visibility) {
-        let nb = self.nb;
-        let Pair { a, b, .. } = self.pairs[p as usize];
-        for (receiver, g) in [(a, ab), (b, ba)] {
-            let (shooter, slot) = self.slot(p, receiver);
-            for l in 0..nb {
-                let col = &mut self.columns[shooter * nb + l][slot * nb..(slot + 1) * nb];
-                for (k, dst) in col.iter_mut().enumerate() {
-                    *dst = g[k * nb + l] as f32;
-                }
-            }
-        }
-        self.pairs[p as usize].visibility = visibility;
-    }
-
     /// Replaces the coefficients of many stored pairs at once: for each `(p, r, g)`,
     /// `g = [G_r,other | G_other,r]` (f32, `nb x nb` row-major each), with the columns written in
     /// parallel, one shooter per task. The blocks they replace, read from the cache lines being
@@ -285,18 +269,6 @@ impl LinkStore {
             }
         }
         g
-    }
-
-    /// [`LinkStore::block`] widened to f64 into `out` (`nb * nb`), without allocating.
-    pub fn block_into(&self, p: PairId, receiver: ElementId, out: &mut [f64]) {
-        let nb = self.nb;
-        let (shooter, slot) = self.slot(p, receiver);
-        for l in 0..nb {
-            let col = &self.columns[shooter * nb + l][slot * nb..(slot + 1) * nb];
-            for (k, &x) in col.iter().enumerate() {
-                out[k * nb + l] = x as f64;
-            }
-        }
     }
 
     /// The other element of pair `p`.

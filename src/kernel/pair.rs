@@ -80,10 +80,6 @@ impl PairCoefficients {
     pub fn zeros(nb: usize) -> Self {
         Self { ij: vec![0.0; nb * nb], ji: vec![0.0; nb * nb] }
     }
-
-    pub fn is_zero(&self) -> bool {
-        self.ij.iter().chain(&self.ji).all(|&x| x == 0.0)
-    }
 }
 
 /// Integrates the pair `(i, j)`. `whole(e, n)` gives element `e`'s samples over its full domain

@@ -135,16 +135,8 @@ impl PairSeries {
         (b_now - self.ref_b) - (a_now - self.ref_a)
     }
 
-    /// `sum_n p^n Phi_n` (eq. 16 plus the reference kernel), both blocks.
-    pub fn eval(&self, p: f64, nb: usize) -> (Vec<f64>, Vec<f64>) {
-        let n2 = nb * nb;
-        let mut both = vec![0.0; 2 * n2];
-        self.eval_into(p, &mut both);
-        let ba = both.split_off(n2);
-        (both, ba)
-    }
-
-    /// [`PairSeries::eval`] into `[G_ab | G_ba]` (`2 nb^2`, overwritten).
+    /// `sum_n p^n Phi_n` (eq. 16 plus the reference kernel) into `[G_ab | G_ba]` (`2 nb^2`,
+    /// overwritten).
     pub fn eval_into(&self, p: f64, out: &mut [f64]) {
         let len = out.len();
         debug_assert_eq!(self.terms.len(), (SERIES_ORDER + 1) * len);
