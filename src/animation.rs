@@ -542,7 +542,7 @@ pub fn advance(
         // Fixed runs of candidates, each into its own batch (no merging copies).
         let run = candidates.len().div_ceil(8 * rayon::current_num_threads()).max(64);
         pool.resize_with(candidates.len().div_ceil(run), Vec::new);
-        let batches = candidates
+        let mut batches = candidates
             .par_chunks(run)
             .zip(pool.into_par_iter())
             .map(|(run, mut blocks)| {
@@ -556,7 +556,6 @@ pub fn advance(
                 Ok(batch)
             })
             .collect::<Result<Vec<UpdateBatch>>>()?;
-        let mut batches = batches;
         stats.pairs_seconds = start.elapsed().as_secs_f64() - stats.scan_seconds;
         stats.visibility_checks = visibility_checks.into_inner();
         stats.visibility_relinked = visibility_relinked.into_inner();

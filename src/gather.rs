@@ -451,14 +451,9 @@ struct Gather<'a> {
     eps: f64,
     /// Per pair of the link store, the kind of its visibility.
     kinds: Vec<VisKind>,
-    /// Per element, built on first use: its linked sources (see [`ElementLinks`]).
-    links: Vec<std::sync::OnceLock<ElementLinks>>,
+    /// Per element, built on first use: its linked sources (see [`Gather::element_links`]).
+    links: Vec<std::sync::OnceLock<Vec<Linked>>>,
 }
-
-/// The sources linked with one element, emitters left out, sorted by element, with the kind of
-/// their visibility (read once per element and frame, shared by the element's corners).
-/// `None` if some source has two links (then each corner sorts its own list, as it always did).
-type ElementLinks = Option<Vec<Linked>>;
 
 /// One linked source: the other element, the pair and the kind of its visibility.
 #[derive(Clone, Copy, Debug)]
@@ -505,10 +500,7 @@ impl Gather<'_> {
         let rx = Receiver { x, n, element: i as u32, cell: cell_of(s, t, self.cells_per_axis) };
         let previous = previous.filter(|p| !self.moved[i] && p.near == near);
         let faces_corner = |j: usize| j != i && self.planes[j].is_none_or(|f| f.any_in_front(patch));
-        let wanted = match self.element_links(i) {
-            Some(links) => self.wanted_merged(&rx, i, near, links, faces_corner),
-            None => self.wanted_sorted(&rx, i, near, faces_corner),
-        };
+        let wanted = self.wanted(&rx, i, near, self.element_links(i), faces_corner);
         // Touched sources are found when a foot is needed (a fresh moment, a kept foot).
         let touch = |j: u32| if feet { self.touch(&rx, i, j as usize) } else { None };
         let nb = sys.basis.len();
@@ -596,9 +588,11 @@ impl Gather<'_> {
         (row, computed)
     }
 
-    /// The sources of element `i`'s links (see [`ElementLinks`]), read on first use.
-    fn element_links(&self, i: usize) -> Option<&[Linked]> {
-        let links = self.links[i].get_or_init(|| {
+    /// The sources linked with element `i`, emitters left out, sorted by element, with the kind
+    /// of their visibility: read once per element and frame, on first use, shared by the
+    /// element's corners. (The store holds each pair of elements once.)
+    fn element_links(&self, i: usize) -> &[Linked] {
+        self.links[i].get_or_init(|| {
             let sys = self.sys;
             let (pairs, others) =
                 (sys.links.pairs_of(i as ElementId), sys.links.receivers_of(i as ElementId));
@@ -615,9 +609,9 @@ impl Gather<'_> {
             if !out.is_sorted_by_key(|l| l.j) {
                 out.sort_unstable_by_key(|l| l.j);
             }
-            out.windows(2).all(|w| w[0].j < w[1].j).then_some(out)
-        });
-        links.as_deref()
+            debug_assert!(out.windows(2).all(|w| w[0].j < w[1].j), "element {i} linked twice to a source");
+            out
+        })
     }
 
     /// How the visibility of linked source `l` is decided from the (not near) corner `rx` of
@@ -637,9 +631,12 @@ impl Gather<'_> {
     }
 
     /// The sources of the corner `rx` of element `i` and how each one's visibility is decided,
-    /// sorted by element, from `links` (sorted, each source once): [`Gather::wanted_sorted`]'s
-    /// list, merged instead of sorted.
-    fn wanted_merged(
+    /// sorted by element, merged from `links` (sorted, each source once) and the emitters. Direct
+    /// light makes the sharpest shadows, and a corner can sit in a penumbra that none of its
+    /// element's visibility samples is in: emitters are always sources, with rays. Next to an
+    /// occluder the corner may see what no sample of its element sees, and the store holds no
+    /// link for a pair blocked everywhere: every element facing the corner is a source.
+    fn wanted(
         &self,
         rx: &Receiver,
         i: usize,
@@ -674,55 +671,6 @@ impl Gather<'_> {
             }
         }
         wanted.extend(emitters.map(|e| (e, emitter_mode)));
-        wanted
-    }
-
-    /// The sources of the corner `rx` of element `i` and how each one's visibility is decided,
-    /// sorted by element, straight from the link store.
-    fn wanted_sorted(
-        &self,
-        rx: &Receiver,
-        i: usize,
-        near: bool,
-        faces_corner: impl Fn(usize) -> bool,
-    ) -> Vec<(u32, Mode)> {
-        let sys = self.sys;
-        let rays = |open: Mode| if self.occluders.is_some() { open } else { Mode::Open };
-        let mut wanted: Vec<(u32, Mode)> = Vec::new();
-        for &p in sys.links.pairs_of(i as ElementId) {
-            let pair = sys.links.pair(p);
-            let j = sys.links.other(p, i as ElementId);
-            if self.is_emitter[j as usize] {
-                continue;
-            }
-            let mode = match (&pair.visibility, near) {
-                _ if self.occluders.is_none() => Mode::Open,
-                (_, true) => Mode::Rays,
-                (Visibility::Full, false) => Mode::Open,
-                (Visibility::Blocked, false) => continue,
-                (vis @ Visibility::Partial(_), false) => {
-                    Mode::Mask(self.mask_row(vis, rx.cell, pair.a == i as u32))
-                }
-            };
-            wanted.push((j, mode));
-        }
-        // Direct light makes the sharpest shadows, and a corner can sit in a penumbra that none
-        // of its element's visibility samples is in: emitters are always sources, with rays.
-        for &j in self.emitters.iter().filter(|&&j| faces_corner(j)) {
-            wanted.push((j as u32, rays(Mode::Rays)));
-        }
-        // Next to an occluder the corner may see what no sample of its element sees, and the
-        // store holds no link for a pair blocked everywhere: every other element is a source.
-        if near {
-            let mut listed: Vec<u32> = wanted.iter().map(|w| w.0).collect();
-            listed.sort_unstable();
-            for j in (0..self.patches.len()).filter(|&j| faces_corner(j)) {
-                if listed.binary_search(&(j as u32)).is_err() && !self.is_emitter[j] {
-                    wanted.push((j as u32, Mode::Rays));
-                }
-            }
-        }
-        wanted.sort_unstable_by_key(|w| w.0);
         wanted
     }
 
