@@ -232,14 +232,20 @@ mod tests {
         assert!(!shaft.may_contain_triangle(&[p, p, p], 1e-9));
     }
 
+    /// A pseudo-random number in [0, 4) from `k` and a frequency `a`.
+    fn f(k: usize, a: f64) -> f64 {
+        ((k as f64 * a).sin() * 43758.5453).fract().abs() * 4.0
+    }
+
+    /// A pseudo-random box of test case `k`, its sides scaled by `s`.
+    fn boxed(k: usize, s: f64) -> Aabb {
+        let p = DVec3::new(f(k, 1.1), f(k, 2.3), f(k, 3.7));
+        Aabb { min: p, max: p + DVec3::new(f(k, 5.1), f(k, 6.3), f(k, 7.9)) * s }
+    }
+
     /// The early-exit box test decides as the built shaft does.
     #[test]
     fn between_may_contain_box_is_may_contain_box() {
-        let f = |k: usize, a: f64| ((k as f64 * a).sin() * 43758.5453).fract().abs() * 4.0;
-        let boxed = |k: usize, s: f64| {
-            let p = DVec3::new(f(k, 1.1), f(k, 2.3), f(k, 3.7));
-            Aabb { min: p, max: p + DVec3::new(f(k, 5.1), f(k, 6.3), f(k, 7.9)) * s }
-        };
         let (mut inside, mut outside) = (0, 0);
         for k in 0..5000 {
             let (a, b, x) = (boxed(3 * k, 0.5), boxed(3 * k + 1, 0.5), boxed(3 * k + 2, 0.2));
@@ -257,11 +263,6 @@ mod tests {
     /// The per-point masks decide as `may_contain_triangle` does, also for points on the planes.
     #[test]
     fn outside_masks_are_may_contain_triangle() {
-        let f = |k: usize, a: f64| ((k as f64 * a).sin() * 43758.5453).fract().abs() * 4.0;
-        let boxed = |k: usize, s: f64| {
-            let p = DVec3::new(f(k, 1.1), f(k, 2.3), f(k, 3.7));
-            Aabb { min: p, max: p + DVec3::new(f(k, 5.1), f(k, 6.3), f(k, 7.9)) * s }
-        };
         let (mut inside, mut outside) = (0, 0);
         for k in 0..2000 {
             let shaft = Shaft::new(&boxed(2 * k, 0.5), &boxed(2 * k + 1, 0.5));
