@@ -132,8 +132,8 @@ typedef struct GrSettings {
    */
   uint32_t quadrature_order;
   /**
-   * Progressive refinement stops when the unshot power is below this fraction of the emitted
-   * power, in (0,1). Default 1e-4.
+   * Progressive refinement stops when the unshot coefficients would deliver less than this
+   * fraction of the emitted power in one bounce, in (0,1). Default 1e-4.
    */
   double tolerance;
   /**

@@ -675,13 +675,15 @@ pub fn advance(
         }
     }
     sys.elements = new_elements;
+    // The transfers were moved with the previous areas; a scaled element reweighs them all.
+    sys.links.set_receiver_areas(&sys.areas());
     sys.emission = emission;
     sys.reflectance = sys.elements.iter().map(|e| next.materials[e.material as usize].reflectance).collect();
 
     let solve_start = std::time::Instant::now();
     let stop = s.tolerance * sys.emitted_power();
     let cancel = || !progress(1.0, "solve");
-    let shot = solver::shoot(&sys.links, &sys.reflectance, &sys.areas(), &mut sys.solution, stop, &cancel)?;
+    let shot = solver::shoot(&sys.links, &sys.reflectance, &mut sys.solution, stop, &cancel)?;
     stats.solve_seconds = solve_start.elapsed().as_secs_f64();
     stats.shots = shot.shots;
     Ok(Outcome::Updated(stats))

@@ -11,6 +11,11 @@
 //! receiver and nothing else (the solver shoots coefficient by coefficient, most often `l = 0`);
 //! a row-major block per pair would cost the whole block's cache lines. [`LinkStore::block`] and
 //! [`LinkStore::blocks_f64`] still give row-major blocks.
+//!
+//! Once the receivers' areas are given ([`LinkStore::set_receiver_areas`]), the store also keeps
+//! per column its *transfer* `T_j^l = sum_i area_i sum_k |G_ij^{kl}|`: the power one unit of
+//! `b_j^l` delivers in one bounce, which the solver ranks shots by. Every write of coefficients
+//! updates it for the columns it touches.
 
 use crate::visibility::Visibility;
 
@@ -48,7 +53,15 @@ pub struct LinkStore {
     /// `[shooter * nb + l]`: column `l` of `G_receiver,shooter` for each receiver of the shooter,
     /// in `receivers` order, `nb` floats each (index `k`, the receiver's function).
     columns: Vec<Vec<f32>>,
+    /// `[shooter * nb + l]`: `T_shooter^l` (module docs), empty until areas are given.
+    transfer: Vec<f64>,
+    /// The receiver areas `transfer` is weighted with.
+    areas: Vec<f64>,
 }
+
+/// Areas within this relative difference of those `transfer` was weighted with keep it (a
+/// rotated element's area changes in its last bits).
+const AREA_TOLERANCE: f64 = 1e-9;
 
 impl LinkStore {
     pub fn new(n_elements: usize, nb: usize) -> Self {
@@ -59,7 +72,46 @@ impl LinkStore {
             adjacency: vec![Vec::new(); n_elements],
             receivers: vec![Vec::new(); n_elements],
             columns: vec![Vec::new(); n_elements * nb],
+            transfer: Vec::new(),
+            areas: Vec::new(),
         }
+    }
+
+    /// Weights the transfers `T_j^l` with these receiver areas (element order), recomputing them
+    /// all (one pass over the store, in parallel) unless the areas are those already used.
+    pub fn set_receiver_areas(&mut self, areas: &[f64]) {
+        use rayon::prelude::*;
+        assert_eq!(areas.len(), self.receivers.len(), "one area per element");
+        let same = self.areas.len() == areas.len()
+            && self
+                .areas
+                .iter()
+                .zip(areas)
+                .all(|(a, b)| (a - b).abs() <= AREA_TOLERANCE * a.abs().max(b.abs()));
+        if same {
+            return;
+        }
+        self.areas = areas.to_vec();
+        let nb = self.nb;
+        let (receivers, columns) = (&self.receivers, &self.columns);
+        self.transfer = (0..receivers.len() * nb)
+            .into_par_iter()
+            .map(|c| {
+                let column = columns[c].chunks_exact(nb);
+                receivers[c / nb]
+                    .iter()
+                    .zip(column)
+                    .map(|(&r, g)| areas[r as usize] * g.iter().map(|x| x.abs() as f64).sum::<f64>())
+                    .sum()
+            })
+            .collect();
+    }
+
+    /// `T_e^l` for `l = 0..nb` of each element `e`, at `[e * nb + l]`: the power a unit of
+    /// `b_e^l` delivers in one bounce (module docs). Empty until
+    /// [`LinkStore::set_receiver_areas`].
+    pub fn transfers(&self) -> &[f64] {
+        &self.transfer
     }
 
     /// Basis functions per element.
@@ -102,9 +154,16 @@ impl LinkStore {
         self.link(a, b, id);
         let nb = self.nb;
         // G_ab is shot by b, G_ba by a; both go to the end of the shooter's columns.
-        for (shooter, g) in [(b, ab), (a, ba)] {
+        for (shooter, receiver, g) in [(b, a, ab), (a, b, ba)] {
             for l in 0..nb {
-                self.columns[shooter as usize * nb + l].extend((0..nb).map(|k| g[k * nb + l] as f32));
+                let column = (0..nb).map(|k| g[k * nb + l] as f32);
+                let start = self.columns[shooter as usize * nb + l].len();
+                self.columns[shooter as usize * nb + l].extend(column);
+                if !self.transfer.is_empty() {
+                    let added = &self.columns[shooter as usize * nb + l][start..];
+                    self.transfer[shooter as usize * nb + l] +=
+                        self.areas[receiver as usize] * added.iter().map(|x| x.abs() as f64).sum::<f64>();
+                }
             }
         }
         id
@@ -187,6 +246,10 @@ impl LinkStore {
                 }
             }
         });
+        if !self.areas.is_empty() {
+            let areas = std::mem::take(&mut self.areas);
+            self.set_receiver_areas(&areas);
+        }
     }
 
     /// Replaces the coefficients of many stored pairs at once: for each `(p, r, g)`,
@@ -234,15 +297,33 @@ impl LinkStore {
             parts.push(part);
             rest = tail;
         }
-        self.columns.par_chunks_mut(nb).zip(parts).enumerate().for_each(|(e, (cols, old))| {
+        // Each task also moves its shooter's transfers by the change of its columns.
+        let weighted = !self.transfer.is_empty();
+        let mut unweighted = Vec::new();
+        let transfer = if weighted {
+            &mut self.transfer
+        } else {
+            unweighted.resize(n * nb, 0.0);
+            &mut unweighted
+        };
+        let (receivers, areas) = (&self.receivers, &self.areas);
+        let tasks = self.columns.par_chunks_mut(nb).zip(parts).zip(transfer.par_chunks_mut(nb));
+        tasks.enumerate().for_each(|(e, ((cols, old), transfer))| {
             let writes = &writes[start[e]..start[e + 1]];
             for (&(k, slot, half), old) in writes.iter().zip(old.chunks_exact_mut(n2)) {
                 let g = &items[k as usize].2[half as usize * n2..][..n2];
                 let slot = slot as usize;
                 for (l, col) in cols.iter_mut().enumerate() {
+                    let (mut was, mut now) = (0.0f64, 0.0f64);
                     for (kk, dst) in col[slot * nb..(slot + 1) * nb].iter_mut().enumerate() {
+                        was += dst.abs() as f64;
+                        now += g[kk * nb + l].abs() as f64;
                         old[kk * nb + l].write(*dst);
                         *dst = g[kk * nb + l];
+                    }
+                    if weighted {
+                        let area = areas[receivers[e][slot] as usize];
+                        transfer[l] = (transfer[l] + area * (now - was)).max(0.0);
                     }
                 }
             }
@@ -370,5 +451,47 @@ mod tests {
             assert_eq!(replaced.get(k, 1), &before[2 * k + 1][..]);
         }
         assert_eq!(untouched, (store.block(0, 0), store.block(0, 1), store.block(2, 0), store.block(2, 3)));
+    }
+
+    /// `T_j^l` recomputed from scratch over the store as it is.
+    fn fresh_transfers(store: &LinkStore) -> Vec<f64> {
+        let mut fresh = store.clone();
+        let areas = std::mem::take(&mut fresh.areas);
+        fresh.set_receiver_areas(&areas);
+        fresh.transfer
+    }
+
+    #[test]
+    fn transfers_follow_replaced_and_added_blocks() {
+        let nb = 4;
+        let mut store = LinkStore::new(5, nb);
+        for (k, &(a, b)) in [(0u32, 1u32), (2, 1), (0, 3), (3, 2)].iter().enumerate() {
+            // Signed entries: the transfer sums magnitudes.
+            let sign = |x: f64| if (x as usize).is_multiple_of(3) { -x } else { x };
+            let ab: Vec<f64> = block(nb, k, a, 1e-3).into_iter().map(sign).collect();
+            store.push(a, b, &ab, &block(nb, k, b, 1e-3), Visibility::Full);
+        }
+        let areas = [1.0, 2.0, 0.5, 3.0, 4.0];
+        store.set_receiver_areas(&areas);
+        assert!(store.transfers().iter().any(|&t| t > 0.0));
+        assert_eq!(store.transfers(), fresh_transfers(&store));
+        // Rewrite two pairs (one to zero), then add one: the kept transfers move with them.
+        let g1: Vec<f32> = (0..2 * nb * nb).map(|x| 0.01 * x as f32 - 0.1).collect();
+        let g3 = vec![0.0f32; 2 * nb * nb];
+        store.replace_blocks(&[(1, 2, &g1[..]), (3, 3, &g3[..])], &mut ReplacedBlocks::default());
+        store.push(4, 0, &block(nb, 9, 4, 2e-3), &block(nb, 9, 0, 2e-3), Visibility::Full);
+        let (kept, fresh) = (store.transfers().to_vec(), fresh_transfers(&store));
+        for (k, f) in kept.iter().zip(&fresh) {
+            assert!((k - f).abs() <= 1e-12 * f.abs().max(1.0), "kept {k} fresh {f}");
+        }
+        // New areas reweigh everything; the same areas (to rounding) keep the transfers.
+        let scaled: Vec<f64> = areas.iter().map(|a| 2.0 * a).collect();
+        store.set_receiver_areas(&scaled);
+        for (k, f) in store.transfers().iter().zip(&fresh) {
+            assert!((k - 2.0 * f).abs() <= 1e-12 * f.abs().max(1.0));
+        }
+        let before = store.transfers().to_vec();
+        store.set_receiver_areas(&scaled.iter().map(|a| a * (1.0 + 1e-14)).collect::<Vec<_>>());
+        assert_eq!(store.transfers(), before);
     }
 }

@@ -1,8 +1,8 @@
 //! Solving eq. (5), `b_i^k = e_i^k + sum_{j,l} rho_i G_ij^kl b_j^l`, per RGB channel.
 //!
 //! [`shoot`]: progressive refinement (Cohen et al. 1988, in Galerkin form as in the seed's 3.4):
-//! repeatedly shoot the elements whose unshot coefficient vectors carry the most power (a batch
-//! at a time, in parallel), until the unshot power is below a threshold. The animation update
+//! repeatedly shoot the unshot coefficients that would deliver the most power (a batch at a time,
+//! in parallel), until what is left would deliver less than a threshold. The animation update
 //! uses the same routine on the differences `Delta b` (eq. 9). [`gauss_seidel`]: a direct
 //! iteration, the cross-check in tests.
 
@@ -33,7 +33,8 @@ impl Coefficients {
 }
 
 /// Power-like size of an element's coefficient vector: `area * sum_c ||v_c||_2` (the L2 norm of
-/// the function over the unit parameter square, orthonormal basis), used to pick shooters.
+/// the function over the unit parameter square, orthonormal basis): the emitted power the
+/// tolerance is relative to.
 pub fn power(v: &[[f64; 3]], area: f64) -> f64 {
     (0..3).map(|c| v.iter().map(|x| x[c] * x[c]).sum::<f64>().sqrt()).sum::<f64>() * area
 }
@@ -42,21 +43,23 @@ pub fn power(v: &[[f64; 3]], area: f64) -> f64 {
 pub struct ShootStats {
     /// Columns shot: one unshot coefficient `l` of one element sent to all its receivers.
     pub shots: usize,
-    /// Unshot power left, relative to the reference.
+    /// Power the unshot coefficients left would deliver in one bounce (before reflection).
     pub residual: f64,
     /// Link coefficients read by the shots (f32 each), the memory traffic that bounds a solve.
     pub floats_read: u64,
 }
 
-/// Shooters of one batch: every (element, coefficient) whose unshot power is at least this
+/// Shooters of one batch: every (element, coefficient) whose unshot would deliver at least this
 /// fraction of the largest. Shooting them together (Jacobi-style) instead of one at a time
 /// (Southwell) keeps the progressive order of magnitude and gives the threads enough work per
 /// batch.
 const BATCH_FRACTION: f64 = 0.25;
 
-/// Power of one unshot coefficient of an element, `area * sum_c |u_c|`, used to pick shooters.
-fn coefficient_power(u: &[f64; 3], area: f64) -> f64 {
-    (u[0].abs() + u[1].abs() + u[2].abs()) * area
+/// Power one unshot coefficient would deliver, `T_j^l sum_c |u_c|` (`T` from
+/// [`LinkStore::transfers`]): what shots are ranked by and the sum of which must fall below the
+/// stopping threshold.
+fn coefficient_power(u: &[f64; 3], transfer: f64) -> f64 {
+    (u[0].abs() + u[1].abs() + u[2].abs()) * transfer
 }
 
 /// One column shot: element `e` sends its unshot coefficient `l` (value `u`, RGB).
@@ -71,37 +74,40 @@ struct Shot {
 /// out the work costs more than it saves.
 const PARALLEL_FLOATS: u64 = 1 << 16;
 
-/// Progressive refinement until the unshot power is below `stop_power`, shooting in parallel
-/// batches. `cancel` is polled between batches.
+/// Progressive refinement until the unshot coefficients would deliver less than `stop_power`,
+/// shooting in parallel batches. `cancel` is polled between batches. The link store must have
+/// its receiver areas ([`LinkStore::set_receiver_areas`]).
 ///
 /// Shooters are single coefficients, not whole elements: a batch takes every coefficient `l`
-/// of every element whose own unshot power is large, and shooting it reads only column `l` of
-/// the element's blocks ([`LinkStore::shooter_column`]). What is left stays unshot, so the
-/// answer is the same; most of the work goes to `l = 0`, which carries most of the power. The
-/// stopping test is unchanged: the sum over elements of [`power`] of the unshot vector.
+/// of every element whose unshot would deliver much power, and shooting it reads only column `l`
+/// of the element's blocks ([`LinkStore::shooter_column`]). They are ranked, and the stopping
+/// test summed, by the power they would deliver, `T_j^l sum_c |u_j^l,c|`, not by the size of the
+/// unshot function: a higher-order coefficient (no net flux, a gradient) delivers far less than
+/// its norm to all but its near neighbours, and ranked by its norm it cost a third of the shots
+/// of a frame's Delta solve. With reflectances below `rho_max`, what is left unshot changes the
+/// solution by at most `rho_max / (1 - rho_max)` times `stop_power` in power.
 ///
 /// Threads split the receivers (element ranges of equal link count), not the shooters, so each
 /// writes its own part of `b` and `unshot` directly and the sums do not depend on the threads.
 pub fn shoot(
     links: &LinkStore,
     reflectance: &[[f64; 3]],
-    area: &[f64],
     x: &mut Coefficients,
     stop_power: f64,
     cancel: &dyn Fn() -> bool,
 ) -> Result<ShootStats> {
     use rayon::prelude::*;
     let nb = x.nb;
-    let n = area.len();
-    let mut element_power: Vec<f64> =
-        (0..n).map(|e| power(&x.unshot[e * nb..(e + 1) * nb], area[e])).collect();
-    let mut priority: Vec<f64> = (0..n * nb).map(|i| coefficient_power(&x.unshot[i], area[i / nb])).collect();
+    let n = reflectance.len();
+    let transfer = links.transfers();
+    assert_eq!(transfer.len(), n * nb, "the link store needs its receiver areas");
+    let mut priority: Vec<f64> = (0..n * nb).map(|i| coefficient_power(&x.unshot[i], transfer[i])).collect();
     let mut stats = ShootStats::default();
     let parts = receiver_ranges(links, n, rayon::current_num_threads().max(1));
     let mut shots: Vec<Shot> = Vec::new();
     let mut gathered = vec![0.0f64; n * 3 * nb];
     loop {
-        let total: f64 = element_power.iter().sum();
+        let total: f64 = priority.iter().sum();
         let best = priority.iter().copied().fold(0.0, f64::max);
         if total <= stop_power || best <= 0.0 {
             stats.residual = total;
@@ -123,10 +129,7 @@ pub fn shoot(
                     priority[i] = 0.0;
                 }
             }
-            if shots.len() > before {
-                element_power[e] = power(&x.unshot[e * nb..(e + 1) * nb], area[e]);
-                floats += ((shots.len() - before) * links.receivers_of(e as ElementId).len() * nb) as u64;
-            }
+            floats += ((shots.len() - before) * links.receivers_of(e as ElementId).len() * nb) as u64;
         }
         stats.shots += shots.len();
         stats.floats_read += floats;
@@ -134,16 +137,15 @@ pub fn shoot(
         // Split the outputs along the receiver ranges.
         let mut work = Vec::with_capacity(ranges.len());
         let (mut b, mut unshot) = (&mut x.b[..], &mut x.unshot[..]);
-        let (mut pr, mut ep, mut gs) = (&mut priority[..], &mut element_power[..], &mut gathered[..]);
+        let (mut pr, mut gs) = (&mut priority[..], &mut gathered[..]);
         for &(lo, hi) in ranges {
             let m = hi - lo;
             let (b0, b1) = b.split_at_mut(m * nb);
             let (u0, u1) = unshot.split_at_mut(m * nb);
             let (p0, p1) = pr.split_at_mut(m * nb);
-            let (e0, e1) = ep.split_at_mut(m);
             let (g0, g1) = gs.split_at_mut(m * 3 * nb);
-            work.push(Part { lo, hi, b: b0, unshot: u0, priority: p0, element_power: e0, gathered: g0 });
-            (b, unshot, pr, ep, gs) = (b1, u1, p1, e1, g1);
+            work.push(Part { lo, hi, b: b0, unshot: u0, priority: p0, gathered: g0 });
+            (b, unshot, pr, gs) = (b1, u1, p1, g1);
         }
         let shots = &shots;
         let run = |part: Part| {
@@ -161,10 +163,9 @@ pub fn shoot(
                     }
                 }
                 g.fill(0.0);
-                let u = &part.unshot[r * nb..(r + 1) * nb];
-                part.element_power[r] = power(u, area[e]);
                 for l in 0..nb {
-                    part.priority[r * nb + l] = coefficient_power(&u[l], area[e]);
+                    part.priority[r * nb + l] =
+                        coefficient_power(&part.unshot[r * nb + l], transfer[e * nb + l]);
                 }
             }
         };
@@ -183,7 +184,6 @@ struct Part<'a> {
     b: &'a mut [[f64; 3]],
     unshot: &'a mut [[f64; 3]],
     priority: &'a mut [f64],
-    element_power: &'a mut [f64],
     /// `sum_j G_ij u_j` per receiver, `[c][k]`, zero between batches.
     gathered: &'a mut [f64],
 }

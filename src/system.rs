@@ -147,10 +147,11 @@ impl System {
         let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
         let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
         let geom = ElementGeometry::new(&patches, &ctx);
-        let links = assemble(&ctx, &geom, occluders.as_ref(), &|done, total| {
+        let mut links = assemble(&ctx, &geom, occluders.as_ref(), &|done, total| {
             progress(if total > 0 { done as f64 / total as f64 } else { 1.0 }, "kernel")
         })
         .ok_or(Error::Cancelled)?;
+        links.set_receiver_areas(&elements.iter().map(|e| e.area).collect::<Vec<_>>());
         let kernel_seconds = start.elapsed().as_secs_f64();
         let nb = basis.len();
         let reflectance = elements.iter().map(|e| scene.materials[e.material as usize].reflectance).collect();
@@ -206,8 +207,7 @@ impl System {
         let start = Instant::now();
         self.solution = Coefficients::from_emission(&self.emission, self.basis.len());
         let stop = tolerance * self.emitted_power();
-        let stats =
-            solver::shoot(&self.links, &self.reflectance, &self.areas(), &mut self.solution, stop, cancel)?;
+        let stats = solver::shoot(&self.links, &self.reflectance, &mut self.solution, stop, cancel)?;
         self.stats.solve_seconds = start.elapsed().as_secs_f64();
         self.stats.shots = stats.shots;
         Ok(stats)

@@ -26,8 +26,8 @@ pub struct GrSettings {
     pub basis_order: u32,
     /// Gauss-Legendre points per axis for a well-separated pair of patches, 1..=16. Default 4.
     pub quadrature_order: u32,
-    /// Progressive refinement stops when the unshot power is below this fraction of the emitted
-    /// power, in (0,1). Default 1e-4.
+    /// Progressive refinement stops when the unshot coefficients would deliver less than this
+    /// fraction of the emitted power in one bounce, in (0,1). Default 1e-4.
     pub tolerance: f64,
     /// 1: ray-cast visibility; 0: everything sees everything. Other values are invalid.
     /// Default 1.

@@ -19,7 +19,8 @@ pub struct Settings {
     pub basis_order: usize,
     /// Gauss-Legendre points per axis for a well-separated pair of patches.
     pub quadrature_order: usize,
-    /// Progressive refinement stops when the unshot power is below `tolerance` x emitted power.
+    /// Progressive refinement stops when the unshot coefficients would deliver less than
+    /// `tolerance` x emitted power in one bounce.
     pub tolerance: f64,
     /// Ray-cast visibility inside the kernel; `false` treats everything as mutually visible.
     pub visibility: bool,
