@@ -35,7 +35,8 @@ class RadiositySceneSettings(bpy.types.PropertyGroup):
         description="Integration and visibility sampling of the form factors")
     tolerance: FloatProperty(
         name="Tolerance", default=1e-4, min=1e-8, max=0.5, precision=6,
-        description="Stop shooting when the unshot light would deliver less than this fraction of the emitted power")
+        description="Stop shooting when the unshot light would deliver less than this fraction "
+                    "of the emitted power")
     visibility: BoolProperty(
         name="Shadows", default=True,
         description="Ray-cast visibility between faces (off: everything sees everything)")
