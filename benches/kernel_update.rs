@@ -78,7 +78,7 @@ fn main() {
         );
         // Columns: the update's time and its parts, the solve, then counts that do not depend on
         // timing noise.
-        let columns = |u: &animation::UpdateStats| -> [(&str, f64); 12] {
+        let columns = |u: &animation::UpdateStats| -> [(&str, f64); 13] {
             [
                 ("kernel s", u.kernel_seconds),
                 ("scan s", u.scan_seconds),
@@ -92,6 +92,7 @@ fn main() {
                 ("segments", u.segments_tested as f64),
                 ("recomputed", u.links_recomputed as f64),
                 ("series", u.links_series as f64),
+                ("series terms", u.series_terms as f64),
             ]
         };
         let row = |label: String, values: &[f64]| {
@@ -105,7 +106,7 @@ fn main() {
         let names = columns(&Default::default()).map(|(name, _)| name);
         println!("| frame | {} |", names.join(" | "));
         println!("|---{}|", "|---".repeat(names.len()));
-        let mut sums = [0.0f64; 12];
+        let mut sums = [0.0f64; 13];
         for f in 2..=frames {
             let Outcome::Updated(u) =
                 animation::advance(&mut sys, &mut state, &scene, f as f64, &no_progress).unwrap()

@@ -60,6 +60,9 @@ pub struct UpdateStats {
     pub recomputed_translation: usize,
     /// Pairs (re-)expanded this frame.
     pub series_expanded: usize,
+    /// Terms `Phi_n` read by the series evaluations (at most `SERIES_ORDER + 1` per pair: see
+    /// `series::SERIES_TAIL`).
+    pub series_terms: usize,
     /// Static pairs whose shaft was tested against the moving elements' swept bounds.
     pub shaft_tests: usize,
     /// Pairs examined in detail: moved relative to each other, or shaft entered by the swept bounds.
@@ -246,6 +249,8 @@ struct UpdateBatch {
     blocks: Vec<f32>,
     /// The f64 blocks being computed.
     scratch: Vec<f64>,
+    /// Series terms read.
+    series_terms: usize,
 }
 
 /// Relative motion of the frame for the candidates with a moved element.
@@ -482,14 +487,13 @@ pub fn advance(
                                 &vis,
                                 dir,
                             );
-                            let ser = PairSeries {
+                            let ser = PairSeries::new(
                                 dir,
-                                ref_a: patches[iu].corners[0],
-                                ref_b: patches[ju].corners[0],
+                                (patches[iu].corners[0], patches[ju].corners[0]),
                                 r_min,
-                                epochs: (state.epochs[iu], state.epochs[ju]),
+                                (state.epochs[iu], state.epochs[ju]),
                                 terms,
-                            };
+                            );
                             Decision { i, j, id, vis, kernel: Kernel::Expanded(Box::new(ser)), reason }
                         }
                         None => {
@@ -516,7 +520,7 @@ pub fn advance(
             let scratch = &mut batch.scratch[..];
             let (series, exchanges) = match d.kernel {
                 Kernel::Series(ser, p) => {
-                    ser.eval_into(p, scratch);
+                    batch.series_terms += ser.eval_into(p, scratch) + 1;
                     (SeriesAction::Keep, true)
                 }
                 Kernel::Expanded(ser) => {
@@ -558,6 +562,7 @@ pub fn advance(
             .collect::<Result<Vec<UpdateBatch>>>()?;
         stats.pairs_seconds = start.elapsed().as_secs_f64() - stats.scan_seconds;
         stats.visibility_checks = visibility_checks.into_inner();
+        stats.series_terms = batches.iter().map(|b| b.series_terms).sum();
         stats.visibility_relinked = visibility_relinked.into_inner();
 
         // Apply: new pairs are appended one by one (rare), stored pairs rewritten in parallel.

@@ -28,6 +28,11 @@ pub const SERIES_ORDER: usize = 8;
 /// 0.13, 5e-3 at `t = 0.2`); the convergence radius is `t = sqrt 2 - 1 = 0.414`. Integrated over
 /// patches the error is far smaller: corners within 3e-5 of peak of the exact update on the demo.
 pub const SERIES_MAX_T: f64 = 0.2;
+/// A frame evaluates the stored series only up to the power whose dropped tail
+/// `sum_{n>m} |p|^n max|Phi_n|` (a bound on every coefficient it leaves out) is at most this
+/// fraction of the largest term `|p|^n max|Phi_n|`: close to its reference a pair needs few terms
+/// (`t = 0.02`: about 5 of the 9), and reading them is the cost of a series frame.
+pub const SERIES_TAIL: f64 = 1e-6;
 
 /// Taylor coefficients `f_0..f_{len-1}` of `(1 + w1 p + w2 p^2)^-2`.
 pub fn inverse_square_series(w1: f64, w2: f64, f: &mut [f64]) {
@@ -127,26 +132,64 @@ pub struct PairSeries {
     pub epochs: (u32, u32),
     /// `Phi_n` for `n = 0..=SERIES_ORDER`, each `[G_ab | G_ba]`, `nb x nb` each.
     pub terms: Vec<f32>,
+    /// `max_kl |Phi_n^kl|` for each `n`.
+    pub norms: [f32; SERIES_ORDER + 1],
 }
 
 impl PairSeries {
+    /// The series of `terms` ([`expand`]) about the reference corners `ref_a`, `ref_b`.
+    pub fn new(
+        dir: DVec3,
+        (ref_a, ref_b): (DVec3, DVec3),
+        r_min: f64,
+        epochs: (u32, u32),
+        terms: Vec<f32>,
+    ) -> Self {
+        let len = terms.len() / (SERIES_ORDER + 1);
+        let mut norms = [0.0f32; SERIES_ORDER + 1];
+        for (norm, t) in norms.iter_mut().zip(terms.chunks_exact(len)) {
+            *norm = t.iter().fold(0.0, |m, x| m.max(x.abs()));
+        }
+        Self { dir, ref_a, ref_b, r_min, epochs, terms, norms }
+    }
+
+    /// The highest power of `p` evaluation keeps: the smallest `m` whose dropped terms add up to
+    /// at most [`SERIES_TAIL`] of the largest term at `p`.
+    pub fn order_at(&self, p: f64) -> usize {
+        let mut size = [0.0f64; SERIES_ORDER + 1];
+        let mut power = 1.0;
+        for (s, &norm) in size.iter_mut().zip(&self.norms) {
+            *s = norm as f64 * power;
+            power *= p.abs();
+        }
+        let bound = SERIES_TAIL * size.iter().fold(0.0f64, |m, &x| m.max(x));
+        let (mut m, mut tail) = (SERIES_ORDER, 0.0);
+        while m > 0 && tail + size[m] <= bound {
+            tail += size[m];
+            m -= 1;
+        }
+        m
+    }
+
     /// Displacement of `b` relative to `a` since the reference, from their current corner 0.
     pub fn displacement(&self, a_now: DVec3, b_now: DVec3) -> DVec3 {
         (b_now - self.ref_b) - (a_now - self.ref_a)
     }
 
     /// `sum_n p^n Phi_n` (eq. 16 plus the reference kernel) into `[G_ab | G_ba]` (`2 nb^2`,
-    /// overwritten).
-    pub fn eval_into(&self, p: f64, out: &mut [f64]) {
+    /// overwritten), up to `n = `[`PairSeries::order_at`]`(p)`, which it returns.
+    pub fn eval_into(&self, p: f64, out: &mut [f64]) -> usize {
         let len = out.len();
         debug_assert_eq!(self.terms.len(), (SERIES_ORDER + 1) * len);
-        // Horner in p over the terms, highest first.
+        let m = self.order_at(p);
+        // Horner in p over the terms kept, highest first.
         out.fill(0.0);
-        for t in self.terms.chunks_exact(len).rev() {
+        for t in self.terms[..(m + 1) * len].chunks_exact(len).rev() {
             for (o, &x) in out.iter_mut().zip(t) {
                 *o = *o * p + x as f64;
             }
         }
+        m
     }
 }
 
@@ -211,4 +254,56 @@ pub fn expand(
         }
     }
     terms.into_iter().map(|x| x as f32).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A series of `len` coefficients per term whose terms shrink like `decay^n`, with signs and
+    /// sizes varying inside each term.
+    fn synthetic(len: usize, decay: f64) -> PairSeries {
+        let terms = (0..=SERIES_ORDER)
+            .flat_map(|n| (0..len).map(move |k| (((k * 7 + n * 3) % 11) as f64 - 5.0) * decay.powi(n as i32)))
+            .map(|x| x as f32)
+            .collect();
+        PairSeries::new(DVec3::X, (DVec3::ZERO, DVec3::Y), 1.0, (0, 0), terms)
+    }
+
+    /// All `SERIES_ORDER + 1` terms, Horner.
+    fn full_eval(ser: &PairSeries, p: f64, len: usize) -> Vec<f64> {
+        let mut out = vec![0.0; len];
+        for t in ser.terms.chunks_exact(len).rev() {
+            for (o, &x) in out.iter_mut().zip(t) {
+                *o = *o * p + x as f64;
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn truncation_keeps_the_dropped_tail_below_its_bound_and_uses_more_terms_further_out() {
+        let len = 2 * 9 * 9;
+        let ser = synthetic(len, 4.0);
+        let mut out = vec![0.0; len];
+        let mut last = 0;
+        for p in [0.0, 1e-4, 1e-3, 0.005, 0.02, 0.05, -0.05, 0.1] {
+            let m = ser.eval_into(p, &mut out);
+            assert_eq!(m, ser.order_at(p));
+            assert!(m >= last, "order falls from {last} to {m} at p = {p}");
+            last = m;
+            let largest =
+                (0..=SERIES_ORDER).map(|n| ser.norms[n] as f64 * p.abs().powi(n as i32)).fold(0.0, f64::max);
+            let worst =
+                out.iter().zip(full_eval(&ser, p, len)).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            assert!(
+                worst <= SERIES_TAIL * largest * (1.0 + 1e-9),
+                "p = {p}: dropped {worst}, bound {}",
+                SERIES_TAIL * largest
+            );
+        }
+        assert_eq!(ser.order_at(0.0), 0, "the reference needs Phi_0 only");
+        assert!(ser.order_at(0.005) < SERIES_ORDER, "a small step reads fewer terms");
+        assert_eq!(ser.order_at(0.1), SERIES_ORDER, "at t = 0.4 per unit decay every term counts");
+    }
 }
