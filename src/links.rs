@@ -24,6 +24,9 @@ pub type ElementId = u32;
 /// [`LinkStore::extend_rows`] leaves each shooter's columns room for `1 / GROWTH_ROOM` more
 /// receivers, plus 4.
 const GROWTH_ROOM: usize = 16;
+
+/// How many block writes ahead [`LinkStore::replace_blocks`] prefetches.
+const PREFETCH_WRITES: usize = 2;
 pub type PairId = u32;
 
 #[derive(Clone, Debug)]
@@ -318,7 +321,15 @@ impl LinkStore {
         let tasks = self.columns.par_chunks_mut(nb).zip(parts).zip(transfer.par_chunks_mut(nb));
         tasks.enumerate().for_each(|(e, ((cols, old), transfer))| {
             let writes = &writes[start[e]..start[e + 1]];
-            for (&(k, slot, half), old) in writes.iter().zip(old.chunks_exact_mut(n2)) {
+            for (x, (&(k, slot, half), old)) in writes.iter().zip(old.chunks_exact_mut(n2)).enumerate() {
+                // Each write lands on `nb` scattered lines and reads a block computed elsewhere:
+                // ask for both ahead.
+                if let Some(&(k, slot, half)) = writes.get(x + PREFETCH_WRITES) {
+                    crate::simd::prefetch(&items[k as usize].2[half as usize * n2..][..n2]);
+                    for col in cols.iter() {
+                        crate::simd::prefetch(&col[slot as usize * nb..][..nb]);
+                    }
+                }
                 let g = &items[k as usize].2[half as usize * n2..][..n2];
                 let slot = slot as usize;
                 for (l, col) in cols.iter_mut().enumerate() {
