@@ -230,6 +230,22 @@ struct Decision<'s> {
     reason: Reason,
 }
 
+impl<'s> Decision<'s> {
+    /// The terms a series evaluation will read.
+    fn series_terms(&self) -> Option<&'s [f32]> {
+        match self.kernel {
+            Kernel::Series(ser, p) => {
+                let len = ser.terms.len() / (series::SERIES_ORDER + 1);
+                Some(&ser.terms[..(ser.order_at(p) + 1) * len])
+            }
+            _ => None,
+        }
+    }
+}
+
+/// How many decided pairs ahead the series terms are prefetched.
+const PREFETCH_SERIES: usize = 2;
+
 /// The new state of one changed pair (its blocks are in its [`UpdateBatch`]).
 struct PairUpdate {
     i: u32,
@@ -552,10 +568,19 @@ pub fn advance(
             .map(|(run, mut blocks)| {
                 blocks.clear();
                 let mut batch = UpdateBatch { blocks, ..Default::default() };
+                // Decided first, then emitted with the series terms a few pairs ahead prefetched:
+                // the solve's stream through the store evicts them between frames, and reading
+                // them from memory was most of a series evaluation.
+                let mut decided = Vec::with_capacity(run.len());
                 for &c in run {
-                    if let Some(d) = decide(c)? {
-                        emit(&mut batch, d);
+                    decided.extend(decide(c)?);
+                }
+                let terms: Vec<Option<&[f32]>> = decided.iter().map(Decision::series_terms).collect();
+                for (k, d) in decided.into_iter().enumerate() {
+                    if let Some(Some(ahead)) = terms.get(k + PREFETCH_SERIES) {
+                        crate::simd::prefetch(ahead);
                     }
+                    emit(&mut batch, d);
                 }
                 Ok(batch)
             })
