@@ -247,7 +247,13 @@ fn gauss_leaf_body(
         &mut heap[..]
     };
     kernel_matrix(si, sj, vis, cells, m);
-    match ctx.basis.len() {
+    project_any(ctx.basis.len(), si, sj, m, ij, ji);
+}
+
+/// [`project`] for `nb` basis functions (1, 4, 9 or 16), inlined into the caller's vector width.
+#[inline(always)]
+pub(crate) fn project_any(nb: usize, si: &Samples, sj: &Samples, m: &[f64], ij: &mut [f64], ji: &mut [f64]) {
+    match nb {
         1 => project::<1>(si, sj, m, ij, ji),
         4 => project::<4>(si, sj, m, ij, ji),
         9 => project::<9>(si, sj, m, ij, ji),
