@@ -1,0 +1,101 @@
+"""Interleaved A/B of the animation update between git revisions (issue 3): builds
+`benches/kernel_update` at each revision (a git worktree and target directory per revision,
+under `out/ab/`), runs the builds in turn `--runs` times, and prints per revision the median,
+25th percentile and best of each frame's times pooled over the runs. This VM's speed drifts by
+30-50% within minutes, so builds are only comparable measured this way.
+
+    .venv/bin/python -m tools.ab 7244f93 HEAD [--runs 5] [--frames 16] [--demo] [--exact REV]
+
+A revision given as `--exact REV` is run with `--exact` (the update without the series).
+"""
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+# Columns of the kernel_update table (after the frame number), and the whole frame.
+COLUMNS = ["kernel", "scan", "pairs", "apply", "solve"]
+
+
+def parse(argv):
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("revs", nargs="*", help="git revisions (HEAD, a hash); WORK: the working tree")
+    p.add_argument("--exact", action="append", default=[], help="a revision to run with --exact")
+    p.add_argument("--runs", type=int, default=5)
+    p.add_argument("--frames", type=int, default=16)
+    p.add_argument("--demo", action="store_true", help="the demo animation instead of the moving light")
+    args = p.parse_args(argv)
+    if len(args.revs) + len(args.exact) < 1:
+        p.error("give at least one revision")
+    return args
+
+
+def build(rev):
+    """The kernel_update bench built at `rev` ('WORK': the working tree); its executable."""
+    if rev == "WORK":
+        tree, target = REPO, REPO / "target"
+    else:
+        commit = subprocess.run(
+            ["git", "-C", str(REPO), "rev-parse", "--short", rev], check=True, capture_output=True, text=True
+        ).stdout.strip()
+        tree, target = REPO / "out" / "ab" / commit, REPO / "out" / "ab" / f"{commit}-target"
+        if not tree.exists():
+            add = ["git", "-C", str(REPO), "worktree", "add", "--detach", str(tree), commit]
+            subprocess.run(add, check=True)
+    out = subprocess.run(
+        ["cargo", "build", "--release", "--bench", "kernel_update", "--message-format=json"],
+        cwd=tree,
+        env={**os.environ, "CARGO_TARGET_DIR": str(target)},
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
+    for line in out.splitlines():
+        msg = json.loads(line)
+        if msg.get("reason") == "compiler-artifact" and msg["target"]["name"] == "kernel_update":
+            if msg.get("executable"):
+                return msg["executable"]
+    sys.exit(f"no kernel_update executable built at {rev}")
+
+
+def frames(executable, args, exact):
+    """Per frame after the first: the table's time columns, in seconds."""
+    cmd = [executable, "--frames", str(args.frames)]
+    cmd += (["--demo"] if args.demo else []) + (["--exact"] if exact else [])
+    table = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+    rows = []
+    for line in table.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if cells and cells[0].isdigit():
+            rows.append([float(c) for c in cells[1 : 1 + len(COLUMNS)]])
+    return rows
+
+
+def main(argv):
+    args = parse(argv)
+    runs = [(rev, False) for rev in args.revs] + [(rev, True) for rev in args.exact]
+    builds = {(rev, exact): build(rev) for rev, exact in runs}
+    pooled = {key: [] for key in runs}
+    for r in range(args.runs):
+        for key in runs:
+            pooled[key] += frames(builds[key], args, key[1])
+        print(f"run {r + 1} of {args.runs} done", file=sys.stderr)
+    names = [*COLUMNS, "frame (kernel + solve)"]
+    print(f"{args.runs} interleaved runs of {args.frames - 1} frames each; ms: median / p25 / best\n")
+    print("| build | " + " | ".join(names) + " |")
+    print("|---" * (len(names) + 1) + "|")
+    for (rev, exact), rows in pooled.items():
+        cells = []
+        for k in range(len(names)):
+            v = sorted(row[0] + row[4] if k == len(COLUMNS) else row[k] for row in rows)
+            cells.append(f"{1e3 * statistics.median(v):.1f} / {1e3 * v[len(v) // 4]:.1f} / {1e3 * v[0]:.1f}")
+        print(f"| {rev}{' --exact' if exact else ''} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
