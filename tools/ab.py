@@ -6,7 +6,9 @@ under `out/ab/`), runs the builds in turn `--runs` times, and prints per revisio
 
     .venv/bin/python -m tools.ab 7244f93 HEAD [--runs 5] [--frames 16] [--demo] [--exact REV]
 
-A revision given as `--exact REV` is run with `--exact` (the update without the series).
+A revision given as `--exact REV` is run with `--exact` (the update without the series). The
+worktrees and builds are kept for the next comparison; `rm -rf out/ab && git worktree prune`
+removes them.
 """
 
 import argparse
