@@ -20,6 +20,7 @@
 use crate::visibility::Visibility;
 
 pub type ElementId = u32;
+pub type PairId = u32;
 
 /// [`LinkStore::extend_rows`] leaves each shooter's columns room for `1 / GROWTH_ROOM` more
 /// receivers, plus 4.
@@ -27,7 +28,6 @@ const GROWTH_ROOM: usize = 16;
 
 /// How many block writes ahead [`LinkStore::replace_blocks`] prefetches.
 const PREFETCH_WRITES: usize = 2;
-pub type PairId = u32;
 
 #[derive(Clone, Debug)]
 pub struct Pair {
@@ -341,6 +341,7 @@ impl LinkStore {
                         *dst = g[kk * nb + l];
                     }
                     if weighted {
+                        // (A sum of magnitudes: the clamp only stops rounding below zero.)
                         let area = areas[receivers[e][slot] as usize];
                         transfer[l] = (transfer[l] + area * (now - was)).max(0.0);
                     }
