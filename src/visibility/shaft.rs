@@ -39,23 +39,31 @@ impl Shaft {
         shaft
     }
 
-    /// `Shaft::new(a, b).may_contain_box(x, eps)`, the same decision, without building the
-    /// shaft: planes are formed one at a time and the first that leaves `x` outside ends the
-    /// test (most boxes tested against many shafts, such as a moving object's swept bounds
-    /// against every pair's shaft, are outside).
+    /// Whether box `x`, grown by `eps`, meets the shaft between `a` and `b`: their convex hull,
+    /// which is the union over `t in [0, 1]` of the boxes `(1 - t) a + t b` (bounds interpolated).
+    /// So `x` meets it iff some `t` has every interpolated bound on the right side of `x`'s: six
+    /// conditions linear in `t`, each keeping a part of `[0, 1]`. Exact for the hull, where the
+    /// planes of [`Shaft::may_contain_box`] test only the union box's and the shaft's own faces
+    /// as separating planes (and so may keep a box outside the hull near an edge).
     pub fn between_may_contain_box(a: &Aabb, b: &Aabb, x: &Aabb, eps: f64) -> bool {
-        if !x.overlaps(&a.union(*b)) {
-            return false;
+        let (mut lo, mut hi) = (0.0f64, 1.0f64);
+        // f0 + t (f1 - f0) <= c for t in [lo, hi].
+        let mut keep = |f0: f64, f1: f64, c: f64| {
+            let slope = f1 - f0;
+            if slope > 0.0 {
+                hi = hi.min((c - f0) / slope);
+            } else if slope < 0.0 {
+                lo = lo.max((c - f0) / slope);
+            } else if f0 > c {
+                hi = -1.0;
+            }
+        };
+        for k in 0..3 {
+            // The interpolated box's min is below x's max, and its max above x's min.
+            keep(a.min[k], b.min[k], x.max[k] + eps);
+            keep(-a.max[k], -b.max[k], -(x.min[k] - eps));
         }
-        let (c, h) = (x.centre(), x.diagonal() * 0.5);
-        let mut inside = true;
-        for_each_plane(a, b, |n, d| {
-            // (`!(x > y)`, not `x <= y`: a NaN keeps the box in, as in `may_contain_overlapping_box`)
-            let outside = n.dot(c) - n.abs().dot(h) > d + eps;
-            inside = !outside;
-            inside
-        });
-        inside
+        lo <= hi
     }
 
     /// False only if the triangle lies wholly outside the shaft (a conservative test).
@@ -243,21 +251,41 @@ mod tests {
         Aabb { min: p, max: p + DVec3::new(f(k, 5.1), f(k, 6.3), f(k, 7.9)) * s }
     }
 
-    /// The early-exit box test decides as the built shaft does.
+    /// The box test is the hull's: every box it keeps the built shaft keeps too (the shaft's
+    /// planes are a conservative test of the same hull); a small box around a point between the
+    /// two boxes is kept; and a box it rejects has no point of the hull, checked by sampling.
     #[test]
-    fn between_may_contain_box_is_may_contain_box() {
-        let (mut inside, mut outside) = (0, 0);
+    fn between_may_contain_box_is_the_hulls_test() {
+        let (mut inside, mut outside, mut tighter) = (0, 0, 0);
         for k in 0..5000 {
             let (a, b, x) = (boxed(3 * k, 0.5), boxed(3 * k + 1, 0.5), boxed(3 * k + 2, 0.2));
-            let want = Shaft::new(&a, &b).may_contain_box(&x, 1e-9);
-            assert_eq!(Shaft::between_may_contain_box(&a, &b, &x, 1e-9), want, "case {k}");
-            if want {
+            let shaft = Shaft::new(&a, &b).may_contain_box(&x, 1e-9);
+            let hull = Shaft::between_may_contain_box(&a, &b, &x, 1e-9);
+            assert!(!hull || shaft, "case {k}: kept by the hull test, not by the shaft");
+            tighter += (shaft && !hull) as usize;
+            if hull {
                 inside += 1;
             } else {
                 outside += 1;
+                // No point (1 - t) p + t q, p in a, q in b, lies in x.
+                for m in 0..200 {
+                    let t = f(k * 200 + m, 9.7) / 4.0;
+                    let (p, q) = (
+                        a.min + (a.max - a.min) * DVec3::new(f(m, 1.3), f(m, 2.9), f(m, 4.1)) / 4.0,
+                        b.min + (b.max - b.min) * DVec3::new(f(m, 5.3), f(m, 6.7), f(m, 8.9)) / 4.0,
+                    );
+                    let y = p * (1.0 - t) + q * t;
+                    assert!(!(y.cmpge(x.min).all() && y.cmple(x.max).all()), "case {k}: {y} in x");
+                }
             }
+            // A small box around a point of the hull is kept.
+            let t = f(k, 3.3) / 4.0;
+            let y = a.centre() * (1.0 - t) + b.centre() * t;
+            let small = Aabb { min: y - DVec3::splat(1e-6), max: y + DVec3::splat(1e-6) };
+            assert!(Shaft::between_may_contain_box(&a, &b, &small, 0.0), "case {k}");
         }
         assert!(inside > 100 && outside > 100, "{inside} inside, {outside} outside");
+        eprintln!("{tighter} of 5000 boxes kept by the shaft's planes are outside the hull");
     }
 
     /// The per-point masks decide as `may_contain_triangle` does, also for points on the planes.
