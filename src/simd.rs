@@ -1,22 +1,24 @@
 //! Run-time choice of vector width for the hot loops.
 
-/// Defines `fn name(args) -> ret` that calls the `#[inline(always)]` function `body` with the
-/// same arguments, compiled for AVX-512 or AVX2 when the CPU has them (checked at run time),
-/// else as built. Only wider vectors are enabled, not fused multiply-add, so every version does
-/// the same operations in the same order and gives the same results.
+/// Defines `fn name(args) -> ret { body }` that runs `body` compiled for AVX-512 or AVX2 when the
+/// CPU has them (checked at run time), else as built. Only wider vectors are enabled, not fused
+/// multiply-add, so every version does the same operations in the same order and gives the same
+/// results. The body sees the arguments and the module's items, not `self`.
 macro_rules! multiversion {
-    ($(#[$attr:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? = $body:path;) => {
+    ($(#[$attr:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? $body:block) => {
         $(#[$attr])*
         $vis fn $name($($arg: $ty),*) $(-> $ret)? {
+            #[inline(always)]
+            fn body($($arg: $ty),*) $(-> $ret)? $body
             #[cfg(target_arch = "x86_64")]
             {
                 #[target_feature(enable = "avx2,avx512f")]
                 fn avx512($($arg: $ty),*) $(-> $ret)? {
-                    $body($($arg),*)
+                    body($($arg),*)
                 }
                 #[target_feature(enable = "avx2")]
                 fn avx2($($arg: $ty),*) $(-> $ret)? {
-                    $body($($arg),*)
+                    body($($arg),*)
                 }
                 if std::arch::is_x86_feature_detected!("avx512f") {
                     // SAFETY: the CPU has AVX-512F (checked above).
@@ -27,7 +29,7 @@ macro_rules! multiversion {
                     return unsafe { avx2($($arg),*) };
                 }
             }
-            $body($($arg),*)
+            body($($arg),*)
         }
     };
 }

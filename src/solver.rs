@@ -218,25 +218,14 @@ crate::simd::multiversion! {
         hi: usize,
         gathered: &mut [f64],
         touched: &mut [bool],
-    ) = shoot_range_body;
-}
-
-#[inline(always)]
-fn shoot_range_body(
-    links: &LinkStore,
-    shots: &[Shot],
-    nb: usize,
-    lo: usize,
-    hi: usize,
-    gathered: &mut [f64],
-    touched: &mut [bool],
-) {
-    match nb {
-        1 => shoot_range_nb::<1>(links, shots, lo, hi, gathered, touched),
-        4 => shoot_range_nb::<4>(links, shots, lo, hi, gathered, touched),
-        9 => shoot_range_nb::<9>(links, shots, lo, hi, gathered, touched),
-        16 => shoot_range_nb::<16>(links, shots, lo, hi, gathered, touched),
-        nb => unreachable!("{nb} basis functions"),
+    ) {
+        match nb {
+            1 => shoot_range_nb::<1>(links, shots, lo, hi, gathered, touched),
+            4 => shoot_range_nb::<4>(links, shots, lo, hi, gathered, touched),
+            9 => shoot_range_nb::<9>(links, shots, lo, hi, gathered, touched),
+            16 => shoot_range_nb::<16>(links, shots, lo, hi, gathered, touched),
+            nb => unreachable!("{nb} basis functions"),
+        }
     }
 }
 

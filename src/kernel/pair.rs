@@ -224,30 +224,20 @@ crate::simd::multiversion! {
         vis: &Visibility,
         ij: &mut [f64],
         ji: &mut [f64],
-    ) = gauss_leaf_body;
-}
-
-#[inline(always)]
-fn gauss_leaf_body(
-    ctx: &PairContext,
-    si: &Samples,
-    sj: &Samples,
-    vis: &Visibility,
-    ij: &mut [f64],
-    ji: &mut [f64],
-) {
-    let cells = ctx.vis_axis * ctx.vis_axis;
-    let (na, nbp) = (si.len(), sj.len());
-    let mut stack = [0.0f64; STACK_PRODUCT];
-    let mut heap = Vec::new();
-    let m = if na * nbp <= STACK_PRODUCT {
-        &mut stack[..na * nbp]
-    } else {
-        heap.resize(na * nbp, 0.0);
-        &mut heap[..]
-    };
-    kernel_matrix(si, sj, vis, cells, m);
-    project_any(ctx.basis.len(), si, sj, m, ij, ji);
+    ) {
+        let cells = ctx.vis_axis * ctx.vis_axis;
+        let (na, nbp) = (si.len(), sj.len());
+        let mut stack = [0.0f64; STACK_PRODUCT];
+        let mut heap = Vec::new();
+        let m = if na * nbp <= STACK_PRODUCT {
+            &mut stack[..na * nbp]
+        } else {
+            heap.resize(na * nbp, 0.0);
+            &mut heap[..]
+        };
+        kernel_matrix(si, sj, vis, cells, m);
+        project_any(ctx.basis.len(), si, sj, m, ij, ji);
+    }
 }
 
 /// [`project`] for `nb` basis functions (1, 4, 9 or 16), inlined into the caller's vector width.

@@ -206,44 +206,34 @@ crate::simd::multiversion! {
         sb: &Samples,
         vis: &Visibility,
         dir: DVec3,
-    ) -> Vec<f32> = expand_body;
-}
-
-#[inline(always)]
-fn expand_body(
-    basis: Basis,
-    vis_axis: usize,
-    sa: &Samples,
-    sb: &Samples,
-    vis: &Visibility,
-    dir: DVec3,
-) -> Vec<f32> {
-    const N: usize = SERIES_ORDER + 1;
-    let nb = basis.len();
-    let n2 = nb * nb;
-    let cells = vis_axis * vis_axis;
-    let (na, nbp) = (sa.len(), sb.len());
-    // `[n][a][b]`: phi_n(x_a, y_b) VIS_ab.
-    let mut m = vec![0.0; N * na * nbp];
-    let mut phi = [0.0; N];
-    for a in 0..na {
-        for b in 0..nbp {
-            let v = vis.at(sa.cell[a], sb.cell[b], cells);
-            if v == 0.0 {
-                continue;
-            }
-            point_series(sa.position[a], sa.normal[a], sb.position[b], sb.normal[b], dir, &mut phi);
-            for (n, &f) in phi.iter().enumerate() {
-                m[(n * na + a) * nbp + b] = f * v;
+    ) -> Vec<f32> {
+        const N: usize = SERIES_ORDER + 1;
+        let nb = basis.len();
+        let n2 = nb * nb;
+        let cells = vis_axis * vis_axis;
+        let (na, nbp) = (sa.len(), sb.len());
+        // `[n][a][b]`: phi_n(x_a, y_b) VIS_ab.
+        let mut m = vec![0.0; N * na * nbp];
+        let mut phi = [0.0; N];
+        for a in 0..na {
+            for b in 0..nbp {
+                let v = vis.at(sa.cell[a], sb.cell[b], cells);
+                if v == 0.0 {
+                    continue;
+                }
+                point_series(sa.position[a], sa.normal[a], sb.position[b], sb.normal[b], dir, &mut phi);
+                for (n, &f) in phi.iter().enumerate() {
+                    m[(n * na + a) * nbp + b] = f * v;
+                }
             }
         }
+        let mut terms = vec![0.0f64; N * 2 * n2];
+        for (term, m) in terms.chunks_exact_mut(2 * n2).zip(m.chunks_exact(na * nbp)) {
+            let (ab, ba) = term.split_at_mut(n2);
+            super::pair::project_any(nb, sa, sb, m, ab, ba);
+        }
+        terms.into_iter().map(|x| x as f32).collect()
     }
-    let mut terms = vec![0.0f64; N * 2 * n2];
-    for (term, m) in terms.chunks_exact_mut(2 * n2).zip(m.chunks_exact(na * nbp)) {
-        let (ab, ba) = term.split_at_mut(n2);
-        super::pair::project_any(nb, sa, sb, m, ab, ba);
-    }
-    terms.into_iter().map(|x| x as f32).collect()
 }
 
 #[cfg(test)]

@@ -221,21 +221,6 @@ impl Occluders {
         })
     }
 
-    #[inline(always)]
-    fn shaft_candidates_body(
-        &self,
-        shaft: &Shaft,
-        planes: &[(DVec3, f64)],
-        skip: (u32, u32),
-        out: &mut Vec<usize>,
-    ) {
-        out.clear();
-        debug_assert!(planes.len() <= 2);
-        let abs_n = [0, 1].map(|k| planes.get(k).map_or(DVec3::ZERO, |(n, _)| n.abs()));
-        let mut visitor = InShaft { shaft, planes, abs_n, eps: 1e-9 * self.scale, skip, out };
-        self.bvh.visit(&mut visitor);
-    }
-
     /// Whether element `e`'s plane culls occluders in [`Occluders::link_visibility`] (some
     /// occluder lies wholly behind it). Links between elements that cull nothing have the masks
     /// of plain any-hit rays against every occluder but their own two elements.
@@ -628,46 +613,49 @@ crate::simd::multiversion! {
         planes: &[(DVec3, f64)],
         skip: (u32, u32),
         out: &mut Vec<usize>,
-    ) = Occluders::shaft_candidates_body;
+    ) {
+        out.clear();
+        debug_assert!(planes.len() <= 2);
+        let abs_n = [0, 1].map(|k| planes.get(k).map_or(DVec3::ZERO, |(n, _)| n.abs()));
+        let mut visitor = InShaft { shaft, planes, abs_n, eps: 1e-9 * occluders.scale, skip, out };
+        occluders.bvh.visit(&mut visitor);
+    }
 }
 
 crate::simd::multiversion! {
     /// Sets `hit[k]` (leaves it set) when segment `k`, `o + t d` for `t in (1e-9, 1 - 1e-9)`, hits one
     /// of `tris` (each `v0, v1 - v0, v2 - v0`): [`bvh::segment_hits`] for each pair, the same operations
     /// in the same order, vectorised over the segments.
-    fn segments_hit(tris: &[[DVec3; 3]], segments: &Segments, hit: &mut [u64]) = segments_hit_body;
-}
-
-#[inline(always)]
-fn segments_hit_body(tris: &[[DVec3; 3]], segments: &Segments, hit: &mut [u64]) {
-    let n = hit.len().min(segments.n);
-    let [ox, oy, oz] = &segments.o;
-    let [dx, dy, dz] = &segments.d;
-    let (ox, oy, oz, dx, dy, dz) = (&ox[..n], &oy[..n], &oz[..n], &dx[..n], &dy[..n], &dz[..n]);
-    let (t_min, t_max) = (1e-9, 1.0 - 1e-9);
-    for [v0, e1, e2] in tris {
-        for k in 0..n {
-            // s = o - v0; q = s x e1 (as glam's cross)
-            let (sx, sy, sz) = (ox[k] - v0.x, oy[k] - v0.y, oz[k] - v0.z);
-            let qx = sy * e1.z - e1.y * sz;
-            let qy = sz * e1.x - e1.z * sx;
-            let qz = sx * e1.y - e1.x * sy;
-            // p = d x e2; det = e1 . p
-            let px = dy[k] * e2.z - e2.y * dz[k];
-            let py = dz[k] * e2.x - e2.z * dx[k];
-            let pz = dx[k] * e2.y - e2.x * dy[k];
-            let det = e1.x * px + e1.y * py + e1.z * pz;
-            let inv_det = 1.0 / det;
-            let u = (sx * px + sy * py + sz * pz) * inv_det;
-            let v = (dx[k] * qx + dy[k] * qy + dz[k] * qz) * inv_det;
-            let h = (e2.x * qx + e2.y * qy + e2.z * qz) * inv_det;
-            // Non-short-circuit `&`, so the loop has no branches. (A NaN `det` fails on `u`.)
-            let blocks = (det.abs() >= 1e-300)
-                & (0.0..=1.0).contains(&u)
-                & !(v < 0.0 || u + v > 1.0)
-                & (h > t_min)
-                & (h < t_max);
-            hit[k] |= blocks as u64;
+    fn segments_hit(tris: &[[DVec3; 3]], segments: &Segments, hit: &mut [u64]) {
+        let n = hit.len().min(segments.n);
+        let [ox, oy, oz] = &segments.o;
+        let [dx, dy, dz] = &segments.d;
+        let (ox, oy, oz, dx, dy, dz) = (&ox[..n], &oy[..n], &oz[..n], &dx[..n], &dy[..n], &dz[..n]);
+        let (t_min, t_max) = (1e-9, 1.0 - 1e-9);
+        for [v0, e1, e2] in tris {
+            for k in 0..n {
+                // s = o - v0; q = s x e1 (as glam's cross)
+                let (sx, sy, sz) = (ox[k] - v0.x, oy[k] - v0.y, oz[k] - v0.z);
+                let qx = sy * e1.z - e1.y * sz;
+                let qy = sz * e1.x - e1.z * sx;
+                let qz = sx * e1.y - e1.x * sy;
+                // p = d x e2; det = e1 . p
+                let px = dy[k] * e2.z - e2.y * dz[k];
+                let py = dz[k] * e2.x - e2.z * dx[k];
+                let pz = dx[k] * e2.y - e2.x * dy[k];
+                let det = e1.x * px + e1.y * py + e1.z * pz;
+                let inv_det = 1.0 / det;
+                let u = (sx * px + sy * py + sz * pz) * inv_det;
+                let v = (dx[k] * qx + dy[k] * qy + dz[k] * qz) * inv_det;
+                let h = (e2.x * qx + e2.y * qy + e2.z * qz) * inv_det;
+                // Non-short-circuit `&`, so the loop has no branches. (A NaN `det` fails on `u`.)
+                let blocks = (det.abs() >= 1e-300)
+                    & (0.0..=1.0).contains(&u)
+                    & !(v < 0.0 || u + v > 1.0)
+                    & (h > t_min)
+                    & (h < t_max);
+                hit[k] |= blocks as u64;
+            }
         }
     }
 }

@@ -101,29 +101,6 @@ impl Shaft {
         outside_masks(self, xyz, eps, out);
     }
 
-    #[inline(always)]
-    fn outside_masks_body(&self, [x, y, z]: [&[f64]; 3], eps: f64, out: &mut [u32]) {
-        let n = out.len();
-        let (x, y, z) = (&x[..n], &y[..n], &z[..n]);
-        let (lo, hi) = (self.bounds.min - DVec3::splat(eps), self.bounds.max + DVec3::splat(eps));
-        for k in 0..n {
-            out[k] = (x[k] < lo.x) as u32
-                | ((x[k] > hi.x) as u32) << 1
-                | ((y[k] < lo.y) as u32) << 2
-                | ((y[k] > hi.y) as u32) << 3
-                | ((z[k] < lo.z) as u32) << 4
-                | ((z[k] > hi.z) as u32) << 5;
-        }
-        for p in 0..self.count {
-            let (nx, ny, nz, limit) = (self.n[0][p], self.n[1][p], self.n[2][p], self.d[p] + eps);
-            for k in 0..n {
-                // `n.dot(point)`, in glam's order.
-                let dot = (nx * x[k]) + (ny * y[k]) + (nz * z[k]);
-                out[k] |= ((dot > limit) as u32) << (6 + p);
-            }
-        }
-    }
-
     /// False only if the box lies wholly outside the shaft: outside the union box, or wholly on
     /// the outer side of a plane (tested at the box's corner nearest the shaft, `n.c - |n|.h`).
     pub fn may_contain_box(&self, b: &Aabb, eps: f64) -> bool {
@@ -156,7 +133,28 @@ impl Shaft {
 
 crate::simd::multiversion! {
     /// [`Shaft::outside_masks`], vectorised over the points.
-    fn outside_masks(shaft: &Shaft, xyz: [&[f64]; 3], eps: f64, out: &mut [u32]) = Shaft::outside_masks_body;
+    fn outside_masks(shaft: &Shaft, xyz: [&[f64]; 3], eps: f64, out: &mut [u32]) {
+        let [x, y, z] = xyz;
+        let n = out.len();
+        let (x, y, z) = (&x[..n], &y[..n], &z[..n]);
+        let (lo, hi) = (shaft.bounds.min - DVec3::splat(eps), shaft.bounds.max + DVec3::splat(eps));
+        for k in 0..n {
+            out[k] = (x[k] < lo.x) as u32
+                | ((x[k] > hi.x) as u32) << 1
+                | ((y[k] < lo.y) as u32) << 2
+                | ((y[k] > hi.y) as u32) << 3
+                | ((z[k] < lo.z) as u32) << 4
+                | ((z[k] > hi.z) as u32) << 5;
+        }
+        for p in 0..shaft.count {
+            let (nx, ny, nz, limit) = (shaft.n[0][p], shaft.n[1][p], shaft.n[2][p], shaft.d[p] + eps);
+            for k in 0..n {
+                // `n.dot(point)`, in glam's order.
+                let dot = (nx * x[k]) + (ny * y[k]) + (nz * z[k]);
+                out[k] |= ((dot > limit) as u32) << (6 + p);
+            }
+        }
+    }
 }
 
 /// Calls `f(n, d)` for each plane of the shaft between `a` and `b` (`n . p > d` is outside,
