@@ -234,10 +234,7 @@ impl<'s> Decision<'s> {
     /// The terms a series evaluation will read.
     fn series_terms(&self) -> Option<&'s [f32]> {
         match self.kernel {
-            Kernel::Series(ser, p) => {
-                let len = ser.terms.len() / (series::SERIES_ORDER + 1);
-                Some(&ser.terms[..(ser.order_at(p) + 1) * len])
-            }
+            Kernel::Series(ser, p) => Some(ser.terms_at(p)),
             _ => None,
         }
     }

@@ -181,15 +181,21 @@ impl PairSeries {
     pub fn eval_into(&self, p: f64, out: &mut [f64]) -> usize {
         let len = out.len();
         debug_assert_eq!(self.terms.len(), (SERIES_ORDER + 1) * len);
-        let m = self.order_at(p);
+        let kept = self.terms_at(p);
         // Horner in p over the terms kept, highest first.
         out.fill(0.0);
-        for t in self.terms[..(m + 1) * len].chunks_exact(len).rev() {
+        for t in kept.chunks_exact(len).rev() {
             for (o, &x) in out.iter_mut().zip(t) {
                 *o = *o * p + x as f64;
             }
         }
-        m
+        kept.len() / len - 1
+    }
+
+    /// The terms an evaluation at `p` reads: `Phi_0` to `Phi_m`, `m = `[`PairSeries::order_at`]`(p)`.
+    pub fn terms_at(&self, p: f64) -> &[f32] {
+        let len = self.terms.len() / (SERIES_ORDER + 1);
+        &self.terms[..(self.order_at(p) + 1) * len]
     }
 }
 
