@@ -66,6 +66,11 @@ pub struct LinkStore {
     areas: Vec<f64>,
 }
 
+/// `sum_k |G^{kl}|` of one receiver's part of a column: its share of `T` before the area.
+fn magnitude(g: &[f32]) -> f64 {
+    g.iter().map(|x| x.abs() as f64).sum()
+}
+
 /// Areas within this relative difference of those `transfer` was weighted with keep it (a
 /// rotated element's area changes in its last bits).
 const AREA_TOLERANCE: f64 = 1e-9;
@@ -105,11 +110,7 @@ impl LinkStore {
             .into_par_iter()
             .map(|c| {
                 let column = columns[c].chunks_exact(nb);
-                receivers[c / nb]
-                    .iter()
-                    .zip(column)
-                    .map(|(&r, g)| areas[r as usize] * g.iter().map(|x| x.abs() as f64).sum::<f64>())
-                    .sum()
+                receivers[c / nb].iter().zip(column).map(|(&r, g)| areas[r as usize] * magnitude(g)).sum()
             })
             .collect();
     }
@@ -169,7 +170,7 @@ impl LinkStore {
                 if !self.transfer.is_empty() {
                     let added = &self.columns[shooter as usize * nb + l][start..];
                     self.transfer[shooter as usize * nb + l] +=
-                        self.areas[receiver as usize] * added.iter().map(|x| x.abs() as f64).sum::<f64>();
+                        self.areas[receiver as usize] * magnitude(added);
                 }
             }
         }
