@@ -78,7 +78,7 @@ fn main() {
         );
         // Columns: the update's time and its parts, the solve, then counts that do not depend on
         // timing noise.
-        let columns = |u: &animation::UpdateStats| -> [(&str, f64); 13] {
+        let columns = |u: &animation::UpdateStats| -> [(&str, f64); 15] {
             [
                 ("kernel s", u.kernel_seconds),
                 ("scan s", u.scan_seconds),
@@ -93,20 +93,22 @@ fn main() {
                 ("recomputed", u.links_recomputed as f64),
                 ("series", u.links_series as f64),
                 ("series terms", u.series_terms as f64),
+                ("shots", u.shots as f64),
+                ("replayed", u.replay_scale),
             ]
         };
         let row = |label: String, values: &[f64]| {
             let cells: Vec<String> = values
                 .iter()
                 .enumerate()
-                .map(|(k, v)| if k < 5 { format!("{v:.4}") } else { format!("{v:.0}") })
+                .map(|(k, v)| if k < 5 || k == 14 { format!("{v:.4}") } else { format!("{v:.0}") })
                 .collect();
             println!("| {label} | {} |", cells.join(" | "));
         };
         let names = columns(&Default::default()).map(|(name, _)| name);
         println!("| frame | {} |", names.join(" | "));
         println!("|---{}|", "|---".repeat(names.len()));
-        let mut sums = [0.0f64; 13];
+        let mut sums = [0.0f64; 15];
         for f in 2..=frames {
             let Outcome::Updated(u) =
                 animation::advance(&mut sys, &mut state, &scene, f as f64, &no_progress).unwrap()

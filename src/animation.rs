@@ -32,6 +32,7 @@ use crate::kernel::assemble::{ElementGeometry, KeptGeometry, integrate_visible_i
 use crate::kernel::series::{self, PairSeries, SERIES_MAX_T, SERIES_ORDER};
 use crate::links::{LinkStore, PairId, ReplacedBlocks};
 use crate::quadrature::GaussLegendre;
+use crate::replay::Replay;
 use crate::scene::Scene;
 use crate::solver;
 use crate::system::{Progress, System, build_elements};
@@ -83,6 +84,9 @@ pub struct UpdateStats {
     pub apply_seconds: f64,
     pub solve_seconds: f64,
     pub shots: usize,
+    /// How much of the last frame's shots were replayed before the solve (`crate::replay`): 0
+    /// without a replay, near 1 under steady motion.
+    pub replay_scale: f64,
 }
 
 /// Why an update cannot proceed and the frame must be rebuilt from scratch.
@@ -110,6 +114,8 @@ pub struct AnimationState {
     /// batches' blocks and the blocks the store replaced.
     block_pool: Vec<Vec<f32>>,
     replaced: ReplacedBlocks,
+    /// The last solve's shots, replayed as the next frame's first guess.
+    replay: Option<Replay>,
 }
 
 impl AnimationState {
@@ -123,6 +129,7 @@ impl AnimationState {
             culled: None,
             block_pool: Vec::new(),
             replaced: ReplacedBlocks::default(),
+            replay: None,
         }
     }
 
@@ -327,6 +334,12 @@ pub fn advance(
     let mut stats =
         UpdateStats { moved_elements: moved.iter().filter(|&&m| m).count(), ..Default::default() };
     let mut delta_b = vec![[0.0f64; 3]; n * nb];
+    // The last frame's shots, replayed as this frame's first guess (`crate::replay`). Taken out
+    // of the state: it goes back only with a finished solve (it must describe the kernel the
+    // changes below start from).
+    let replay = state.replay.take().filter(|r| r.applies_to(&sys.reflectance));
+    // `Delta K sigma`, for the replay, formed with `Delta K b` (zero without a replay).
+    let mut delta_k_sigma = vec![[0.0f64; 3]; n * nb];
 
     if stats.moved_elements > 0 {
         let rule = GaussLegendre::new(s.quadrature_order);
@@ -682,7 +695,11 @@ pub fn advance(
             let source = if half == 0 { c.j } else { c.i };
             (source, &c.new[half as usize * n2..][..n2], c.old[half as usize])
         };
-        delta_b.par_chunks_mut(nb).enumerate().for_each(|(r, out)| {
+        let no_replay = vec![[0.0f64; 3]; n * nb];
+        let sigma = replay.as_ref().map_or(&no_replay[..], Replay::sigma);
+        let b = &sys_ref.solution.b;
+        let outputs = delta_b.par_chunks_mut(nb).zip(delta_k_sigma.par_chunks_mut(nb));
+        outputs.enumerate().for_each(|(r, (out_b, out_sigma))| {
             let mine = &received[first[r] as usize..first[r + 1] as usize];
             for (x, &entry) in mine.iter().enumerate() {
                 // The blocks lie wherever their pairs were computed: ask for them ahead
@@ -693,7 +710,9 @@ pub fn advance(
                     crate::simd::prefetch(old);
                 }
                 let (source, new, old) = blocks_of(entry);
-                delta_kb(out, sys_ref, r, source as usize, new, old);
+                let s = source as usize * nb..(source as usize + 1) * nb;
+                let rho = sys_ref.reflectance[r];
+                delta_kb([&mut *out_b, &mut *out_sigma], rho, [&b[s.clone()], &sigma[s]], new, old);
             }
         });
         drop((rewrites, fresh));
@@ -728,9 +747,15 @@ pub fn advance(
     sys.reflectance = sys.elements.iter().map(|e| next.materials[e.material as usize].reflectance).collect();
 
     let solve_start = std::time::Instant::now();
+    // Replay the last frame's shots, then shoot what is left; record this frame's for the next.
+    let before = sys.solution.clone();
+    if let Some(r) = &replay {
+        stats.replay_scale = r.apply(&mut sys.solution, &delta_k_sigma, sys.links.transfers());
+    }
     let stop = s.tolerance * sys.emitted_power();
     let cancel = || !progress(1.0, "solve");
     let shot = solver::shoot(&sys.links, &sys.reflectance, &mut sys.solution, stop, &cancel)?;
+    state.replay = Some(Replay::record(&before, &sys.solution, &sys.reflectance));
     stats.solve_seconds = solve_start.elapsed().as_secs_f64();
     stats.shots = shot.shots;
     Ok(Outcome::Updated(stats))
@@ -789,21 +814,33 @@ const MAX_SWEPT_BOXES: usize = 4;
 /// than the quadratures they save; benches/animation.rs).
 const MIN_SERIES_FRAMES: f64 = 3.0;
 
-/// `out += rho_r (G_new - G_old) b_s` for receiver `r` (its `nb` coefficients), source `s`.
-fn delta_kb(out: &mut [[f64; 3]], sys: &System, r: usize, s: usize, new: &[f32], old: &[f32]) {
-    let nb = sys.basis.len();
-    let rho = sys.reflectance[r];
-    let b = &sys.solution.b[s * nb..(s + 1) * nb];
-    for (o, (new, old)) in out.iter_mut().zip(new.chunks_exact(nb).zip(old.chunks_exact(nb))) {
-        let mut acc = [0.0f64; 3];
-        for ((&x, &y), b) in new.iter().zip(old).zip(b) {
-            let d = x as f64 - y as f64;
-            for c in 0..3 {
-                acc[c] += d * b[c];
-            }
+crate::simd::multiversion! {
+    /// `out[v] += rho (G_new - G_old) x[v]` for one receiver (its `nb` coefficients, reflectance
+    /// `rho`) and the coefficients `x[v]` of one source, for the two vectors `b` and `sigma` at
+    /// once: the blocks are read once, and the six channels of the two vectors make one vector
+    /// register (a multiply per block entry instead of six).
+    fn delta_kb(out: [&mut [[f64; 3]]; 2], rho: [f64; 3], x: [&[[f64; 3]]; 2], new: &[f32], old: &[f32]) {
+        let nb = x[0].len();
+        // Per source function l: b's three channels, sigma's three, two lanes of padding.
+        let mut xs = [[0.0f64; 8]; 16];
+        for l in 0..nb {
+            xs[l][..3].copy_from_slice(&x[0][l]);
+            xs[l][3..6].copy_from_slice(&x[1][l]);
         }
-        for c in 0..3 {
-            o[c] += rho[c] * acc[c];
+        let [out_b, out_sigma] = out;
+        let rows = new.chunks_exact(nb).zip(old.chunks_exact(nb));
+        for ((ob, os), (new, old)) in out_b.iter_mut().zip(out_sigma.iter_mut()).zip(rows) {
+            let mut acc = [0.0f64; 8];
+            for (xl, (&g1, &g0)) in xs.iter().zip(new.iter().zip(old)) {
+                let d = g1 as f64 - g0 as f64;
+                for v in 0..8 {
+                    acc[v] += d * xl[v];
+                }
+            }
+            for c in 0..3 {
+                ob[c] += rho[c] * acc[c];
+                os[c] += rho[c] * acc[3 + c];
+            }
         }
     }
 }

@@ -16,6 +16,7 @@ pub mod geometry;
 pub mod kernel;
 pub mod links;
 pub mod quadrature;
+pub mod replay;
 pub mod scene;
 pub mod scenes;
 pub mod session;

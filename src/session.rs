@@ -54,6 +54,9 @@ pub struct FrameStats {
     /// Pairs with a moved element whose motion is a pure translation.
     pub recomputed_translation: usize,
     pub shots: usize,
+    /// How much of the last frame's shots the solve replayed first ([`crate::replay`]): near 1
+    /// under steady motion, 0 without a replay.
+    pub replay_scale: f64,
     /// Time of the corner gather ([`crate::gather`]), included in `seconds`.
     pub gather_seconds: f64,
     /// (Corner, source) moments of the gather, and how many were computed this frame (the rest
@@ -207,6 +210,7 @@ impl Session {
                         recomputed_non_translation: u.recomputed_non_translation,
                         recomputed_translation: u.recomputed_translation,
                         shots: u.shots,
+                        replay_scale: u.replay_scale,
                         gather_seconds,
                         gather_moments: g.moments,
                         gather_recomputed: g.recomputed,

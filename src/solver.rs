@@ -132,6 +132,11 @@ pub fn shoot(
             floats += ((shots.len() - before) * links.receivers_of(e as ElementId).len() * nb) as u64;
         }
         stats.shots += shots.len();
+        if std::env::var("GR_DEBUG").is_ok() {
+            let groups = shots.chunk_by(|x, y| x.e == y.e).count();
+            let l0 = shots.iter().filter(|s| s.l == 0).count();
+            eprintln!("batch shots {} groups {} l0 {} floats {}", shots.len(), groups, l0, floats);
+        }
         stats.floats_read += floats;
         let ranges: &[(usize, usize)] = if floats < PARALLEL_FLOATS { &[(0, n)] } else { &parts };
         // Split the outputs along the receiver ranges.

@@ -142,3 +142,26 @@ fn circle_rotation_and_emission_keys_match_full() {
     scene.frames = (1, 5);
     assert_matches_full(&scene, "circle + rotation + emission");
 }
+
+/// The solve replays the last frame's shots scaled by `replay_scale` (`galerkin_radiosity::replay`):
+/// about 1 while the light moves steadily, about 0 the frame it stops (the last frame's shots no
+/// longer fit), and about 1 again once it moves back (the frames in between shot nothing, so the
+/// turn itself has nothing to replay). Whatever the scale, every frame stays within 1% of `--full`.
+#[test]
+fn replayed_shots_follow_the_motion() {
+    let mut scene = scenes::cornell_box(4, settings());
+    let light = scene.objects.iter_mut().find(|o| o.name == "Light").unwrap();
+    let x = |d: f64| DVec3::new(d, 0.0, 0.0);
+    // Steady to frame 5, still to frame 7, back from 7 to 9.
+    light.animation = translation_keys(&[(1.0, x(0.0)), (5.0, x(-0.04)), (7.0, x(-0.04)), (9.0, x(0.0))]);
+    scene.frames = (1, 9);
+    assert_matches_full(&scene, "move, stop, return");
+    let scale: Vec<f64> = bake(&scene, Method::Incremental).iter().map(|(_, s)| s.replay_scale).collect();
+    eprintln!("replay scales {scale:?}");
+    // Frame 1 is the build and frame 2 the first update: nothing to replay yet.
+    assert_eq!(scale[..2], [0.0, 0.0]);
+    for f in [3, 4, 5, 9] {
+        assert!((scale[f - 1] - 1.0).abs() < 0.25, "steady motion, frame {f}: {}", scale[f - 1]);
+    }
+    assert!(scale[5].abs() < 0.05, "stopped, frame 6: {}", scale[5]);
+}
