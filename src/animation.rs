@@ -819,27 +819,42 @@ crate::simd::multiversion! {
     /// once: the blocks are read once, and the six channels of the two vectors make one vector
     /// register (a multiply per block entry instead of six).
     fn delta_kb(out: [&mut [[f64; 3]]; 2], rho: [f64; 3], x: [&[[f64; 3]]; 2], new: &[f32], old: &[f32]) {
-        let nb = x[0].len();
-        // Per source function l: b's three channels, sigma's three, two lanes of padding.
-        let mut xs = [[0.0f64; 8]; 16];
-        for l in 0..nb {
-            xs[l][..3].copy_from_slice(&x[0][l]);
-            xs[l][3..6].copy_from_slice(&x[1][l]);
+        match x[0].len() {
+            1 => delta_kb_nb::<1>(out, rho, x, new, old),
+            4 => delta_kb_nb::<4>(out, rho, x, new, old),
+            9 => delta_kb_nb::<9>(out, rho, x, new, old),
+            16 => delta_kb_nb::<16>(out, rho, x, new, old),
+            nb => unreachable!("{nb} basis functions"),
         }
-        let [out_b, out_sigma] = out;
-        let rows = new.chunks_exact(nb).zip(old.chunks_exact(nb));
-        for ((ob, os), (new, old)) in out_b.iter_mut().zip(out_sigma.iter_mut()).zip(rows) {
-            let mut acc = [0.0f64; 8];
-            for (xl, (&g1, &g0)) in xs.iter().zip(new.iter().zip(old)) {
-                let d = g1 as f64 - g0 as f64;
-                for v in 0..8 {
-                    acc[v] += d * xl[v];
-                }
+    }
+}
+
+/// [`delta_kb`] with `NB` basis functions.
+#[inline(always)]
+fn delta_kb_nb<const NB: usize>(
+    [out_b, out_sigma]: [&mut [[f64; 3]]; 2],
+    rho: [f64; 3],
+    x: [&[[f64; 3]]; 2],
+    new: &[f32],
+    old: &[f32],
+) {
+    // Per source function l: b's three channels, sigma's three, two lanes of padding.
+    let xs: [[f64; 8]; NB] = std::array::from_fn(|l| {
+        let (b, s) = (x[0][l], x[1][l]);
+        [b[0], b[1], b[2], s[0], s[1], s[2], 0.0, 0.0]
+    });
+    let rows = new.as_chunks::<NB>().0.iter().zip(old.as_chunks::<NB>().0);
+    for ((ob, os), (new, old)) in out_b.iter_mut().zip(out_sigma.iter_mut()).zip(rows) {
+        let mut acc = [0.0f64; 8];
+        for (xl, (&g1, &g0)) in xs.iter().zip(new.iter().zip(old)) {
+            let d = g1 as f64 - g0 as f64;
+            for v in 0..8 {
+                acc[v] += d * xl[v];
             }
-            for c in 0..3 {
-                ob[c] += rho[c] * acc[c];
-                os[c] += rho[c] * acc[3 + c];
-            }
+        }
+        for c in 0..3 {
+            ob[c] += rho[c] * acc[c];
+            os[c] += rho[c] * acc[3 + c];
         }
     }
 }
