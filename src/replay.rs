@@ -178,7 +178,9 @@ mod tests {
         let before = x.clone();
         crate::solver::shoot(&links, &rho, &mut x, stop, &|| false).unwrap();
         let replay = Replay::record(&before, &x, &rho);
-        assert!(invariant_error(&links, &rho, &e, &x) < 1e-12);
+        // The solver sums each batch's shots in f32: the invariant holds to that rounding.
+        let peak = x.b.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(invariant_error(&links, &rho, &e, &x) < 1e-7 * peak);
 
         // Next "frame": the emission changes by Delta e (Delta K = 0 here), then the replay.
         let e2: Vec<[f64; 3]> = e.iter().map(|v| v.map(|x| 1.1 * x)).collect();
@@ -203,12 +205,12 @@ mod tests {
         // solve from emission) 0.1 times cancels the new unshot power almost entirely.
         assert!((alpha - 0.1).abs() < 0.02, "alpha {alpha}");
         assert!(unshot_power(&y) < 0.05 * power_before, "{} vs {power_before}", unshot_power(&y));
-        assert!(invariant_error(&links, &rho, &e2, &y) < 1e-12);
+        assert!(invariant_error(&links, &rho, &e2, &y) < 1e-7 * peak);
         crate::solver::shoot(&links, &rho, &mut y, stop, &|| false).unwrap();
         let reference = crate::solver::gauss_seidel(&links, &rho, &e2, 1e-14);
         for (a, b) in y.b.iter().zip(&reference) {
             for c in 0..3 {
-                assert!((a[c] - b[c]).abs() < 1e-8, "{} vs {}", a[c], b[c]);
+                assert!((a[c] - b[c]).abs() < 1e-7 * peak, "{} vs {}", a[c], b[c]);
             }
         }
     }
