@@ -446,7 +446,14 @@ pub fn advance(
                     // Re-checking from `Blocked` is exact in the first case and gives a mask
                     // that still yields the zero kernel in the second.
                     let relinked = (static_pair && relink_ok(iu, ju))
-                        .then(|| o.relink_visibility((&patches[iu], &patches[ju]), old_vis, &moved_triangles))
+                        .then(|| {
+                            o.relink_visibility(
+                                (iu, &patches[iu]),
+                                (ju, &patches[ju]),
+                                old_vis,
+                                &moved_triangles,
+                            )
+                        })
                         .flatten();
                     if relinked.is_some() {
                         batch.visibility_relinked += 1;
