@@ -137,22 +137,12 @@ mod tests {
 
     /// `K v = rho G v`, through the store.
     fn apply_k(links: &LinkStore, rho: &[[f64; 3]], v: &[[f64; 3]]) -> Vec<[f64; 3]> {
-        let nb = links.nb();
-        let mut out = vec![[0.0; 3]; v.len()];
-        for i in 0..rho.len() {
-            for &p in links.pairs_of(i as u32) {
-                let j = links.other(p, i as u32) as usize;
-                for l in 0..nb {
-                    let g = links.column(p, i as u32, l);
-                    for k in 0..nb {
-                        for c in 0..3 {
-                            out[i * nb + k][c] += rho[i][c] * g[k] as f64 * v[j * nb + l][c];
-                        }
-                    }
-                }
-            }
-        }
-        out
+        (0..rho.len())
+            .flat_map(|i| {
+                let row = crate::solver::gather_row(links, i as u32, v);
+                row.into_iter().map(move |g| std::array::from_fn(|c| rho[i][c] * g[c]))
+            })
+            .collect()
     }
 
     /// `max |e + K (b - u) - b|`: how far `x` is from the shooting invariant.

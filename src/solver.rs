@@ -303,6 +303,25 @@ fn shoot_range_nb<const NB: usize, const L: usize>(
     }
 }
 
+/// `sum_j G_ij^{kl} v_j^l` for receiver `i`, per `k` (before reflection): one row of eq. (5)'s
+/// sum, read through the store pair by pair (for checks, not speed).
+pub fn gather_row(links: &LinkStore, i: ElementId, v: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    let nb = links.nb();
+    let mut acc = vec![[0.0; 3]; nb];
+    for &p in links.pairs_of(i) {
+        let j = links.other(p, i) as usize;
+        for l in 0..nb {
+            let g = links.column(p, i, l);
+            for k in 0..nb {
+                for c in 0..3 {
+                    acc[k][c] += g[k] as f64 * v[j * nb + l][c];
+                }
+            }
+        }
+    }
+    acc
+}
+
 /// Gauss-Seidel on eq. (5) until no coefficient moves by more than `tol` (absolute); returns `b`.
 pub fn gauss_seidel(links: &LinkStore, reflectance: &[[f64; 3]], e: &[[f64; 3]], tol: f64) -> Vec<[f64; 3]> {
     let nb = links.nb();
@@ -311,18 +330,7 @@ pub fn gauss_seidel(links: &LinkStore, reflectance: &[[f64; 3]], e: &[[f64; 3]],
     for _ in 0..10_000 {
         let mut delta: f64 = 0.0;
         for i in 0..n {
-            let mut acc = vec![[0.0; 3]; nb];
-            for &p in links.pairs_of(i as ElementId) {
-                let j = links.other(p, i as ElementId) as usize;
-                for l in 0..nb {
-                    let g = links.column(p, i as ElementId, l);
-                    for k in 0..nb {
-                        for c in 0..3 {
-                            acc[k][c] += g[k] as f64 * b[j * nb + l][c];
-                        }
-                    }
-                }
-            }
+            let acc = gather_row(links, i as ElementId, &b);
             for k in 0..nb {
                 for c in 0..3 {
                     let v = e[i * nb + k][c] + reflectance[i][c] * acc[k][c];
