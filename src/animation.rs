@@ -348,8 +348,7 @@ pub fn advance(
             vis_axis: s.visibility_samples,
             adaptive: s.adaptive_quadrature,
         };
-        let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
-        let geom = ElementGeometry::reusing(state.geometry.take(), &patches, &moved, &ctx);
+        let kept_geometry = state.geometry.take();
         let shaft_eps = 1e-9 * scene_scale;
         let bounds: Vec<Aabb> = patches.iter().map(Patch::bounds).collect();
         // Per swept box and element, 3 bits "min <= swept max" and 3 bits "max >= swept min"
@@ -362,39 +361,50 @@ pub fn advance(
                 bounds.iter().map(code).collect()
             })
             .collect();
-        state.index.sync(&sys.links);
         // Per element i, its candidates (i, j > i) and how many shafts it tested.
-        let per_element: Vec<(Vec<PairCandidate>, usize)> = (0..n)
-            .into_par_iter()
-            .map(|i| {
-                let mut found = Vec::new();
-                let mut tests = 0;
-                for j in (i + 1)..n {
-                    if moved[i] || moved[j] {
-                        let rigid = translated[i] && translated[j] && (shift[j] - shift[i]).length() <= eps;
-                        if !rigid {
-                            found.push((i as u32, j as u32, Candidate::Moved));
+        let scan = || -> Vec<(Vec<PairCandidate>, usize)> {
+            (0..n)
+                .into_par_iter()
+                .map(|i| {
+                    let mut found = Vec::new();
+                    let mut tests = 0;
+                    for j in (i + 1)..n {
+                        if moved[i] || moved[j] {
+                            let rigid =
+                                translated[i] && translated[j] && (shift[j] - shift[i]).length() <= eps;
+                            if !rigid {
+                                found.push((i as u32, j as u32, Candidate::Moved));
+                                continue;
+                            }
+                        }
+                        if !s.visibility {
                             continue;
                         }
-                    }
-                    if !s.visibility {
-                        continue;
-                    }
-                    let (bi, bj) = (&bounds[i], &bounds[j]);
-                    for (x, code) in swept.iter().zip(&codes) {
-                        if code[i] | code[j] != 0b11_1111 {
-                            continue; // The pair's box misses this swept box.
-                        }
-                        tests += 1;
-                        if Shaft::between_may_contain_box(bi, bj, x, shaft_eps) {
-                            found.push((i as u32, j as u32, Candidate::VisibilityOnly));
-                            break;
+                        let (bi, bj) = (&bounds[i], &bounds[j]);
+                        for (x, code) in swept.iter().zip(&codes) {
+                            if code[i] | code[j] != 0b11_1111 {
+                                continue; // The pair's box misses this swept box.
+                            }
+                            tests += 1;
+                            if Shaft::between_may_contain_box(bi, bj, x, shaft_eps) {
+                                found.push((i as u32, j as u32, Candidate::VisibilityOnly));
+                                break;
+                            }
                         }
                     }
-                }
-                (found, tests)
-            })
-            .collect();
+                    (found, tests)
+                })
+                .collect()
+        };
+        // The occluders' BVH is built on one thread: the other scans meanwhile.
+        let ((occluders, geom), per_element) = rayon::join(
+            || {
+                let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
+                (occluders, ElementGeometry::reusing(kept_geometry, &patches, &moved, &ctx))
+            },
+            scan,
+        );
+        state.index.sync(&sys.links);
         stats.shaft_tests = per_element.iter().map(|(_, t)| t).sum();
         let candidates: Vec<PairCandidate> = per_element.into_iter().flat_map(|(c, _)| c).collect();
         stats.candidates = candidates.len();
