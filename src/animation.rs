@@ -35,7 +35,7 @@ use crate::quadrature::GaussLegendre;
 use crate::replay::Replay;
 use crate::scene::Scene;
 use crate::solver;
-use crate::system::{Progress, System, build_elements};
+use crate::system::{Progress, System, build_elements_reusing};
 use crate::visibility::shaft::Shaft;
 use crate::visibility::{MovedTriangles, Occluders, Visibility};
 
@@ -297,7 +297,7 @@ pub fn advance(
     let s = &next.settings;
     let basis = sys.basis;
     let nb = basis.len();
-    let new_elements = build_elements(next, frame, basis);
+    let new_elements = build_elements_reusing(next, frame, basis, &sys.elements);
     if new_elements.len() != sys.elements.len()
         || new_elements.iter().zip(&sys.elements).any(|(a, b)| (a.object, a.face) != (b.object, b.face))
     {

@@ -43,9 +43,17 @@ pub struct Element {
 
 /// World-space elements of a scene at a frame: one per non-degenerate face.
 pub fn build_elements(scene: &Scene, frame: f64, basis: Basis) -> Vec<Element> {
+    build_elements_reusing(scene, frame, basis, &[])
+}
+
+/// [`build_elements`], taking from `previous` (the elements of another frame, in their order)
+/// every element whose face sits where it sat there: only moved faces pay for their area and
+/// moments (placing the 1,079 faces of the moving-light box, of which 9 move: 0.8 -> 0.33 ms).
+pub fn build_elements_reusing(scene: &Scene, frame: f64, basis: Basis, previous: &[Element]) -> Vec<Element> {
     let rule = GaussLegendre::new(4);
     let mut elements = Vec::with_capacity(scene.face_count());
     let mut degenerate = scene.degenerate_faces.iter().peekable();
+    let mut previous = previous.iter().peekable();
     for (o, obj) in scene.objects.iter().enumerate() {
         let m = obj.world_from_object(frame);
         let world: Vec<DVec3> = obj.vertices.iter().map(|v| m.transform_point3(*v)).collect();
@@ -56,6 +64,16 @@ pub fn build_elements(scene: &Scene, frame: f64, basis: Basis) -> Vec<Element> {
             }
             let corners: Vec<DVec3> = face.iter().map(|&v| world[v as usize]).collect();
             let patch = Patch::from_corners(&corners);
+            // Previous elements of faces before this one (degenerate there, not here) are passed.
+            while previous.next_if(|e| (e.object, e.face) < (o as u32, f as u32)).is_some() {}
+            if let Some(e) = previous.next_if(|e| (e.object, e.face) == (o as u32, f as u32))
+                && e.patch == patch
+                && e.material == obj.face_materials[f]
+                && e.moments.len() == basis.len()
+            {
+                elements.push(e.clone());
+                continue;
+            }
             elements.push(element(
                 o as u32,
                 f as u32,
