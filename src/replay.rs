@@ -93,7 +93,8 @@ const ALPHA_STEP: f64 = 0.01;
 /// `alpha` is the median of the points `-u / c` (clamped to the range) weighted by `w |c|`. A
 /// histogram finds the bin holding the median in one pass over the terms, and a second pass sorts
 /// only that bin's points: no copy of all ~30k points of the moving-light box, whose selection took
-/// 0.73-0.96 ms a frame against 0.50-0.68 ms now (sorting them, 1.5 ms). Zero when no term depends on `alpha`.
+/// 0.73-0.96 ms a frame against 0.50-0.68 ms now (sorting them, 1.5 ms). Zero when no term depends
+/// on `alpha`.
 fn least_power_scale(n: usize, term: impl Fn(usize) -> (f64, f64, f64)) -> f64 {
     const BINS: usize = (2.0 * ALPHA_RANGE / ALPHA_STEP) as usize;
     let point = |t: usize| {
