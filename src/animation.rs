@@ -336,7 +336,7 @@ pub fn advance(
     // The last frame's shots, replayed as this frame's first guess (`crate::replay`). Taken out
     // of the state: it goes back only with a finished solve (it must describe the kernel the
     // changes below start from).
-    let replay = state.replay.take().filter(|r| r.applies_to(&sys.reflectance));
+    let replay = state.replay.take();
     // `Delta K sigma`, for the replay, formed with `Delta K b` (zero without a replay).
     let mut delta_k_sigma = vec![[0.0f64; 3]; n * nb];
 
@@ -765,7 +765,8 @@ pub fn advance(
     let solve_start = std::time::Instant::now();
     // Replay the last frame's shots, then shoot what is left; record this frame's for the next.
     let before = sys.solution.clone();
-    if let Some(r) = &replay {
+    // (Under other reflectances than the recorded ones the replay would not keep the invariant.)
+    if let Some(r) = replay.as_ref().filter(|r| r.applies_to(&sys.reflectance)) {
         stats.replay_scale = r.apply(&mut sys.solution, &delta_k_sigma, sys.links.transfers());
     }
     let stop = s.tolerance * sys.emitted_power();
