@@ -77,9 +77,9 @@ struct Shot {
 /// row, with no shuffles. The f64 `[channel][k]` rows before took 18% longer a frame (solve
 /// 17.9 -> 14.7 ms median, moving-light box, 5 interleaved runs) and the static solve 20% longer;
 /// the time went to the adds and stores of 27 doubles in odd-sized rows, not to reading the links
-/// (halving the link bytes had changed nothing). The sums of one batch are small next to `b`,
-/// which stays f64: the shooting invariant holds to 2e-9 of the peak (`replay` tests) and a
-/// frame's solution moves by 5e-9 of the peak.
+/// (halving the link bytes had changed nothing). A batch's sums round to f32 (6e-8 relative)
+/// once, before they join `b`, which stays f64: the shooting invariant holds to 2e-9 of the peak
+/// (`replay` tests) and a frame's solution moves by 5e-9 of the peak.
 fn lanes(nb: usize) -> usize {
     match nb {
         1 | 4 | 16 => nb,
