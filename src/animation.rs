@@ -590,15 +590,15 @@ pub fn advance(
             .map(|(run, mut blocks)| {
                 blocks.clear();
                 let mut batch = UpdateBatch { blocks, ..Default::default() };
-                // Decided first, then emitted with the series terms a few pairs ahead prefetched:
-                // the solve's stream through the store evicts them between frames, and reading
-                // them from memory was most of a series evaluation.
                 // Progress and cancellation once per run (a shared counter per candidate made
                 // the two threads trade its cache line 29k times a frame).
                 let d = done.fetch_add(run.len(), std::sync::atomic::Ordering::Relaxed);
                 if !progress(d as f64 / total.max(1) as f64, "kernel update") {
                     return Err(Error::Cancelled);
                 }
+                // Decided first, then emitted with the series terms a few pairs ahead prefetched:
+                // the solve's stream through the store evicts them between frames, and reading
+                // them from memory was most of a series evaluation.
                 let mut decided = Vec::with_capacity(run.len());
                 for &c in run {
                     decided.extend(decide(c, &mut batch)?);

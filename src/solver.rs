@@ -131,7 +131,8 @@ pub fn shoot(
     let parts = receiver_ranges(links, n, rayon::current_num_threads().max(1));
     let mut shots: Vec<Shot> = Vec::new();
     // The batch sums, their rows starting on cache lines ([`lanes`]).
-    let width = 3 * lanes(nb);
+    let lane = lanes(nb);
+    let width = 3 * lane;
     let mut gathered_buf = vec![0.0f32; n * width + 16];
     let offset = gathered_buf.as_ptr().align_offset(64);
     let gathered = &mut gathered_buf[offset..offset + n * width];
@@ -161,11 +162,6 @@ pub fn shoot(
             floats += ((shots.len() - before) * links.receivers_of(e as ElementId).len() * nb) as u64;
         }
         stats.shots += shots.len();
-        if std::env::var("GR_DEBUG").is_ok() {
-            let groups = shots.chunk_by(|x, y| x.e == y.e).count();
-            let l0 = shots.iter().filter(|s| s.l == 0).count();
-            eprintln!("batch shots {} groups {} l0 {} floats {}", shots.len(), groups, l0, floats);
-        }
         stats.floats_read += floats;
         let ranges: &[(usize, usize)] = if floats < PARALLEL_FLOATS { &[(0, n)] } else { &parts };
         // Split the outputs along the receiver ranges.
@@ -189,7 +185,6 @@ pub fn shoot(
             for (r, _) in touched.iter().enumerate().filter(|(_, t)| **t) {
                 let e = part.lo + r;
                 let g = &mut part.gathered[r * width..(r + 1) * width];
-                let lane = width / 3;
                 for k in 0..nb {
                     for c in 0..3 {
                         let d = reflectance[e][c] * g[c * lane + k] as f64;
