@@ -62,12 +62,45 @@ fn coefficient_power(u: &[f64; 3], transfer: f64) -> f64 {
     (u[0].abs() + u[1].abs() + u[2].abs()) * transfer
 }
 
-/// One column shot: element `e` sends its unshot coefficient `l` (value `u`, RGB).
+/// One column shot: element `e` sends its unshot coefficient `l` (value `u`, RGB, in the
+/// batch sums' units, [`SumScale`]).
 #[derive(Clone, Copy, Debug)]
 struct Shot {
     e: ElementId,
     l: u32,
-    u: [f64; 3],
+    u: [f32; 3],
+}
+
+/// The power of two a solve's f32 batch sums are kept in units of, so that their range follows
+/// the unshot values and not the scene's units.
+///
+/// A solve's values shrink geometrically toward its tolerance. Had the sums been kept in the
+/// scene's units, a dim scene (emission 1e-30) or a tolerance of 1e-300 took them into f32's
+/// subnormals, where a shot through a coupling above 1/2 rounds back up to the smallest
+/// subnormal: the same few values circled between two elements for ever (seen in CI, from the
+/// FFI property test). Scaled so that the largest unshot value starts in `[1, 2)`, the sums stay
+/// normal down to 2^-126 of it, and a shot below that, which can deliver nothing f32 can hold, is
+/// dropped instead of shot (`shoot`). Scaling by a power of two is exact, so solutions in the
+/// normal range are bit-identical to unscaled sums.
+#[derive(Clone, Copy, Debug)]
+struct SumScale {
+    /// Scene units -> sum units.
+    up: f64,
+    /// Sum units -> scene units.
+    down: f64,
+}
+
+impl SumScale {
+    fn of(unshot: &[[f64; 3]]) -> Result<Self> {
+        let largest = unshot.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+        if !largest.is_finite() {
+            return Err(Error::Internal(format!("unshot radiosity {largest} is not finite")));
+        }
+        // f64 holds 2^+-1000 exactly; a largest value outside that is clamped (and a zero one
+        // needs no scale).
+        let exponent = if largest > 0.0 { largest.log2().floor().clamp(-1000.0, 1000.0) } else { 0.0 };
+        Ok(Self { up: (-exponent).exp2(), down: exponent.exp2() })
+    }
 }
 
 /// Lanes per channel of a batch's sums per receiver: `nb` rounded up to a whole vector.
@@ -136,6 +169,7 @@ pub fn shoot(
     let mut gathered_buf = vec![0.0f32; n * width + 16];
     let offset = gathered_buf.as_ptr().align_offset(64);
     let gathered = &mut gathered_buf[offset..offset + n * width];
+    let scale = SumScale::of(&x.unshot)?;
     loop {
         let total: f64 = priority.iter().sum();
         let best = priority.iter().copied().fold(0.0, f64::max);
@@ -154,7 +188,10 @@ pub fn shoot(
             for l in 0..nb {
                 let i = e * nb + l;
                 if priority[i] >= BATCH_FRACTION * best && priority[i] > 0.0 {
-                    shots.push(Shot { e: e as ElementId, l: l as u32, u: x.unshot[i] });
+                    let u = x.unshot[i].map(|v| (v * scale.up) as f32);
+                    if u.iter().any(|v| v.abs() >= f32::MIN_POSITIVE) {
+                        shots.push(Shot { e: e as ElementId, l: l as u32, u });
+                    }
                     x.unshot[i] = [0.0; 3];
                     priority[i] = 0.0;
                 }
@@ -187,7 +224,7 @@ pub fn shoot(
                 let g = &mut part.gathered[r * width..(r + 1) * width];
                 for k in 0..nb {
                     for c in 0..3 {
-                        let d = reflectance[e][c] * g[c * lane + k] as f64;
+                        let d = reflectance[e][c] * (g[c * lane + k] as f64 * scale.down);
                         part.b[r * nb + k][c] += d;
                         part.unshot[r * nb + k][c] += d;
                     }
@@ -281,10 +318,7 @@ fn shoot_range_nb<const NB: usize, const L: usize>(
         });
         let cols = &cols[..group.len()];
         // The group's unshot values, as the sums are kept.
-        let us: [[f32; 3]; NB] = std::array::from_fn(|m| match group.get(m) {
-            Some(s) => s.u.map(|x| x as f32),
-            None => [0.0; 3],
-        });
+        let us: [[f32; 3]; NB] = std::array::from_fn(|m| group.get(m).map_or([0.0; 3], |s| s.u));
         for (r, &i) in receivers.iter().enumerate() {
             let i = i as usize;
             if i < lo || i >= hi {
@@ -349,4 +383,64 @@ pub fn gauss_seidel(links: &LinkStore, reflectance: &[[f64; 3]], e: &[[f64; 3]],
         }
     }
     b
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::visibility::Visibility;
+
+    /// Two elements, one basis function, coupled both ways by `g` (`G_ab = G_ba = g`).
+    fn facing_pair(g: f64) -> LinkStore {
+        let mut links = LinkStore::new(2, 1);
+        links.push(0, 1, &[g], &[g], Visibility::Full);
+        links.set_receiver_areas(&[1.0, 1.0]);
+        links
+    }
+
+    /// Solves with emission `e` on element 0 down to `stop`, failing (not hanging) after 10,000
+    /// batches.
+    fn solve(links: &LinkStore, rho: f64, e: f64, stop: f64) -> Result<Coefficients> {
+        let mut x = Coefficients::from_emission(&[[e; 3], [0.0; 3]], 1);
+        let batches = std::cell::Cell::new(0);
+        let cancel = || {
+            batches.set(batches.get() + 1);
+            batches.get() > 10_000
+        };
+        shoot(links, &[[rho; 3]; 2], &mut x, stop, &cancel)?;
+        Ok(x)
+    }
+
+    #[test]
+    fn dim_scenes_and_tiny_tolerances_converge_to_the_closed_form() {
+        // A coupling above 1/2 is what trapped unscaled f32 sums: from the smallest subnormal,
+        // 0.9 * 0.9 of it rounds back up to it, and the solve went on for ever.
+        let (g, rho) = (0.9, 0.9);
+        let links = facing_pair(g);
+        // b_0 = e / (1 - (rho g)^2), b_1 = rho g b_0.
+        let closed_form = |e: f64| {
+            let b0 = e / (1.0 - (rho * g) * (rho * g));
+            [b0, rho * g * b0]
+        };
+        for (e, stop) in [(1.0, 1e-12), (1e-30, 1e-300), (1.0, 1e-300), (1e30, 1e-10)] {
+            let x = solve(&links, rho, e, stop).unwrap_or_else(|err| panic!("e {e}, stop {stop}: {err}"));
+            let want = closed_form(e);
+            for (b, w) in x.b.iter().zip(want) {
+                // f32 sums: 6e-8 relative per batch.
+                assert!((b[0] - w).abs() < 1e-6 * w, "e {e}, stop {stop}: {} vs {w}", b[0]);
+            }
+        }
+    }
+
+    #[test]
+    fn solutions_scale_with_the_emission_exactly() {
+        // The sums are kept in units of a power of two that follows the values, so a scene 2^-100
+        // as bright solves to exactly 2^-100 times the solution, shot for shot.
+        let links = facing_pair(0.7);
+        let bright = solve(&links, 0.8, 1.5, 1e-9).unwrap();
+        let dim = solve(&links, 0.8, 1.5 * 2f64.powi(-100), 1e-9 * 2f64.powi(-100)).unwrap();
+        for (a, b) in bright.b.iter().zip(&dim.b) {
+            assert_eq!(a.map(|v| v * 2f64.powi(-100)), *b);
+        }
+    }
 }

@@ -13,7 +13,9 @@
 
 use std::ffi::{CStr, c_void};
 use std::ptr::{null, null_mut};
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
 
 use galerkin_radiosity::ffi::*;
 use proptest::prelude::*;
@@ -244,6 +246,26 @@ static SOLVED: AtomicUsize = AtomicUsize::new(0);
 static CANCELLED: AtomicUsize = AtomicUsize::new(0);
 static READS: AtomicUsize = AtomicUsize::new(0);
 
+/// The case being run and since when, for [`watchdog`].
+static CURRENT: Mutex<Option<(Instant, Case)>> = Mutex::new(None);
+
+/// A case runs in milliseconds; one that has run for `limit` has hung (a solve that never
+/// stopped hung CI for its whole 90 minutes once). Prints the case, so it can be replayed, and
+/// ends the process: a failure with its input instead of a timeout without one.
+fn watchdog(limit: Duration) {
+    std::thread::spawn(move || {
+        loop {
+            std::thread::sleep(Duration::from_secs(1));
+            if let Some((since, case)) = &*CURRENT.lock().unwrap()
+                && since.elapsed() > limit
+            {
+                eprintln!("a case has run for over {limit:?}; it is:\n{case:#?}");
+                std::process::exit(101);
+            }
+        }
+    });
+}
+
 fn ptr<T>(v: &[T], null_it: bool) -> *const T {
     if null_it { null() } else { v.as_ptr() }
 }
@@ -251,6 +273,7 @@ fn ptr<T>(v: &[T], null_it: bool) -> *const T {
 /// Builds the arrays of `gr_session_new` from `c`, calls it, then runs the ops on the session.
 fn run(c: &Case) -> Result<(), TestCaseError> {
     RUNS.fetch_add(1, Ordering::Relaxed);
+    *CURRENT.lock().unwrap() = Some((Instant::now(), c.clone()));
     let nm = c.materials.len();
     let reflectance: Vec<f32> = c.materials.iter().flat_map(|m| m[..3].to_vec()).collect();
     let emission: Vec<f32> = c.materials.iter().flat_map(|m| m[3..].to_vec()).collect();
@@ -493,6 +516,7 @@ fn config() -> Config {
 fn arbitrary_input_never_crashes() {
     let config = config();
     let cases = config.cases;
+    watchdog(Duration::from_secs(60));
     let mut runner = TestRunner::new(config);
     let result = runner.run(&case(), |c| run(&c));
     eprintln!(
