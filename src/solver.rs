@@ -6,7 +6,7 @@
 //! uses the same routine on the differences `Delta b` (eq. 9). [`gauss_seidel`]: a direct
 //! iteration, the cross-check in tests.
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, invalid_scene};
 use crate::links::{ElementId, LinkStore};
 
 /// Radiosity coefficients and their unshot part, `[element * nb + k]`, RGB.
@@ -128,6 +128,14 @@ fn lanes(nb: usize) -> usize {
 /// ahead gained less).
 const PREFETCH_RECEIVERS: usize = 16;
 
+/// A solve whose unshot power grows this many times over its start diverges. With reflectances
+/// below 1 and form factors summing to at most 1, a shot delivers less power than it takes
+/// (up to the weighting of the higher-order coefficients): growth means the kernel is wrong for
+/// the scene, and without this test the solve went on until the values overflowed, then for ever
+/// on NaN (seen in the FFI property test: three triangles meeting at an edge, basis order 3,
+/// quadrature order 3).
+const DIVERGED: f64 = 1e6;
+
 /// Batches with fewer link coefficients than this are shot on one thread: below it, handing
 /// out the work costs more than it saves.
 const PARALLEL_FLOATS: u64 = 1 << 16;
@@ -170,12 +178,22 @@ pub fn shoot(
     let offset = gathered_buf.as_ptr().align_offset(64);
     let gathered = &mut gathered_buf[offset..offset + n * width];
     let scale = SumScale::of(&x.unshot)?;
+    let start_total: f64 = priority.iter().sum();
     loop {
         let total: f64 = priority.iter().sum();
         let best = priority.iter().copied().fold(0.0, f64::max);
         if total <= stop_power || best <= 0.0 {
             stats.residual = total;
             return Ok(stats);
+        }
+        if !total.is_finite() || total > DIVERGED * start_total {
+            return Err(invalid_scene!(
+                "the solution diverges (the unshot power grew {:.1e}-fold in {} shots): the kernel \
+                 couples some patches by more than 1, as when patches nearly touch and \
+                 settings.quadrature_order is too low to resolve them; raise it or subdivide",
+                total / start_total,
+                stats.shots
+            ));
         }
         if cancel() {
             return Err(Error::Cancelled);
@@ -430,6 +448,18 @@ mod tests {
                 assert!((b[0] - w).abs() < 1e-6 * w, "e {e}, stop {stop}: {} vs {w}", b[0]);
             }
         }
+    }
+
+    #[test]
+    fn a_diverging_kernel_is_an_error_not_a_hang() {
+        // rho g = 1.35 > 1: each bounce brings back more than was sent.
+        let links = facing_pair(1.5);
+        match solve(&links, 0.9, 1.0, 1e-6) {
+            Err(Error::InvalidScene(m)) => assert!(m.contains("diverges"), "{m}"),
+            other => panic!("{other:?}"),
+        }
+        // Just below 1 converges, however slowly.
+        assert!(solve(&facing_pair(1.1), 0.9, 1.0, 1e-6).is_ok());
     }
 
     #[test]

@@ -245,6 +245,7 @@ static SESSIONS: AtomicUsize = AtomicUsize::new(0);
 static SOLVED: AtomicUsize = AtomicUsize::new(0);
 static CANCELLED: AtomicUsize = AtomicUsize::new(0);
 static READS: AtomicUsize = AtomicUsize::new(0);
+static DIVERGED: AtomicUsize = AtomicUsize::new(0);
 
 /// The case being run and since when, for [`watchdog`].
 static CURRENT: Mutex<Option<(Instant, Case)>> = Mutex::new(None);
@@ -382,6 +383,15 @@ unsafe extern "C" fn stop_after(_f: f64, _stage: *const std::ffi::c_char, user: 
     1
 }
 
+/// A solve of a valid scene fails only when its kernel makes the solution diverge (random
+/// triangles that meet at an edge, with a low quadrature order), and says so.
+fn diverged(st: GrStatus) -> Result<(), TestCaseError> {
+    let msg = last_error();
+    prop_assert!(st == GrStatus::InvalidScene && msg.contains("diverges"), "solve_frame: {st:?}: {msg}");
+    DIVERGED.fetch_add(1, Ordering::Relaxed);
+    Ok(())
+}
+
 fn run_ops(s: *mut GrSession, c: &Case) -> Result<(), TestCaseError> {
     let mut solved = false;
     let mut n = 0u32;
@@ -389,9 +399,12 @@ fn run_ops(s: *mut GrSession, c: &Case) -> Result<(), TestCaseError> {
     prop_assert_eq!(n as usize, c.objects.len());
     if c.solve_first {
         let st = check("solve_frame", unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) })?;
-        prop_assert_eq!(st, GrStatus::Ok);
-        SOLVED.fetch_add(1, Ordering::Relaxed);
-        solved = true;
+        if st == GrStatus::Ok {
+            SOLVED.fetch_add(1, Ordering::Relaxed);
+            solved = true;
+        } else {
+            diverged(st)?;
+        }
     }
     for op in &c.ops {
         match op {
@@ -408,12 +421,12 @@ fn run_ops(s: *mut GrSession, c: &Case) -> Result<(), TestCaseError> {
                 let st = check("solve_frame", unsafe {
                     gr_session_solve_frame(s, *frame, Some(stop_after), (&raw mut left).cast())
                 })?;
-                prop_assert!(matches!(st, GrStatus::Ok | GrStatus::Cancelled | GrStatus::InvalidArgument));
                 solved |= st == GrStatus::Ok;
-                if st == GrStatus::Ok {
-                    SOLVED.fetch_add(1, Ordering::Relaxed);
-                } else if st == GrStatus::Cancelled {
-                    CANCELLED.fetch_add(1, Ordering::Relaxed);
+                match st {
+                    GrStatus::Ok => _ = SOLVED.fetch_add(1, Ordering::Relaxed),
+                    GrStatus::Cancelled => _ = CANCELLED.fetch_add(1, Ordering::Relaxed),
+                    GrStatus::InvalidArgument => {}
+                    _ => diverged(st)?,
                 }
             }
             Op::FaceRadiosity(o, d) | Op::CornerRadiosity(o, d) => {
@@ -520,11 +533,13 @@ fn arbitrary_input_never_crashes() {
     let mut runner = TestRunner::new(config);
     let result = runner.run(&case(), |c| run(&c));
     eprintln!(
-        "{cases} cases ({} runs): {} sessions made, {} frames solved, {} cancelled, {} radiosity reads",
+        "{cases} cases ({} runs): {} sessions made, {} frames solved, {} cancelled, {} diverged, {} \
+         radiosity reads",
         RUNS.load(Ordering::Relaxed),
         SESSIONS.load(Ordering::Relaxed),
         SOLVED.load(Ordering::Relaxed),
         CANCELLED.load(Ordering::Relaxed),
+        DIVERGED.load(Ordering::Relaxed),
         READS.load(Ordering::Relaxed),
     );
     if let Err(e) = result {
