@@ -9,7 +9,8 @@
 //!
 //! 256 cases by default (well under a second); `PROPTEST_CASES=50000 cargo test --test
 //! ffi_props -- --nocapture` for more (it prints how many sessions, solves and reads the cases
-//! reached); `FFI_PROPS_DEBUG=1` prints why each rejected scene was rejected.
+//! reached); `FFI_PROPS_DEBUG=1` prints why each rejected scene was rejected, and each case
+//! whose solve diverged.
 
 use std::ffi::{CStr, c_void};
 use std::ptr::{null, null_mut};
@@ -389,6 +390,11 @@ fn diverged(st: GrStatus) -> Result<(), TestCaseError> {
     let msg = last_error();
     prop_assert!(st == GrStatus::InvalidScene && msg.contains("diverges"), "solve_frame: {st:?}: {msg}");
     DIVERGED.fetch_add(1, Ordering::Relaxed);
+    if std::env::var_os("FFI_PROPS_DEBUG").is_some()
+        && let Some((_, case)) = &*CURRENT.lock().unwrap()
+    {
+        eprintln!("diverged: {msg}\n{case:#?}");
+    }
     Ok(())
 }
 
