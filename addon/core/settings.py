@@ -13,7 +13,7 @@ from . import frames as _frames
 
 # name: (quadrature_order, visibility_samples, description)
 QUALITY = {
-    "DRAFT": (2, 1, "2 Gauss points per axis, 1 visibility ray per link"),
+    "DRAFT": (2, 1, "2 Gauss points per axis (basis order + 1 at least), 1 visibility ray per link"),
     "MEDIUM": (4, 2, "4 Gauss points per axis, 16 visibility rays per link (library default)"),
     "HIGH": (6, 3, "6 Gauss points per axis, 81 visibility rays per link"),
     "ULTRA": (8, 4, "8 Gauss points per axis, 256 visibility rays per link"),
@@ -69,6 +69,10 @@ class BakeSettings:
     def native(self) -> dict:
         """The settings dict of ``binding.Session``."""
         quadrature, visibility_samples, _ = QUALITY[self.quality]
+        # A rule of n points integrates degree 2n - 1: below basis order + 1 it cannot integrate the
+        # basis products, the projection is wrong, and random scenes made the library's solve
+        # diverge with it. Draft keeps its speed at low orders only.
+        quadrature = max(quadrature, self.basis_order + 1)
         return {
             "basis_order": self.basis_order,
             "quadrature_order": quadrature,

@@ -17,6 +17,12 @@ def test_native_settings_follow_quality():
     assert "threads" not in s.solve_signature()
 
 
+@pytest.mark.parametrize("order, points", [(0, 2), (1, 2), (2, 3), (3, 4)])
+def test_draft_quality_keeps_enough_points_for_the_basis(order, points):
+    n = BakeSettings(basis_order=order, quality="DRAFT").validate().native()
+    assert n["quadrature_order"] == points and n["visibility_samples"] == 1
+
+
 @pytest.mark.parametrize("bad, match", [
     (dict(basis_order=4), "basis order"),
     (dict(quality="SUPER"), "quality"),
