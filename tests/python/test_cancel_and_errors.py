@@ -121,6 +121,29 @@ def test_no_faces(blender):
     assert "have no faces" in _error(bpy)
 
 
+def test_a_diverging_solve_is_reported_and_changes_nothing(blender):
+    """Three random triangles from the FFI property test, which cross, lit with visibility off:
+    the kernel then passes on more light than it receives, and the solve says so and stops (it
+    used to run for ever)."""
+    bpy = blender
+    vertices = [(-1.9812213, 0.77613264, -0.49970147), (0.52665615, -1.4438541, -1.6441722),
+                (1.0218674, 0.2207829, 0.7339074), (-0.58700806, -0.49895608, -1.9490031),
+                (1.3606553, -0.27369004, 0.76706606), (1.6043353, -1.7408254, -1.3136085)]
+    first = scenes.material(bpy, "First", (0.506, 0.404, 0.0069), (0.887, 0.293, 1.0), 1.0)
+    other = scenes.material(bpy, "Other", (0.310, 0.9946, 0.736), (1.0, 0.553, 0.362), 1.4)
+    obj = scenes.mesh_object(bpy, "Crossing", vertices, [(1, 0, 2), (3, 5, 4), (4, 1, 3)], first)
+    obj.data.materials.append(other)
+    for poly, m in zip(obj.data.polygons, (0, 1, 1), strict=True):
+        poly.material_index = m
+    msg = _error(bpy, basis_order=2, visibility=False, frame_start=1, frame_end=1)
+    assert "the solution diverges" in msg and "visibility" in msg
+    assert scenes.rad_frames(obj.data) == [] and len(obj.modifiers) == 0
+    assert "radiosity_bake" not in bpy.context.scene
+    # With visibility on, the same triangles solve.
+    _job(bpy, basis_order=2, visibility=True, frame_start=1, frame_end=1).run()
+    assert scenes.rad_frames(obj.data) == [1]
+
+
 def test_frame_outside_the_attribute_range(blender):
     bpy = blender
     scenes.cornell_box(bpy, light_frames=(1, 2), box=False)
