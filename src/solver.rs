@@ -132,7 +132,7 @@ const PREFETCH_RECEIVERS: usize = 16;
 /// below 1 and form factors summing to at most 1, a shot delivers less power than it takes
 /// (up to the weighting of the higher-order coefficients): growth means the kernel is wrong for
 /// the scene, and without this test the solve went on until the values overflowed, then for ever
-/// on NaN. Seen only in the FFI property test's random scenes, about 1 solve in 15,000: faces that
+/// on NaN. Seen only in the FFI property test's random scenes, about 1 solve in 12,000: faces that
 /// cross, overlap or share three corners, with visibility off or one visibility sample (surfaces
 /// that hide one another then all receive light) or a quadrature order at or below the basis
 /// order (the rule does not integrate the basis products).
