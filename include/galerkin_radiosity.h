@@ -129,7 +129,8 @@ typedef struct GrSettings {
    */
   uint32_t basis_order;
   /**
-   * Gauss-Legendre points per axis for a well-separated pair of patches, 1..=16. Default 4.
+   * Gauss-Legendre points per axis for a well-separated pair of patches, 1..=16, more than
+   * `basis_order` (fewer cannot integrate the basis products). Default 4.
    */
   uint32_t quadrature_order;
   /**

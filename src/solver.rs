@@ -134,8 +134,8 @@ const PREFETCH_RECEIVERS: usize = 16;
 /// the scene, and without this test the solve went on until the values overflowed, then for ever
 /// on NaN. Seen only in the FFI property test's random scenes, about 1 solve in 12,000: faces that
 /// cross, overlap or share three corners, with visibility off or one visibility sample (surfaces
-/// that hide one another then all receive light) or a quadrature order at or below the basis
-/// order (the rule does not integrate the basis products).
+/// that hide one another then all receive light) or, before validation required more Gauss points
+/// than the basis order, with too coarse a rule.
 const DIVERGED: f64 = 1e6;
 
 /// Batches with fewer link coefficients than this are shot on one thread: below it, handing
@@ -192,8 +192,8 @@ pub fn shoot(
             return Err(invalid_scene!(
                 "the solution diverges (the unshot power grew {:.1e}-fold in {} shots): the kernel \
                  passes on more light than it receives, as with faces that cross or overlap while \
-                 visibility is off or coarse, or a quadrature order at or below the basis order; \
-                 raise settings.quadrature_order and visibility_samples, or turn visibility on",
+                 visibility is off or coarse; turn visibility on, raise settings.visibility_samples \
+                 and quadrature_order, or mend the mesh",
                 total / start_total,
                 stats.shots
             ));

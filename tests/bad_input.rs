@@ -53,6 +53,11 @@ fn each_bad_input_names_what_is_wrong() {
         (scene_with(&QUAD.replace("[0,1,0]]", "[0,1e400,0]]"), MAT), "scene JSON"),
         (scene_with(QUAD, MAT).replace("\"basis_order\": 1", "\"basis_order\": 7"), "basis_order 7"),
         (
+            scene_with(QUAD, MAT)
+                .replace("\"basis_order\": 1", "\"basis_order\": 2, \"quadrature_order\": 2"),
+            "settings.quadrature_order 2 must exceed settings.basis_order 2",
+        ),
+        (
             scene_with(QUAD, MAT).replace("\"basis_order\": 1", "\"basis_order\": 1, \"tolerence\": 1"),
             "unknown field `tolerence`",
         ),

@@ -108,15 +108,19 @@ fn matrix() -> impl Strategy<Value = [f32; 16]> {
 fn settings() -> impl Strategy<Value = RawSettings> {
     let numbers =
         (0u32..=3, 1u32..=6, prop::sample::select(vec![1e-4, 1e-2, 0.5]), 0u32..=1, 1u32..=2, 0u32..=2);
-    (numbers, 0u32..=2, 0u32..=1).prop_map(|((b, q, t, v, vs, th), m, g)| RawSettings {
-        basis_order: b,
-        quadrature_order: q,
-        tolerance: t,
-        visibility: v,
-        visibility_samples: vs,
-        threads: th,
-        method: m,
-        corner_gather: g,
+    // Mostly a rule with more points than the basis order (fewer is rejected at validation).
+    let enough_points = prop_oneof![7 => Just(true), 1 => Just(false)];
+    (numbers, 0u32..=2, 0u32..=1, enough_points).prop_map(|((b, q, t, v, vs, th), m, g, enough)| {
+        RawSettings {
+            basis_order: b,
+            quadrature_order: if enough && q <= b { b + q } else { q },
+            tolerance: t,
+            visibility: v,
+            visibility_samples: vs,
+            threads: th,
+            method: m,
+            corner_gather: g,
+        }
     })
 }
 

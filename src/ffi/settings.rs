@@ -24,7 +24,8 @@ pub enum GrMethod {
 pub struct GrSettings {
     /// Legendre degree per axis, 0..=3 (0: classic constant radiosity). Default 2.
     pub basis_order: u32,
-    /// Gauss-Legendre points per axis for a well-separated pair of patches, 1..=16. Default 4.
+    /// Gauss-Legendre points per axis for a well-separated pair of patches, 1..=16, more than
+    /// `basis_order` (fewer cannot integrate the basis products). Default 4.
     pub quadrature_order: u32,
     /// Progressive refinement stops when the unshot coefficients would deliver less than this
     /// fraction of the emitted power in one bounce, in (0,1). Default 1e-4.
