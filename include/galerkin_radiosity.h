@@ -59,7 +59,7 @@ enum GrStatus
    * The scene failed validation (non-finite vertex or matrix, face with other than 3 or 4
    * vertices, vertex index or material out of range, reflectance outside [0,1), bad
    * settings); the message names the object, face or field. Also returned by a solve that
-   * diverges (patches that nearly touch, integrated too coarsely for the basis order).
+   * diverges (faces that cross or overlap while visibility is off or coarse).
    */
   GR_STATUS_INVALID_SCENE = 3,
   /**

@@ -388,8 +388,8 @@ unsafe extern "C" fn stop_after(_f: f64, _stage: *const std::ffi::c_char, user: 
     1
 }
 
-/// A solve of a valid scene fails only when its kernel makes the solution diverge (random
-/// triangles that meet at an edge, with a low quadrature order), and says so.
+/// A solve of a valid scene fails only when its kernel makes the solution diverge (random faces
+/// that cross or overlap, with visibility off or one visibility sample), and says so.
 fn diverged(st: GrStatus) -> Result<(), TestCaseError> {
     let msg = last_error();
     prop_assert!(st == GrStatus::InvalidScene && msg.contains("diverges"), "solve_frame: {st:?}: {msg}");

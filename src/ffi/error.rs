@@ -21,7 +21,7 @@ pub enum GrStatus {
     /// The scene failed validation (non-finite vertex or matrix, face with other than 3 or 4
     /// vertices, vertex index or material out of range, reflectance outside [0,1), bad
     /// settings); the message names the object, face or field. Also returned by a solve that
-    /// diverges (patches that nearly touch, integrated too coarsely for the basis order).
+    /// diverges (faces that cross or overlap while visibility is off or coarse).
     InvalidScene = 3,
     /// The solve stopped because the progress callback returned 0 or `gr_session_cancel` was
     /// called; the last completed frame stays readable.

@@ -19,14 +19,11 @@ pub(super) fn validate(scene: &mut Scene) -> Result<()> {
     // A rule of n points integrates degree 2n - 1 exactly; the products of two basis functions
     // have degree 2 x basis_order per axis. With fewer points the projection is not a projection
     // (the basis is not orthonormal under the rule), and random scenes then made solves diverge.
-    if s.quadrature_order <= s.basis_order {
+    let (q, order) = (s.quadrature_order, s.basis_order);
+    if q <= order {
         return Err(invalid_scene!(
-            "settings.quadrature_order {} must exceed settings.basis_order {}: {} Gauss points per \
-             axis cannot integrate the products of basis functions of order {}",
-            s.quadrature_order,
-            s.basis_order,
-            s.quadrature_order,
-            s.basis_order
+            "settings.quadrature_order {q} must exceed settings.basis_order {order}: {q} Gauss \
+             points per axis cannot integrate the products of basis functions of order {order}"
         ));
     }
     if !(s.tolerance.is_finite() && s.tolerance > 0.0 && s.tolerance < 1.0) {
