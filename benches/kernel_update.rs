@@ -2,8 +2,9 @@
 //! the moving-light Cornell box of issue 3: `cargo bench --bench kernel_update [-- OPTIONS]`.
 //!
 //! Options: `--frames N` (default 16), `--subdiv N` (default 14: 1,079 patches), `--demo` (the
-//! demo animation instead: light and short block moving), `--exact`
-//! (no series), `--save PATH` / `--check PATH` (write, or compare against, every frame's link
+//! demo animation instead: light and short block moving), `--room` / `--billiard` (the seed's
+//! Fig. 5a and 5b scenes as `cargo bench --bench animation` builds them), `--exact`
+//! (no series), `--reasons` (per frame, why pairs were recomputed), `--save PATH` / `--check PATH` (write, or compare against, every frame's link
 //! store and solution: the link store must match bit for bit, the solution within 1e-6 of peak).
 //!
 //! Prints per frame `kernel_seconds` and the counts that do not depend on timing noise (pairs
@@ -58,11 +59,17 @@ fn main() {
     let save = arg(&args, "--save");
     let check = arg(&args, "--check");
     let settings = Settings { basis_order: 2, corner_gather: false, ..Settings::default() };
-    let scene = if args.iter().any(|a| a == "--demo") {
+    let flag = |name: &str| args.iter().any(|a| a == name);
+    let scene = if flag("--demo") {
         scenes::cornell_box_animated(subdiv, 48, settings)
+    } else if flag("--room") {
+        scenes::seed_room(3.0, 48, settings)
+    } else if flag("--billiard") {
+        scenes::billiard(2.5, 48, settings)
     } else {
         scenes::cornell_box_moving_light(subdiv, 48, settings)
     };
+    let reasons = flag("--reasons");
     let pool = rayon::ThreadPoolBuilder::new().num_threads(scene.settings.threads).build().unwrap();
     pool.install(|| {
         let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
@@ -116,6 +123,19 @@ fn main() {
                 panic!("topology changed")
             };
             let values = columns(&u).map(|(_, v)| v);
+            if reasons {
+                println!(
+                    "frame {f} recomputed: bound {}, direction {}, half-space {}, visibility {}, \
+                     non-translation {}, translation {}; expanded {}",
+                    u.recomputed_bound,
+                    u.recomputed_direction,
+                    u.recomputed_half_space,
+                    u.recomputed_visibility,
+                    u.recomputed_non_translation,
+                    u.recomputed_translation,
+                    u.series_expanded
+                );
+            }
             row(f.to_string(), &values);
             for (s, x) in sums.iter_mut().zip(values) {
                 *s += x;

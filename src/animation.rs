@@ -506,7 +506,7 @@ pub fn advance(
                     let expand =
                         both_translated && vis != Visibility::Blocked && reason != Reason::Visibility;
                     let r_min = (state.use_series && expand)
-                        .then(|| series::eligible(&patches[iu], &patches[ju]))
+                        .then(|| series::eligible(&patches[iu], &patches[ju], motion.normalize()))
                         .flatten()
                         .filter(|r| SERIES_MAX_T * r >= MIN_SERIES_FRAMES * motion.length());
                     match r_min {
@@ -536,7 +536,7 @@ pub fn advance(
                             if reason == Reason::Translation
                                 && state.use_series
                                 && existing_series.is_none()
-                                && !series::mutually_in_front(&patches[iu], &patches[ju])
+                                && !series::clip_invariant(&patches[iu], &patches[ju], motion.normalize())
                             {
                                 reason = Reason::HalfSpace;
                             }
@@ -793,7 +793,7 @@ fn series_check(
     if ser.epochs != (state.epochs[i], state.epochs[j]) {
         return Err(Reason::NonTranslation);
     }
-    if !series::mutually_in_front(&patches[i], &patches[j]) {
+    if !series::clip_invariant(&patches[i], &patches[j], ser.dir) {
         return Err(Reason::HalfSpace);
     }
     if vis != old_vis {

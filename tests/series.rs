@@ -250,3 +250,62 @@ fn curved_paths_direction_expansion_versus_axis_decomposition_versus_3d_taylor()
         assert!(worst_3d_vs_dir <= 1e-9, "on a line the 3-D Taylor expansion is the directional series");
     }
 }
+
+/// A light sliding under a ceiling, and a wall whose top reaches above the light's plane (as in
+/// the Cornell box, whose left wall is also twisted: not planar). Neither pair is mutually in
+/// front, so before session 7 both were recomputed by quadrature every frame (`half-space`); but
+/// the motion is parallel to the light's plane, so no point pair's cosine changes sign
+/// (`clip_invariant`), and the series of the clipped kernel about the reference equals the exact
+/// kernel at the displaced light, to the series' accuracy. At `p = 0` it is the exact kernel
+/// itself, which it would not be if the expansion did not clip the wall's part above the light.
+#[test]
+fn series_of_a_wall_straddling_a_sliding_light_matches_the_exact_kernel() {
+    use galerkin_radiosity::basis::Basis;
+    use galerkin_radiosity::geometry::{Patch, Rect};
+    use galerkin_radiosity::kernel::pair::{PairContext, integrate_pair};
+    use galerkin_radiosity::kernel::samples::Samples;
+    use galerkin_radiosity::kernel::series::{self, PairSeries};
+    use galerkin_radiosity::quadrature::GaussLegendre;
+    use galerkin_radiosity::visibility::Visibility;
+
+    let p = DVec3::new;
+    // Facing down (-y) at y = 1, 1.4 to 1.6 from the wall.
+    let light = Patch { corners: [p(1.4, 1., 0.4), p(1.6, 1., 0.4), p(1.6, 1., 0.6), p(1.4, 1., 0.6)] };
+    // Facing +x at x = 0, from y = 0.8 to 1.2: its upper half is behind the light's plane.
+    let wall = Patch { corners: [p(0., 0.8, 0.3), p(0., 1.2, 0.3), p(0., 1.2, 0.7), p(0., 0.8, 0.7)] };
+    let mut twisted = wall;
+    twisted.corners[2].x = 0.05;
+    assert!(twisted.front_plane().is_none(), "the twisted wall is not planar");
+    let basis = Basis::new(2);
+    let rule = GaussLegendre::new(4);
+    let ctx = PairContext { basis, rule: &rule, vis_axis: 4, adaptive: false };
+    let samples = |patch: &Patch| Samples::new(patch, &Rect::UNIT, &rule, basis, 4);
+    let exact = |a: &Patch, b: &Patch| {
+        let (sa, sb) = (samples(a), samples(b));
+        let k = integrate_pair(&ctx, a, b, |j, _| if j { &sb } else { &sa }, &Visibility::Full);
+        [k.ij, k.ji].concat()
+    };
+    // Sliding along the light's plane, towards and along the wall at once.
+    let dir = p(-1., 0., 1.).normalize();
+    for (name, w) in [("straddling", wall), ("twisted and straddling", twisted)] {
+        assert!(!series::wholly_in_front(&light, &w), "{name}: the light's plane cuts the wall");
+        let r_min = series::eligible(&w, &light, dir).unwrap_or_else(|| panic!("{name}: not eligible"));
+        assert!(
+            series::eligible(&w, &light, p(0., -1., 1.).normalize()).is_none(),
+            "{name}: eligible for a motion that crosses the light's plane"
+        );
+        let terms = series::expand(basis, 4, &samples(&w), &samples(&light), &Visibility::Full, dir);
+        let ser = PairSeries::new(dir, (w.corners[0], light.corners[0]), r_min, (0, 0), terms);
+        for t in [0.0, 0.05, 0.1, 0.2] {
+            let d = t * r_min * dir;
+            let moved = Patch { corners: light.corners.map(|c| c + d) };
+            let want = exact(&w, &moved);
+            let mut got = vec![0.0; want.len()];
+            ser.eval_into(t * r_min, &mut got);
+            let peak = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            let worst = want.iter().zip(&got).map(|(a, b)| (a - b).abs()).fold(0.0f64, f64::max);
+            eprintln!("{name}, t = {t}: worst {:.1e} of the largest coefficient", worst / peak);
+            assert!(worst <= 1e-5 * peak, "{name}, t = {t}: {worst:e} of {peak:e}");
+        }
+    }
+}
