@@ -116,6 +116,11 @@ pub struct AnimationState {
     replaced: ReplacedBlocks,
     /// The last solve's shots, replayed as the next frame's first guess.
     replay: Option<Replay>,
+    /// Updates made so far.
+    updates: u32,
+    /// Per pair id: the update in which its visibility last changed, or in which it was added
+    /// ([`NEVER`] for the pairs of the build); see [`CALM_UPDATES`].
+    visibility_changed: Vec<u32>,
 }
 
 impl AnimationState {
@@ -130,6 +135,8 @@ impl AnimationState {
             block_pool: Vec::new(),
             replaced: ReplacedBlocks::default(),
             replay: None,
+            updates: 0,
+            visibility_changed: Vec::new(),
         }
     }
 
@@ -293,6 +300,7 @@ pub fn advance(
     progress: Progress,
 ) -> Result<Outcome> {
     let start = std::time::Instant::now();
+    state.updates += 1;
     let segments_before = crate::visibility::segments_tested();
     let s = &next.settings;
     let basis = sys.basis;
@@ -498,13 +506,15 @@ pub fn advance(
                         }
                     }
                     // Exact (eq. 6), re-expanded along this frame's motion when the series applies.
-                    // Expanding costs about SERIES_ORDER + 1 quadratures: only worth it when the
-                    // pair stays within the bound for a few frames at this frame's speed, and not
-                    // in the frame its visibility changed (a pair in a moving penumbra changes
-                    // again soon: it is expanded the next frame if its visibility held; measured,
-                    // expansions -16% on the moving-light box, -8% on the demo animation).
-                    let expand =
-                        both_translated && vis != Visibility::Blocked && reason != Reason::Visibility;
+                    // Expanding costs about as much as 15 quadratures: only worth it when the
+                    // pair stays within the bound for a few frames at this frame's speed, and
+                    // when its visibility has held for CALM_UPDATES updates (a pair in a moving
+                    // penumbra changes again soon, and each change drops its series).
+                    let calm = id.is_some_and(|p| {
+                        let changed = state.visibility_changed.get(p as usize).copied().unwrap_or(NEVER);
+                        vis == *old_vis && (changed == NEVER || state.updates - changed >= CALM_UPDATES)
+                    });
+                    let expand = both_translated && vis != Visibility::Blocked && calm;
                     let r_min = (state.use_series && expand)
                         .then(|| series::eligible(&patches[iu], &patches[ju], motion.normalize()))
                         .flatten()
@@ -644,6 +654,9 @@ pub fn advance(
             let blocks = &batch.blocks[2 * n2 * k..][..2 * n2];
             let p = match u.id {
                 Some(p) => {
+                    if sys.links.pair(p).visibility != u.vis {
+                        mark_visibility_change(state, p);
+                    }
                     sys.links.set_visibility(p, u.vis);
                     rewrites.push((p, u.i, blocks));
                     p
@@ -652,6 +665,7 @@ pub fn advance(
                     let wide: Vec<f64> = blocks.iter().map(|&x| x as f64).collect();
                     let p = sys.links.push(u.i, u.j, &wide[..n2], &wide[n2..], u.vis);
                     state.index.insert(u.i, u.j, p);
+                    mark_visibility_change(state, p);
                     fresh.push((u.i, u.j, blocks));
                     p
                 }
@@ -828,6 +842,26 @@ const PREFETCH_CHANGES: usize = 4;
 /// Moving objects up to which each gets its own swept box (each box costs a test per pair).
 const MAX_SWEPT_BOXES: usize = 4;
 
+/// A pair whose visibility changed (or that was added) is not expanded until its visibility has
+/// held for this many updates. In a moving penumbra a pair's mask changes every few frames, and
+/// each change drops its series: re-expanded the next frame, as before session 7, the moving-light
+/// box spent 3.5-4 ms of thread time a frame on expansions and 8.2-8.6 ms on all its kernels
+/// (series, quadratures, expansions) against 5.3-5.6 ms for `--exact`'s quadratures. Waiting 8
+/// updates: 1.5-1.9 ms on expansions, 5.1-6.5 ms in all, level with `--exact` (4 or 16 were
+/// no better; timers around each kind of kernel, 2 runs of 30 frames, thread time per frame).
+const CALM_UPDATES: u32 = 8;
+
+/// [`AnimationState::visibility_changed`] of a pair that never changed.
+const NEVER: u32 = u32::MAX;
+
+/// Records that pair `p`'s visibility changed (or that it was added) in this update.
+fn mark_visibility_change(state: &mut AnimationState, p: PairId) {
+    if state.visibility_changed.len() <= p as usize {
+        state.visibility_changed.resize(p as usize + 1, NEVER);
+    }
+    state.visibility_changed[p as usize] = state.updates;
+}
+
 /// A pair is expanded only if, at the current speed, the series would serve at least this many
 /// frames before `p` reaches `SERIES_MAX_T r_min` (measured: below 3, re-expansions cost more
 /// than the quadratures they save; benches/animation.rs).
@@ -876,5 +910,79 @@ fn delta_kb_nb<const NB: usize>(
             ob[c] += rho[c] * acc[c];
             os[c] += rho[c] * acc[3 + c];
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Key, KeyTransform, Material, Settings};
+    use crate::scenes::subdivided_quad;
+    use crate::system::no_progress;
+
+    /// A light sliding over a floor past a thin occluder, whose shadow sweeps the floor: the
+    /// light-floor pairs' masks change frame after frame. No pair is expanded before its
+    /// visibility has held for `CALM_UPDATES` updates, and pairs whose visibility changed are
+    /// expanded again once it has.
+    #[test]
+    fn pairs_are_expanded_only_after_their_visibility_has_held() {
+        let p = DVec3::new;
+        let floor =
+            subdivided_quad("floor", [p(0., 0., 0.), p(1., 0., 0.), p(1., 1., 0.), p(0., 1., 0.)], 4, 0);
+        let occluder = subdivided_quad(
+            "occluder",
+            [p(0.6, 0., 0.5), p(0.65, 0., 0.5), p(0.65, 1., 0.5), p(0.6, 1., 0.5)],
+            1,
+            0,
+        );
+        let mut light = subdivided_quad(
+            "light",
+            [p(0.4, 0.4, 1.), p(0.4, 0.6, 1.), p(0.6, 0.6, 1.), p(0.6, 0.4, 1.)],
+            1,
+            1,
+        );
+        light.animation = vec![
+            Key { frame: 1.0, transform: KeyTransform::Translation(DVec3::ZERO) },
+            Key { frame: 41.0, transform: KeyTransform::Translation(p(1.2, 0., 0.)) },
+        ];
+        let materials = vec![
+            Material { name: "grey".into(), reflectance: [0.5; 3], emission: [0.0; 3] },
+            Material { name: "light".into(), reflectance: [0.0; 3], emission: [5.0; 3] },
+        ];
+        let settings = Settings { basis_order: 1, corner_gather: false, ..Settings::default() };
+        let scene =
+            Scene::new(settings, (1, 41), materials, vec![vec![]; 2], vec![floor, occluder, light]).unwrap();
+        let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
+        sys.solve(scene.settings.tolerance, &|| false).unwrap();
+        let mut state = AnimationState::new(sys.elements.len(), true);
+        let reference = |s: &AnimationState| -> Vec<Option<(DVec3, DVec3)>> {
+            s.series.iter().map(|x| x.as_ref().map(|x| (x.ref_a, x.ref_b))).collect()
+        };
+        let (mut changes, mut late_expansions) = (0, 0);
+        for f in 2..=41 {
+            let before = reference(&state);
+            let changed_before = state.visibility_changed.clone();
+            let Outcome::Updated(_) = advance(&mut sys, &mut state, &scene, f as f64, &no_progress).unwrap()
+            else {
+                panic!("topology changed")
+            };
+            for (p, now) in reference(&state).iter().enumerate() {
+                let changed = state.visibility_changed.get(p).copied().unwrap_or(NEVER);
+                if changed != changed_before.get(p).copied().unwrap_or(NEVER) {
+                    changes += 1;
+                }
+                let expanded = now.is_some() && before.get(p).copied().flatten() != *now;
+                if expanded && changed != NEVER {
+                    let held = state.updates - changed;
+                    assert!(
+                        held >= CALM_UPDATES,
+                        "frame {f}: pair {p} expanded {held} updates after a change"
+                    );
+                    late_expansions += 1;
+                }
+            }
+        }
+        assert!(changes >= 10, "only {changes} visibility changes: the shadow does not sweep the floor");
+        assert!(late_expansions > 0, "no pair was expanded again after its visibility changed");
     }
 }
