@@ -863,9 +863,15 @@ fn mark_visibility_change(state: &mut AnimationState, p: PairId) {
 }
 
 /// A pair is expanded only if, at the current speed, the series would serve at least this many
-/// frames before `p` reaches `SERIES_MAX_T r_min` (measured: below 3, re-expansions cost more
-/// than the quadratures they save; benches/animation.rs).
-const MIN_SERIES_FRAMES: f64 = 3.0;
+/// frames before `p` reaches `SERIES_MAX_T r_min`. Timed per pair (session 7, thread time): an
+/// expansion 8.5-9 us, about 15 far-pair quadratures (0.4-0.7 us), which an evaluation
+/// (0.27-0.42 us) undercuts by about 0.3 us a frame, so an expansion pays back after some 25
+/// frames of use. At 3 (before session 7) the Fig. 5a room, whose light moves far relative to
+/// its pairs' distances, re-expanded 500-900 pairs a frame after 3 frames each: 13.7-15.5 ms of
+/// kernels a frame against 8.9-11.9 ms for `--exact`. At 15 it expands none (9.1-10.8 ms), and the
+/// moving-light box keeps the series for the pairs that use it long (4.9-5.6 ms, as at 3; 30
+/// drops those too: 6.6-6.9 ms). `--exact` there: 4.8 ms.
+const MIN_SERIES_FRAMES: f64 = 15.0;
 
 crate::simd::multiversion! {
     /// `out[v] += rho (G_new - G_old) x[v]` for one receiver (its `nb` coefficients, reflectance
@@ -943,7 +949,8 @@ mod tests {
         );
         light.animation = vec![
             Key { frame: 1.0, transform: KeyTransform::Translation(DVec3::ZERO) },
-            Key { frame: 41.0, transform: KeyTransform::Translation(p(1.2, 0., 0.)) },
+            // 0.0125 a frame: slow enough for the series to serve MIN_SERIES_FRAMES frames.
+            Key { frame: 81.0, transform: KeyTransform::Translation(p(1.0, 0., 0.)) },
         ];
         let materials = vec![
             Material { name: "grey".into(), reflectance: [0.5; 3], emission: [0.0; 3] },
@@ -951,7 +958,7 @@ mod tests {
         ];
         let settings = Settings { basis_order: 1, corner_gather: false, ..Settings::default() };
         let scene =
-            Scene::new(settings, (1, 41), materials, vec![vec![]; 2], vec![floor, occluder, light]).unwrap();
+            Scene::new(settings, (1, 81), materials, vec![vec![]; 2], vec![floor, occluder, light]).unwrap();
         let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
         sys.solve(scene.settings.tolerance, &|| false).unwrap();
         let mut state = AnimationState::new(sys.elements.len(), true);
@@ -959,7 +966,7 @@ mod tests {
             s.series.iter().map(|x| x.as_ref().map(|x| (x.ref_a, x.ref_b))).collect()
         };
         let (mut changes, mut late_expansions) = (0, 0);
-        for f in 2..=41 {
+        for f in 2..=81 {
             let before = reference(&state);
             let changed_before = state.visibility_changed.clone();
             let Outcome::Updated(_) = advance(&mut sys, &mut state, &scene, f as f64, &no_progress).unwrap()

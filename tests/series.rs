@@ -93,18 +93,19 @@ fn re_expansion_threshold_is_enforced() {
     );
     light.animation = vec![
         Key { frame: 1.0, transform: KeyTransform::Translation(DVec3::ZERO) },
-        Key { frame: 12.0, transform: KeyTransform::Translation(p(0., 0., -0.5)) },
+        // 0.01 a frame: slow enough for the series to serve `MIN_SERIES_FRAMES` (15) frames.
+        Key { frame: 51.0, transform: KeyTransform::Translation(p(0., 0., -0.5)) },
     ];
     let materials = vec![
         Material { name: "floor".into(), reflectance: [0.6; 3], emission: [0.0; 3] },
         Material { name: "light".into(), reflectance: [0.0; 3], emission: [5.0; 3] },
     ];
     let settings = Settings { basis_order: 2, tolerance: 1e-6, corner_gather: false, ..Settings::default() };
-    let scene = Scene::new(settings, (1, 12), materials, vec![vec![]; 2], vec![floor, light]).unwrap();
+    let scene = Scene::new(settings, (1, 51), materials, vec![vec![]; 2], vec![floor, light]).unwrap();
     let mut inc = Session::new(scene.clone(), Method::Incremental).unwrap();
     let mut full = Session::new(scene, Method::Full).unwrap();
     let (mut series, mut bound) = (0, 0);
-    for f in 1..=12 {
+    for f in 1..=51 {
         let s = inc.solve_frame(f as f64, &no_progress).unwrap();
         full.solve_frame(f as f64, &no_progress).unwrap();
         series += s.links_series;
