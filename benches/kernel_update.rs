@@ -4,7 +4,8 @@
 //! Options: `--frames N` (default 16), `--subdiv N` (default 14: 1,079 patches), `--demo` (the
 //! demo animation instead: light and short block moving), `--room` / `--billiard` (the seed's
 //! Fig. 5a and 5b scenes as `cargo bench --bench animation` builds them), `--exact`
-//! (no series), `--reasons` (per frame, why pairs were recomputed), `--save PATH` / `--check PATH` (write, or compare against, every frame's link
+//! (no series), `--reasons` (per frame, why pairs were recomputed), `--threads N` (default: one
+//! per core), `--save PATH` / `--check PATH` (write, or compare against, every frame's link
 //! store and solution: the link store must match bit for bit, the solution within 1e-6 of peak).
 //!
 //! Prints per frame `kernel_seconds` and the counts that do not depend on timing noise (pairs
@@ -58,7 +59,8 @@ fn main() {
     let exact = args.iter().any(|a| a == "--exact");
     let save = arg(&args, "--save");
     let check = arg(&args, "--check");
-    let settings = Settings { basis_order: 2, corner_gather: false, ..Settings::default() };
+    let threads: usize = arg(&args, "--threads").map_or(0, |v| v.parse().unwrap());
+    let settings = Settings { basis_order: 2, corner_gather: false, threads, ..Settings::default() };
     let flag = |name: &str| args.iter().any(|a| a == name);
     let scene = if flag("--demo") {
         scenes::cornell_box_animated(subdiv, 48, settings)
