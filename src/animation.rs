@@ -493,6 +493,7 @@ pub fn advance(
                 }
                 Candidate::Moved => {
                     let motion = shift[ju] - shift[iu];
+                    let dir = motion.normalize();
                     let both_translated = translated[iu] && translated[ju];
                     let mut reason =
                         if both_translated { Reason::Translation } else { Reason::NonTranslation };
@@ -516,7 +517,7 @@ pub fn advance(
                     });
                     let expand = both_translated && vis != Visibility::Blocked && calm;
                     let r_min = (state.use_series && expand)
-                        .then(|| series::eligible(&patches[iu], &patches[ju], motion.normalize()))
+                        .then(|| series::eligible(&patches[iu], &patches[ju], dir))
                         .flatten()
                         .filter(|r| SERIES_MAX_T * r >= MIN_SERIES_FRAMES * motion.length());
                     match r_min {
@@ -524,7 +525,6 @@ pub fn advance(
                             let (ci, ri) = patches[iu].bounding_sphere();
                             let (cj, rj) = patches[ju].bounding_sphere();
                             let npts = ctx.points_for(ci.distance(cj) / (ri + rj));
-                            let dir = motion.normalize();
                             let terms = series::expand(
                                 basis,
                                 ctx.vis_axis,
@@ -546,7 +546,7 @@ pub fn advance(
                             if reason == Reason::Translation
                                 && state.use_series
                                 && existing_series.is_none()
-                                && !series::clip_invariant(&patches[iu], &patches[ju], motion.normalize())
+                                && !series::clip_invariant(&patches[iu], &patches[ju], dir)
                             {
                                 reason = Reason::HalfSpace;
                             }

@@ -102,9 +102,14 @@ pub fn min_distance(a: &Patch, b: &Patch) -> f64 {
 /// the gap `min_b n.y - max_a n.x` (over the corners) times `cos theta` exceeds the pairs' largest
 /// distance times `sin theta`.
 pub fn wholly_in_front(a: &Patch, b: &Patch) -> bool {
-    if let Some(plane) = a.front_plane() {
-        return plane.all_in_front(b);
+    match a.front_plane() {
+        Some(plane) => plane.all_in_front(b),
+        None => in_front_of_cone(a, b),
     }
+}
+
+/// [`wholly_in_front`] for a bilinear `a` that is not planar: the test on its normals' cone.
+fn in_front_of_cone(a: &Patch, b: &Patch) -> bool {
     let n = a.centre_normal();
     let mut cos = 1.0f64;
     for (s, t) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)] {
@@ -141,8 +146,9 @@ const PARALLEL: f64 = 1e-9;
 /// ceiling: its plane cuts the walls' top row, whose parts above it it never lights, wherever it
 /// slides.
 pub fn clip_invariant(a: &Patch, b: &Patch, dir: DVec3) -> bool {
-    let side = |x: &Patch, other: &Patch| {
-        wholly_in_front(x, other) || x.front_plane().is_some_and(|pl| pl.normal.dot(dir).abs() <= PARALLEL)
+    let side = |x: &Patch, other: &Patch| match x.front_plane() {
+        Some(plane) => plane.all_in_front(other) || plane.normal.dot(dir).abs() <= PARALLEL,
+        None => in_front_of_cone(x, other),
     };
     side(a, b) && side(b, a)
 }
