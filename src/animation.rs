@@ -358,7 +358,11 @@ pub fn advance(
         };
         let kept_geometry = state.geometry.take();
         let shaft_eps = 1e-9 * scene_scale;
-        let bounds: Vec<Aabb> = patches.iter().map(Patch::bounds).collect();
+        // A static pair's mask can change only where a moved triangle meets one of its segments,
+        // which lie between the two elements' visibility samples: the shafts between the samples'
+        // bounds (narrower than the patches') hold them (`visibility::sample_bounds`).
+        let bounds: Vec<Aabb> =
+            patches.iter().map(|p| crate::visibility::sample_bounds(p, s.visibility_samples)).collect();
         // Per swept box and element, 3 bits "min <= swept max" and 3 bits "max >= swept min"
         // (x, y, z): a pair's union box overlaps the swept box when its two codes have all six.
         let codes: Vec<Vec<u8>> = swept

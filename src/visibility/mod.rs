@@ -97,6 +97,9 @@ pub struct Occluders {
     /// Per element, its `m x m` visibility samples ([`sample_points`]), computed once per
     /// placement instead of once per link (2% of an animation frame's time).
     samples: Vec<DVec3>,
+    /// Per element, the bounds of its samples: a link's segments lie in the shaft between its
+    /// two elements' sample bounds, which is narrower than the one between their patch bounds.
+    sample_bounds: Vec<Aabb>,
 }
 
 impl Occluders {
@@ -134,11 +137,12 @@ impl Occluders {
                 .collect()
         };
         let cells = samples_per_axis * samples_per_axis;
-        let samples = elements
+        let samples: Vec<DVec3> = elements
             .iter()
             .flat_map(|p| sample_points(p, samples_per_axis).into_iter().take(cells))
             .collect();
-        Occluders { bvh, edges, culling_planes, scale, samples_per_axis, samples }
+        let sample_bounds = samples.chunks(cells).map(Aabb::from_points).collect();
+        Occluders { bvh, edges, culling_planes, scale, samples_per_axis, samples, sample_bounds }
     }
 
     /// Triangles that can occlude anything (elements on the scene's hull are left out).
@@ -156,6 +160,11 @@ impl Occluders {
         let x = &self.samples[e * cells..(e + 1) * cells];
         debug_assert_eq!(x[..], sample_points(p, self.samples_per_axis)[..cells], "element {e}");
         x
+    }
+
+    /// The bounds of element `e`'s visibility samples (see [`sample_bounds`]).
+    pub fn sample_bounds_of(&self, e: usize) -> &Aabb {
+        &self.sample_bounds[e]
     }
 
     /// Whether the segment from `a` (on element `i`) to `b` (on element `j`) is unobstructed by
@@ -216,7 +225,7 @@ impl Occluders {
 
     /// Visibility between elements `i` and `j`; also returns whether any ray was needed.
     pub fn link_visibility(&self, i: usize, pi: &Patch, j: usize, pj: &Patch) -> Visibility {
-        let shaft = Shaft::new(&pi.bounds(), &pj.bounds());
+        let shaft = Shaft::new(&self.sample_bounds[i], &self.sample_bounds[j]);
         let planes = [self.culling_planes[i], self.culling_planes[j]];
         let mut culling = [(DVec3::ZERO, 0.0); 2];
         let mut count = 0;
@@ -262,7 +271,7 @@ impl Occluders {
         old: &Visibility,
         moved: &MovedTriangles,
     ) -> Option<Visibility> {
-        let shaft = Shaft::new(&pi.bounds(), &pj.bounds());
+        let shaft = Shaft::new(&self.sample_bounds[i], &self.sample_bounds[j]);
         let eps = 1e-9 * self.scale;
         SCRATCH.with_borrow_mut(|scratch| {
             let Scratch { masks, was, now, segments, hit, hit_was } = scratch;
@@ -348,8 +357,8 @@ impl Occluders {
             out.extend(js.iter().map(|&(j, pj)| self.link_visibility(i, pi, j, pj)));
             return;
         }
-        let bi = pi.bounds();
-        let union = js.iter().fold(crate::geometry::Aabb::EMPTY, |b, (_, p)| b.union(p.bounds()));
+        let bi = self.sample_bounds[i];
+        let union = js.iter().fold(Aabb::EMPTY, |b, &(j, _)| b.union(self.sample_bounds[j]));
         let group = Shaft::new(&bi, &union);
         let eps = 1e-9 * self.scale;
         let (tris, bounds) = (self.bvh.triangles(), self.bvh.triangle_bounds());
@@ -372,7 +381,7 @@ impl Occluders {
                     out.push(Visibility::Full);
                     continue;
                 }
-                let shaft = Shaft::new(&bi, &pj.bounds());
+                let shaft = Shaft::new(&bi, &self.sample_bounds[j]);
                 out.push(CANDIDATES.with_borrow_mut(|candidates| {
                     candidates.clear();
                     candidates.extend(list.iter().copied().filter(|&t| {
@@ -487,6 +496,14 @@ impl bvh::Visitor for InShaft<'_> {
             self.out.push(t);
         }
     }
+}
+
+/// The bounds of an element's `m x m` visibility samples (those of [`Occluders`]): every segment
+/// a link traces lies in the shaft between its two elements' sample bounds, so an occluder outside
+/// that shaft cannot change the link's mask (the patch bounds are wider: by a quarter of the
+/// patch on each side at `m = 2`).
+pub fn sample_bounds(p: &Patch, m: usize) -> Aabb {
+    Aabb::from_points(&sample_points(p, m)[..m * m])
 }
 
 /// The visibility samples of an element: cell centres of an `m x m` grid (at most 16).
