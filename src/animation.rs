@@ -374,13 +374,39 @@ pub fn advance(
             })
             .collect();
         // Per element i, its candidates (i, j > i) and how many shafts it tested.
+        let moved_bytes: Vec<u8> = moved.iter().map(|&m| m as u8).collect();
         let scan = || -> Vec<(Vec<PairCandidate>, usize)> {
             (0..n)
                 .into_par_iter()
-                .map(|i| {
+                .map_init(Vec::new, |worth, i| {
+                    // First, branch-free over all j > i (vectorised), whether (i, j) is worth a
+                    // look: a moved element, or a pair box meeting a swept box. Most pairs are
+                    // neither (85% on the moving-light box). The scan on one thread, least of 3
+                    // frames, 3 runs: 3.2 -> 2.2 ms, of which the shaft tests take 0.9.
+                    let rest = (i + 1)..n;
+                    worth.clear();
+                    worth.extend(moved_bytes[rest.clone()].iter().map(|&m| m | moved_bytes[i]));
+                    if s.visibility {
+                        for code in &codes {
+                            let ci = code[i];
+                            for (w, &cj) in worth.iter_mut().zip(&code[rest.clone()]) {
+                                *w |= (((ci | cj) == 0b11_1111) as u8) << 1;
+                            }
+                        }
+                    }
                     let mut found = Vec::new();
                     let mut tests = 0;
-                    for j in (i + 1)..n {
+                    // (Eight at a time: a whole zero word is skipped at once.)
+                    worth.resize(worth.len().next_multiple_of(8), 0);
+                    let words = worth
+                        .chunks_exact(8)
+                        .enumerate()
+                        .filter(|(_, w)| u64::from_ne_bytes((*w).try_into().expect("eight bytes")) != 0);
+                    let marked = words.flat_map(|(c, w)| {
+                        w.iter().enumerate().filter(|(_, x)| **x != 0).map(move |(k, _)| 8 * c + k)
+                    });
+                    for k in marked {
+                        let j = i + 1 + k;
                         if moved[i] || moved[j] {
                             let rigid =
                                 translated[i] && translated[j] && (shift[j] - shift[i]).length() <= eps;
