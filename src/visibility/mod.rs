@@ -162,11 +162,6 @@ impl Occluders {
         x
     }
 
-    /// The bounds of element `e`'s visibility samples (see [`sample_bounds`]).
-    pub fn sample_bounds_of(&self, e: usize) -> &Aabb {
-        &self.sample_bounds[e]
-    }
-
     /// Whether the segment from `a` (on element `i`) to `b` (on element `j`) is unobstructed by
     /// any other element: one ray, for point queries such as the corner gather.
     pub fn segment_visible(&self, a: DVec3, b: DVec3, i: u32, j: u32) -> bool {
