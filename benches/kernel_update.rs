@@ -5,8 +5,11 @@
 //! demo animation instead: light and short block moving), `--room` / `--billiard` (the seed's
 //! Fig. 5a and 5b scenes as `cargo bench --bench animation` builds them), `--exact`
 //! (no series), `--reasons` (per frame, why pairs were recomputed), `--threads N` (default: one
-//! per core), `--save PATH` / `--check PATH` (write, or compare against, every frame's link
-//! store and solution: the link store must match bit for bit, the solution within 1e-6 of peak).
+//! per core), `--gather` (also the corner gather after each frame, as a session with
+//! `corner_gather` on runs it: its time, moments held and moments recomputed), `--save PATH` /
+//! `--check PATH` (write, or compare against, every frame's link store and solution, and with
+//! `--gather` its corners: the link store must match bit for bit, the solution and the corners
+//! within 1e-6 of peak).
 //!
 //! Prints per frame `kernel_seconds` and the counts that do not depend on timing noise (pairs
 //! whose shafts were tested against the swept box, link visibility checks, segments tested).
@@ -15,6 +18,7 @@ use std::collections::BTreeMap;
 use std::io::Write;
 
 use galerkin_radiosity::animation::{self, AnimationState, Outcome};
+use galerkin_radiosity::gather::GatherStats;
 use galerkin_radiosity::scene::Settings;
 use galerkin_radiosity::scenes;
 use galerkin_radiosity::system::{System, no_progress};
@@ -72,10 +76,14 @@ fn main() {
         scenes::cornell_box_moving_light(subdiv, 48, settings)
     };
     let reasons = flag("--reasons");
+    let gather = flag("--gather");
     let pool = rayon::ThreadPoolBuilder::new().num_threads(scene.settings.threads).build().unwrap();
     pool.install(|| {
         let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
         sys.solve(scene.settings.tolerance, &|| false).unwrap();
+        if gather {
+            sys.gather_corners(&scene, 1.0, &no_progress).unwrap();
+        }
         let mut state = AnimationState::new(sys.elements.len(), !exact);
         // Per frame: link hash, then the solution's coefficients.
         let mut record: Vec<(u64, Vec<f64>)> = Vec::new();
@@ -87,7 +95,7 @@ fn main() {
         );
         // Columns: the update's time and its parts, the solve, then counts that do not depend on
         // timing noise.
-        let columns = |u: &animation::UpdateStats| -> [(&str, f64); 15] {
+        let columns = |u: &animation::UpdateStats, g: &(f64, GatherStats)| -> [(&str, f64); 18] {
             [
                 ("kernel s", u.kernel_seconds),
                 ("scan s", u.scan_seconds),
@@ -104,27 +112,37 @@ fn main() {
                 ("series terms", u.series_terms as f64),
                 ("shots", u.shots as f64),
                 ("replayed", u.replay_scale),
+                ("gather s", g.0),
+                ("moments", g.1.moments as f64),
+                ("moments recomputed", g.1.recomputed as f64),
             ]
         };
         let row = |label: String, values: &[f64]| {
             let cells: Vec<String> = values
                 .iter()
                 .enumerate()
-                .map(|(k, v)| if k < 5 || k == 14 { format!("{v:.4}") } else { format!("{v:.0}") })
+                .map(|(k, v)| if k < 5 || k == 14 || k == 15 { format!("{v:.4}") } else { format!("{v:.0}") })
                 .collect();
             println!("| {label} | {} |", cells.join(" | "));
         };
-        let names = columns(&Default::default()).map(|(name, _)| name);
+        let names = columns(&Default::default(), &Default::default()).map(|(name, _)| name);
         println!("| frame | {} |", names.join(" | "));
         println!("|---{}|", "|---".repeat(names.len()));
-        let mut sums = [0.0f64; 15];
+        let mut sums = [0.0f64; 18];
         for f in 2..=frames {
             let Outcome::Updated(u) =
                 animation::advance(&mut sys, &mut state, &scene, f as f64, &no_progress).unwrap()
             else {
                 panic!("topology changed")
             };
-            let values = columns(&u).map(|(_, v)| v);
+            let g = if gather {
+                let start = std::time::Instant::now();
+                let g = sys.gather_corners(&scene, f as f64, &no_progress).unwrap();
+                (start.elapsed().as_secs_f64(), g)
+            } else {
+                Default::default()
+            };
+            let values = columns(&u, &g).map(|(_, v)| v);
             if reasons {
                 println!(
                     "frame {f} recomputed: bound {}, direction {}, half-space {}, visibility {}, \
@@ -147,7 +165,12 @@ fn main() {
                 let h = hash(snap.iter().flat_map(|(&(a, b), v)| {
                     std::iter::once(((a as u64) << 32) | b as u64).chain(v.iter().map(|&x| x as u64))
                 }));
-                let b: Vec<f64> = sys.solution.b.iter().flat_map(|c| c.iter().copied()).collect();
+                let mut b: Vec<f64> = sys.solution.b.iter().flat_map(|c| c.iter().copied()).collect();
+                // The corners follow the solution in the record, in their own peak.
+                if let Some(corners) = &sys.corners {
+                    b.push(f64::NAN);
+                    b.extend(corners.iter().flatten().flatten());
+                }
                 record.push((h, b));
             }
         }
@@ -167,13 +190,28 @@ fn main() {
                 let mut words = line.split(' ');
                 let want_h: u64 = words.next().unwrap().parse().unwrap();
                 let want: Vec<f64> = words.map(|w| w.parse().unwrap()).collect();
-                let peak = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-                let worst = want.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+                // Worst difference relative to the peak, per part (solution, then corners).
+                let worst = |want: &[f64], got: &[f64]| {
+                    let peak = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+                    want.iter().zip(got).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max) / peak
+                };
+                let split = |v: &[f64]| {
+                    let k = v.iter().position(|x| x.is_nan()).unwrap_or(v.len());
+                    (v[..k].to_vec(), v.get(k + 1..).unwrap_or_default().to_vec())
+                };
+                let ((want_b, want_c), (got_b, got_c)) = (split(&want), split(b));
+                let corners = if want_c.is_empty() && got_c.is_empty() {
+                    String::new()
+                } else if want_c.len() != got_c.len() {
+                    ", corners DIFFER in number".into()
+                } else {
+                    format!(", corners worst {:.1e} of peak", worst(&want_c, &got_c))
+                };
                 println!(
-                    "frame {}: links {}, solution worst {:.1e} of peak",
+                    "frame {}: links {}, solution worst {:.1e} of peak{corners}",
                     k + 2,
                     if want_h == *h { "identical" } else { "DIFFER" },
-                    worst / peak
+                    worst(&want_b, &got_b)
                 );
             }
         }
