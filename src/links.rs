@@ -54,6 +54,9 @@ pub struct LinkStore {
     slots: Vec<[u32; 2]>,
     /// Per element: the pairs it belongs to.
     adjacency: Vec<Vec<PairId>>,
+    /// Pairs added, or whose visibility changed, since [`LinkStore::take_visibility_changes`]
+    /// last ran; `None` when unknown (never taken, or more were logged than there are pairs).
+    visibility_changes: Option<Vec<PairId>>,
     /// Per element, in `adjacency` order: the other element of the pair, which receives what this
     /// one shoots.
     receivers: Vec<Vec<ElementId>>,
@@ -80,6 +83,7 @@ impl LinkStore {
         Self {
             nb,
             pairs: Vec::new(),
+            visibility_changes: None,
             slots: Vec::new(),
             adjacency: vec![Vec::new(); n_elements],
             receivers: vec![Vec::new(); n_elements],
@@ -160,6 +164,7 @@ impl LinkStore {
         let id = self.pairs.len() as PairId;
         self.pairs.push(Pair { a, b, visibility });
         self.link(a, b, id);
+        self.log_visibility_change(id);
         let nb = self.nb;
         // G_ab is shot by b, G_ba by a; both go to the end of the shooter's columns.
         for (shooter, receiver, g) in [(b, a, ab), (a, b, ba)] {
@@ -231,6 +236,7 @@ impl LinkStore {
                 let id = self.pairs.len() as PairId;
                 self.pairs.push(Pair { a: row.a, b, visibility: v });
                 self.link(row.a, b, id);
+                self.log_visibility_change(id);
                 origin.push((ri as u32, k as u32));
             }
         }
@@ -355,7 +361,29 @@ impl LinkStore {
     }
 
     pub fn set_visibility(&mut self, p: PairId, visibility: Visibility) {
-        self.pairs[p as usize].visibility = visibility;
+        if self.pairs[p as usize].visibility != visibility {
+            self.pairs[p as usize].visibility = visibility;
+            self.log_visibility_change(p);
+        }
+    }
+
+    /// The pairs added, or whose visibility changed, since the last call (each at least once,
+    /// in no particular order), or `None` when that is not known: before the first call, or
+    /// when more changes than pairs piled up between calls. What the corner gather reads to keep
+    /// a corner's sources without re-deriving them ([`crate::gather`]).
+    pub fn take_visibility_changes(&mut self) -> Option<Vec<PairId>> {
+        self.visibility_changes.replace(Vec::new())
+    }
+
+    fn log_visibility_change(&mut self, p: PairId) {
+        if let Some(log) = &mut self.visibility_changes {
+            // Bounded: a log nobody takes (the gather off) stops at "unknown".
+            if log.len() >= self.pairs.len().max(1024) {
+                self.visibility_changes = None;
+            } else {
+                log.push(p);
+            }
+        }
     }
 
     /// The block with `receiver` as receiver, `G_receiver,other`, row-major (row = receiver
@@ -433,6 +461,29 @@ mod tests {
     /// A block whose entries name it: `pair`, receiver and index.
     fn block(nb: usize, pair: usize, receiver: u32, scale: f64) -> Vec<f64> {
         (0..nb * nb).map(|x| scale * (1000 * pair + 100 * receiver as usize + x) as f64).collect()
+    }
+
+    /// The log lists added pairs and real visibility changes, is unknown before it is first
+    /// taken, and gives up (unknown) rather than grow past the number of pairs.
+    #[test]
+    fn visibility_changes_are_logged_between_takes() {
+        let nb = 1;
+        let mut store = LinkStore::new(3, nb);
+        let zero = [0.0];
+        store.push(0, 1, &zero, &zero, Visibility::Full);
+        assert_eq!(store.take_visibility_changes(), None, "unknown before the first take");
+        store.push(1, 2, &zero, &zero, Visibility::Full);
+        store.set_visibility(0, Visibility::Full); // unchanged: not logged
+        store.set_visibility(0, Visibility::Blocked);
+        assert_eq!(store.take_visibility_changes(), Some(vec![1, 0]));
+        assert_eq!(store.take_visibility_changes(), Some(vec![]));
+        for k in 0..2000 {
+            let vis = if k % 2 == 0 { Visibility::Full } else { Visibility::Blocked };
+            store.set_visibility(0, vis);
+        }
+        assert_eq!(store.take_visibility_changes(), None, "more changes than pairs: unknown");
+        store.set_visibility(1, Visibility::Blocked);
+        assert_eq!(store.take_visibility_changes(), Some(vec![1]));
     }
 
     #[test]

@@ -262,8 +262,16 @@ impl System {
     pub fn gather_corners(&mut self, scene: &Scene, frame: f64, progress: Progress) -> Result<GatherStats> {
         self.corners = None;
         let previous = self.gather.take();
-        let (corners, kept, stats) =
-            CornerGather::run(self, scene, frame, self.occluders.as_ref(), previous, progress)?;
+        let changed = self.links.take_visibility_changes();
+        let (corners, kept, stats) = CornerGather::run(
+            self,
+            scene,
+            frame,
+            self.occluders.as_ref(),
+            previous,
+            changed.as_deref(),
+            progress,
+        )?;
         self.corners = Some(corners);
         self.gather = Some(kept);
         Ok(stats)
