@@ -100,6 +100,8 @@ pub struct Occluders {
     /// Per element, the bounds of its samples: a link's segments lie in the shaft between its
     /// two elements' sample bounds, which is narrower than the one between their patch bounds.
     sample_bounds: Vec<Aabb>,
+    /// Per element: on the scene's hull, hence not an occluder.
+    hull: Vec<bool>,
 }
 
 impl Occluders {
@@ -142,7 +144,13 @@ impl Occluders {
             .flat_map(|p| sample_points(p, samples_per_axis).into_iter().take(cells))
             .collect();
         let sample_bounds = samples.chunks(cells).map(Aabb::from_points).collect();
-        Occluders { bvh, edges, culling_planes, scale, samples_per_axis, samples, sample_bounds }
+        Occluders { bvh, edges, culling_planes, scale, samples_per_axis, samples, sample_bounds, hull }
+    }
+
+    /// Whether element `e` lies on the scene's hull and so occludes nothing (its triangles are
+    /// left out).
+    pub fn on_hull(&self, e: usize) -> bool {
+        self.hull[e]
     }
 
     /// Triangles that can occlude anything (elements on the scene's hull are left out).
@@ -514,6 +522,74 @@ fn sample_points(p: &Patch, m: usize) -> [DVec3; 16] {
     x
 }
 
+/// The occluder triangles of the elements that moved, at their previous and at their new places,
+/// as [`Occluders`] holds them, to tell whether segments meet them alike at both places
+/// ([`MovedOccluders::meet_alike`]). The moved elements must be occluders at both places (not
+/// on the scene's hull, [`Occluders::on_hull`]).
+pub struct MovedOccluders {
+    /// Per moved element: the bounds of its old and new places, and its triangles at each as
+    /// `v0, v1 - v0, v2 - v0`, formed as `Occluders::new` forms them (the same rounding, hence
+    /// the same decisions of the segment test).
+    swept: Vec<Aabb>,
+    old: Vec<Vec<[DVec3; 3]>>,
+    new: Vec<Vec<[DVec3; 3]>>,
+}
+
+impl MovedOccluders {
+    /// `moved` yields each moved element's patch at the previous and at the new place.
+    pub fn new<'a>(moved: impl Iterator<Item = (&'a Patch, &'a Patch)>) -> Self {
+        let edges = |p: &Patch| -> Vec<[DVec3; 3]> {
+            p.triangles().into_iter().map(|v| [v[0], v[1] - v[0], v[2] - v[0]]).collect()
+        };
+        let (mut swept, mut old, mut new) = (Vec::new(), Vec::new(), Vec::new());
+        for (a, b) in moved {
+            let bounds =
+                |p: &Patch| p.triangles().iter().fold(Aabb::EMPTY, |u, t| u.union(Aabb::from_points(t)));
+            swept.push(bounds(a).union(bounds(b)));
+            old.push(edges(a));
+            new.push(edges(b));
+        }
+        Self { swept, old, new }
+    }
+
+    /// Whether each segment from `x` to a point of `targets` (all inside `bounds`), over
+    /// `t in (1e-9, 1 - 1e-9)` as [`Occluders::point_visibility`] casts it, meets some old
+    /// triangle exactly when it meets some new one (decided by the same test). Then, as nothing
+    /// else moved, each segment gets the verdict it got before (with the old places) whatever
+    /// other occluders it meets. Only the elements whose swept bounds the shaft between `x` and
+    /// `bounds` may hold (by `eps`) are tested; `false` also when they have more than
+    /// [`BRUTE_FORCE_CANDIDATES`] triangles at either place.
+    pub fn meet_alike(&self, x: DVec3, bounds: &Aabb, targets: &[DVec3], eps: f64) -> bool {
+        let point = Aabb { min: x, max: x };
+        CAST_MOVED.with_borrow_mut(|(old, new, from_old, from_new)| {
+            (old.n, new.n) = (0, 0);
+            for m in 0..self.swept.len() {
+                if !Shaft::between_may_contain_box(&point, bounds, &self.swept[m], eps) {
+                    continue;
+                }
+                if !(old.extend(&self.old[m]) && new.extend(&self.new[m])) {
+                    return false;
+                }
+            }
+            if old.n == 0 && new.n == 0 {
+                return true;
+            }
+            old.terms_from(x, from_old);
+            new.terms_from(x, from_new);
+            targets.iter().all(|&y| {
+                let d = y - x;
+                old.any_hit(from_old, d, 1e-9, 1.0 - 1e-9) == new.any_hit(from_new, d, 1e-9, 1.0 - 1e-9)
+            })
+        })
+    }
+}
+
+thread_local! {
+    /// [`MovedOccluders::meet_alike`]'s triangles and per-origin terms, old and new.
+    static CAST_MOVED: std::cell::RefCell<(CandidateTriangles, CandidateTriangles, FromOrigin, FromOrigin)> =
+        const { std::cell::RefCell::new((CandidateTriangles::empty(), CandidateTriangles::empty(), FromOrigin::empty(), FromOrigin::empty())) };
+}
+
 /// The occluder triangles of the elements that moved this frame, at their previous and at their
 /// new positions, for [`Occluders::relink_visibility`].
 pub struct MovedTriangles {
@@ -750,6 +826,23 @@ impl CandidateTriangles {
         Self { n: 0, v0: zero, e1: zero, e2: zero }
     }
 
+    /// Appends triangles (`v0, v1 - v0, v2 - v0` each); `false`, changing nothing, when they
+    /// would not fit.
+    fn extend(&mut self, edges: &[[DVec3; 3]]) -> bool {
+        if self.n + edges.len() > BRUTE_FORCE_CANDIDATES {
+            return false;
+        }
+        for [v0, e1, e2] in edges {
+            for c in 0..3 {
+                self.v0[c][self.n] = v0[c];
+                self.e1[c][self.n] = e1[c];
+                self.e2[c][self.n] = e2[c];
+            }
+            self.n += 1;
+        }
+        true
+    }
+
     #[cfg(test)]
     fn from(&self, o: DVec3) -> FromOrigin {
         let mut f = FromOrigin::empty();
@@ -825,6 +918,40 @@ mod tests {
             .collect();
         let edges = tris.iter().map(|t| [t.v[0], t.v[1] - t.v[0], t.v[2] - t.v[0]]).collect();
         (tris, edges)
+    }
+
+    /// A small square sliding across the segments from a point to a far square: segments it
+    /// crosses at one place and not the other are told apart; a slide that stays clear of the
+    /// shaft, or that covers the same segments before and after, meets them alike.
+    #[test]
+    fn moved_occluders_meet_alike_only_when_each_segment_is_met_at_both_places_or_neither() {
+        let p = DVec3::new;
+        let square = |x: f64, y: f64, z: f64, h: f64| {
+            Patch::from_corners(&[
+                p(x - h, y - h, z),
+                p(x + h, y - h, z),
+                p(x + h, y + h, z),
+                p(x - h, y + h, z),
+            ])
+        };
+        let x = p(0.0, 0.0, 0.0);
+        let source = square(0.0, 0.0, 10.0, 1.0);
+        let bounds = source.bounds();
+        let targets: Vec<DVec3> = [-0.5, 0.0, 0.5]
+            .iter()
+            .flat_map(|&a| [-0.5, 0.0, 0.5].map(|b| source.point(0.5 + 0.5 * a, 0.5 + 0.5 * b)))
+            .collect();
+        let alike = |from: Patch, to: Patch| {
+            MovedOccluders::new([(&from, &to)].into_iter()).meet_alike(x, &bounds, &targets, 1e-9)
+        };
+        // Into the middle of the shaft from beside it: segments met now, not before.
+        assert!(!alike(square(5.0, 0.0, 5.0, 0.3), square(0.0, 0.0, 5.0, 0.3)));
+        // Far outside the shaft at both places.
+        assert!(alike(square(5.0, 0.0, 5.0, 0.3), square(6.0, 0.0, 5.0, 0.3)));
+        // A wide square covering every segment at both places.
+        assert!(alike(square(0.0, 0.0, 5.0, 3.0), square(0.1, 0.0, 5.0, 3.0)));
+        // A small square moving between segments (from the middle one to beside it).
+        assert!(!alike(square(0.0, 0.0, 5.0, 0.05), square(0.07, 0.0, 5.0, 0.05)));
     }
 
     /// The Moeller-Trumbore vectorised over segments gives the decisions of `segment_hits` for
