@@ -32,11 +32,14 @@
 //! enter the shaft between the corner and the source.
 //!
 //! Which sources a corner has, and how each one's visibility is decided, is re-derived only for
-//! corners whose element had a pair with a non-emitter added or changing visibility
-//! ([`crate::links::LinkStore::take_visibility_changes`]), or that a moved element may have
-//! turned towards or away from. The others visit only their moved sources and those with rays.
-//! On the moving-light box (1,079 patches, 1,767 corner points, 1.33M moments) that took the
-//! gather of a frame from 75 to 59 ms on one thread.
+//! corners whose element had a pair with a non-emitter added, whose sources came or went with a
+//! change of a pair's visibility ([`crate::links::LinkStore::take_visibility_changes`]), or that
+//! a moved element may have turned towards or away from. The others visit only their moved
+//! sources, those with rays and those whose pair's visibility changed. A kept moment whose shaft
+//! a swept box enters holds when its rays meet the moved triangles alike at the old and the new
+//! places ([`crate::visibility::MovedOccluders`]). On the moving-light box (1,079 patches, 1,767
+//! corner points, 1.33M moments) these took the gather of a frame from 75 to 53-56 ms on one
+//! thread, bit-identical.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -72,6 +75,19 @@ const MAX_DEPTH: u32 = 12;
 /// ([`Gather::unchanged`]); with more, a swept box entering the shaft recomputes the moment.
 const MAX_MOVED_OCCLUDERS: usize = 64;
 
+/// Per element, the non-emitter sources whose pair with it changed visibility since the kept
+/// gather: `(source, pair)`, sorted, each once.
+struct SourceChanges {
+    first: Vec<u32>,
+    changes: Vec<(u32, u32)>,
+}
+
+impl SourceChanges {
+    fn of(&self, e: usize) -> &[(u32, u32)] {
+        &self.changes[self.first[e] as usize..self.first[e + 1] as usize]
+    }
+}
+
 /// `B` at every face corner, per object in face order.
 pub type CornerValues = Vec<Vec<[f64; 3]>>;
 
@@ -92,6 +108,8 @@ pub struct CornerGather {
     cells_per_axis: usize,
     /// The emitters and whether there were occluders: a row's sources depend on both.
     is_emitter: Vec<bool>,
+    /// Pairs in the link store then (those past it were added since).
+    pairs: usize,
     occluded: bool,
     /// Per element, on the scene's hull (not an occluder) in this gather's occluders.
     hull: Vec<bool>,
@@ -226,20 +244,40 @@ impl CornerGather {
         }
         // Rows whose sources cannot have changed skip re-deriving them (`Gather::settled`): when
         // the emitters and the occluders' presence are those of `previous`, and the changed
-        // pairs are known. Per element, whether a pair with a non-emitter source changed (the
-        // sources `Gather::element_links` lists).
+        // pairs are known. Per element, whether a pair with a non-emitter source (one that
+        // `Gather::element_links` lists) was added, and the non-emitter sources whose pair
+        // changed visibility, sorted, each once (`first[e]..first[e + 1]` of `changes`).
         let settled_ok = previous.as_ref().is_some_and(|p| {
             p.is_emitter == is_emitter && p.occluded == occluders.is_some() && changed.is_some()
         });
-        let mut links_changed = vec![!settled_ok; patches.len()];
-        if let (true, Some(changed)) = (settled_ok, changed) {
-            for &p in changed {
-                let pair = sys.links.pair(p);
-                let (a, b) = (pair.a as usize, pair.b as usize);
-                links_changed[a] |= !is_emitter[b];
-                links_changed[b] |= !is_emitter[a];
+        let mut links_added = vec![!settled_ok; patches.len()];
+        let mut by_element: Vec<(u32, u32, u32)> = Vec::new();
+        if let (Some(p), Some(changed)) = (previous.as_ref().filter(|_| settled_ok), changed) {
+            for &id in changed {
+                let pair = sys.links.pair(id);
+                for (e, j) in [(pair.a, pair.b), (pair.b, pair.a)] {
+                    if is_emitter[j as usize] {
+                        continue;
+                    }
+                    if id as usize >= p.pairs {
+                        links_added[e as usize] = true;
+                    } else {
+                        by_element.push((e, j, id));
+                    }
+                }
             }
         }
+        by_element.sort_unstable();
+        by_element.dedup();
+        let mut first = vec![0u32; patches.len() + 1];
+        for &(e, ..) in &by_element {
+            first[e as usize + 1] += 1;
+        }
+        for e in 0..patches.len() {
+            first[e + 1] += first[e];
+        }
+        let source_changes =
+            SourceChanges { first, changes: by_element.iter().map(|&(_, j, p)| (j, p)).collect() };
         let movers: Vec<u32> = (0..patches.len()).filter(|&e| moved[e]).map(|e| e as u32).collect();
         // The moved elements' triangles at their old and new places, when both are occluders
         // (on the hull at neither place), for `Gather::unchanged`.
@@ -271,7 +309,8 @@ impl CornerGather {
             cells_per_axis,
             moved: &moved,
             movers: &movers,
-            links_changed: &links_changed,
+            links_added: &links_added,
+            source_changes: &source_changes,
             swept: &swept,
             moved_occluders: moved_occluders.as_ref(),
             swept_union: swept.iter().fold(Aabb::EMPTY, |u, b| u.union(*b)),
@@ -357,6 +396,7 @@ impl CornerGather {
             basis: sys.basis,
             cells_per_axis,
             is_emitter,
+            pairs: sys.links.len(),
             occluded: occluders.is_some(),
             hull,
         };
@@ -507,8 +547,10 @@ struct Gather<'a> {
     moved: &'a [bool],
     movers: &'a [u32],
     /// Per element: its sources may differ from the kept gather's ([`Gather::settled`]) because
-    /// one of its pairs with a non-emitter was added or changed visibility (all, when unknown).
-    links_changed: &'a [bool],
+    /// a pair of it with a non-emitter was added (all, when what changed is unknown).
+    links_added: &'a [bool],
+    /// Per element, the non-emitter sources whose pair with it changed visibility.
+    source_changes: &'a SourceChanges,
     /// Old-and-new bounds of each moving object.
     swept: &'a [Aabb],
     /// The moved elements' triangles at their old and new places (`None`: no kept gather, or
@@ -578,10 +620,13 @@ impl Gather<'_> {
         let rx = Receiver { x, n, element: i as u32, cell: cell_of(s, t, self.cells_per_axis) };
         let previous = previous.filter(|p| p.near == near);
         let faces_corner = |j: usize| j != i && self.planes[j].is_none_or(|f| f.any_in_front(patch));
-        if let Some(p) = previous.as_ref().filter(|p| self.settled(i, near, p, faces_corner)) {
-            let visit_all = near || self.movers.len() + self.emitters.len() > p.sources.len() / 4;
+        if let Some((p, modes)) =
+            previous.as_ref().and_then(|p| Some((p, self.settled(&rx, i, near, p, faces_corner)?)))
+        {
+            let visit_all =
+                near || self.movers.len() + self.emitters.len() + modes.len() > p.sources.len() / 4;
             let previous = previous.expect("checked above");
-            return self.update_settled(&rx, previous, visit_all, feet);
+            return self.update_settled(&rx, previous, &modes, visit_all, feet);
         }
         let wanted = self.wanted(&rx, i, near, self.element_links(i), faces_corner);
         // Touched sources are found when a foot is needed (a fresh moment, a kept foot).
@@ -671,43 +716,80 @@ impl Gather<'_> {
         (row, computed)
     }
 
-    /// Whether the kept row `p` of a point of element `i` (not moved, `near` as before) has the
-    /// sources and modes [`Gather::wanted`] would give now, without deriving them: none of the
-    /// element's pairs with non-emitters changed (`links_changed`, which also covers each mask
-    /// row a `Mode::Mask` reads), and no moved element entered or left the sources by turning
-    /// towards or away from the corner. Only moved elements can turn; a moved non-emitter in a
-    /// row that is not near is a source through its link alone. `false` is always safe (the
-    /// caller then derives the sources).
-    fn settled(&self, i: usize, near: bool, p: &Row, faces_corner: impl Fn(usize) -> bool) -> bool {
-        if self.links_changed[i] {
-            return false;
+    /// Whether the kept row `p` of a point `rx` of element `i` (not moved, `near` as before) has
+    /// the sources [`Gather::wanted`] would give now, without deriving them, and which of its
+    /// entries (index, new mode) change how their visibility is decided. That holds when no pair
+    /// of the element with a non-emitter was added (`links_added`), each source whose pair
+    /// changed visibility is still a source exactly when it was (its mode may change: a mask
+    /// row, open to masked; near an occluder every source has rays whatever its link), and no
+    /// moved element entered or left the sources by turning towards or away from the corner.
+    /// Only moved elements can turn; a moved non-emitter in a row that is not near is a source
+    /// through its link alone. `None` is always safe (the caller then derives the sources).
+    fn settled(
+        &self,
+        rx: &Receiver,
+        i: usize,
+        near: bool,
+        p: &Row,
+        faces_corner: impl Fn(usize) -> bool,
+    ) -> Option<Vec<(usize, Mode)>> {
+        if self.links_added[i] {
+            return None;
         }
-        self.movers.iter().all(|&j| {
+        let mut modes = Vec::new();
+        if !near {
+            for &(j, pair) in self.source_changes.of(i) {
+                let mode = self.link_mode(rx, i, &Linked { j, pair, kind: self.kinds[pair as usize] });
+                match (p.sources.binary_search(&j), mode) {
+                    (Ok(k), Some(mode)) => {
+                        if p.modes[k] != mode {
+                            modes.push((k, mode));
+                        }
+                    }
+                    (Err(_), None) => {}
+                    _ => return None,
+                }
+            }
+        }
+        let turned = self.movers.iter().any(|&j| {
             let j = j as usize;
             if !near && !self.is_emitter[j] {
-                return true;
+                return false;
             }
             // Near: a source that faces the corner now is wanted whatever its link, and one in
             // the row that no longer faces it may be there through a link: both hold only if
             // membership and facing agree. An emitter (not near) is a source iff it faces.
-            p.sources.binary_search(&(j as u32)).is_ok() == faces_corner(j)
-        })
+            p.sources.binary_search(&(j as u32)).is_ok() != faces_corner(j)
+        });
+        (!turned).then_some(modes)
     }
 
     /// A settled row ([`Gather::settled`]) brought to this frame: what [`Gather::row`] does to a
-    /// kept row with the same sources, visiting only the entries that can have changed (moved
-    /// sources, and those with rays: every one near an occluder, else the emitters) unless
-    /// `visit_all`. The others keep their moments, and their feet update themselves.
-    fn update_settled(&self, rx: &Receiver, mut row: Row, visit_all: bool, feet: bool) -> (Row, usize) {
+    /// kept row with the same sources, the entries in `modes` taking their new mode. It visits
+    /// only the entries that can have changed (those, moved sources, and those with rays: every
+    /// one near an occluder, else the emitters) unless `visit_all`. The others keep their
+    /// moments, and their feet update themselves.
+    fn update_settled(
+        &self,
+        rx: &Receiver,
+        mut row: Row,
+        modes: &[(usize, Mode)],
+        visit_all: bool,
+        feet: bool,
+    ) -> (Row, usize) {
         let nb = self.sys.basis.len();
         let i = rx.element as usize;
         let touch = |j: u32| if feet { self.touch(rx, i, j as usize) } else { None };
         let mut old_feet = std::mem::take(&mut row.feet);
         let mut computed = 0;
+        for &(k, mode) in modes {
+            row.modes[k] = mode;
+        }
         let mut visit = |row: &mut Row, k: usize| {
             let (j, mode) = (row.sources[k], row.modes[k]);
             let old_foot = old_feet.iter().position(|f| f.element == j).map(|x| old_feet.swap_remove(x));
-            computed += if self.unchanged(rx, j as usize, mode) {
+            let new_mode = modes.iter().any(|&(x, _)| x == k);
+            computed += if !new_mode && self.unchanged(rx, j as usize, mode) {
                 match old_foot {
                     Some(_) => self.keep_foot(j, touch(j), old_foot, &mut row.feet),
                     None => 0,
@@ -729,6 +811,7 @@ impl Gather<'_> {
                 .copied()
                 .chain(emitters)
                 .filter_map(|j| row.sources.binary_search(&j).ok())
+                .chain(modes.iter().map(|&(k, _)| k))
                 .collect();
             entries.sort_unstable();
             entries.dedup();
