@@ -1,0 +1,119 @@
+"""Times the add-on's live preview while scrubbing: what an artist waits for per frame change.
+
+    .venv/bin/python -m tools.live_preview_bench [--subdiv 13] [--frames 24] [--lib A --lib B ...]
+
+Builds the test suite's Cornell box (six walls of subdiv x subdiv faces, a 0.5 x 0.5 ceiling
+light keyframed across the room over 48 frames, no block: 1,015 faces at 13) under the bpy
+module, turns the live preview on (basis order 2, Medium quality, corner gather on, as the
+panel's defaults) and steps the timeline frame by frame with ``scene.frame_set``. Prints per
+frame the wall-clock time of ``frame_set`` (the handler: sampling, the native solve, writing the
+colour attributes) and the native solve's parts (kernel update, Delta solve, corner gather) from
+its frame statistics, then the medians over frames 3 onward.
+
+With several ``--lib`` (paths of ``libgalerkin_radiosity.so``, e.g. two builds), each library
+runs in its own process, alternately, ``--runs`` times, so that machine noise hits all alike.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def measure(subdiv: int, frames: int) -> list[dict]:
+    """Runs in this process (bpy imported here); one dict per frame from 2 to ``frames``."""
+    sys.path[:0] = [str(REPO), str(REPO / "tests" / "python")]
+    os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="blender-user-"))
+    import bpy
+    import scenes
+
+    import addon
+    from addon.native import binding
+
+    addon.register()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    last: list[dict] = []
+    solve_frame = binding.Session.solve_frame
+
+    def recording(self, *args, **kwargs):
+        stats = solve_frame(self, *args, **kwargs)
+        last.append(stats)
+        return stats
+
+    binding.Session.solve_frame = recording
+    scenes.cornell_box(bpy, n=subdiv, light_frames=(1, 48), box=False)
+    sc = bpy.context.scene
+    sc.radiosity.basis_order = 2
+    sc.radiosity.live_preview = True  # solves frame 1
+    rows = []
+    for f in range(2, frames + 1):
+        t = time.perf_counter()
+        sc.frame_set(f)
+        wall = time.perf_counter() - t
+        st = last[-1]
+        rows.append({
+            "frame": f,
+            "frame_set_ms": 1e3 * wall,
+            "kernel_ms": 1e3 * st["kernel_seconds"],
+            "solve_ms": 1e3 * st["solve_seconds"],
+            "gather_ms": 1e3 * st["gather_seconds"],
+            "moments_recomputed": st["gather_recomputed"],
+            "faces": sum(len(o.data.polygons) for o in sc.objects if o.type == "MESH"),
+        })
+    return rows
+
+
+def medians(rows: list[dict]) -> dict:
+    keep = [r for r in rows if r["frame"] >= 3]
+    keys = ("frame_set_ms", "kernel_ms", "solve_ms", "gather_ms", "moments_recomputed")
+    return {k: statistics.median(r[k] for r in keep) for k in keys}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--subdiv", type=int, default=13)
+    ap.add_argument("--frames", type=int, default=24)
+    ap.add_argument("--lib", action="append", default=[], help="library to time (repeatable)")
+    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # child mode
+    args = ap.parse_args(argv)
+    if args.json:
+        print(json.dumps(measure(args.subdiv, args.frames)))
+        return
+    if not args.lib:
+        rows = measure(args.subdiv, args.frames)
+        print(f"{rows[0]['faces']} faces")
+        print("| frame | frame_set ms | kernel ms | solve ms | gather ms | moments recomputed |")
+        print("|---|---|---|---|---|---|")
+        for r in rows:
+            print(f"| {r['frame']} | {r['frame_set_ms']:.1f} | {r['kernel_ms']:.1f} | {r['solve_ms']:.1f} | "
+                  f"{r['gather_ms']:.1f} | {r['moments_recomputed']} |")
+        m = medians(rows)
+        print(f"| median 3.. | {m['frame_set_ms']:.1f} | {m['kernel_ms']:.1f} | {m['solve_ms']:.1f} | "
+              f"{m['gather_ms']:.1f} | {m['moments_recomputed']:.0f} |")
+        return
+    print("| library | run | frame_set ms | kernel ms | solve ms | gather ms | moments recomputed |")
+    print("|---|---|---|---|---|---|---|")
+    for run in range(args.runs):
+        for lib in args.lib:
+            env = dict(os.environ, GALERKIN_RADIOSITY_LIB=lib)
+            cmd = [sys.executable, "-m", "tools.live_preview_bench", "--json",
+                   "--subdiv", str(args.subdiv), "--frames", str(args.frames)]
+            out = subprocess.run(cmd, cwd=REPO, env=env, check=True, capture_output=True, text=True).stdout
+            m = medians(json.loads(out.strip().splitlines()[-1]))
+            cells = [m["frame_set_ms"], m["kernel_ms"], m["solve_ms"], m["gather_ms"]]
+            print(f"| {lib} | {run + 1} | " + " | ".join(f"{x:.1f}" for x in cells)
+                  + f" | {m['moments_recomputed']:.0f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
