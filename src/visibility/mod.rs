@@ -128,7 +128,7 @@ impl Occluders {
             }
         }
         let bvh = Bvh::build(tris);
-        let edges = bvh.triangles().iter().map(|t| [t.v[0], t.v[1] - t.v[0], t.v[2] - t.v[0]]).collect();
+        let edges = bvh.triangles().iter().map(|t| triangle_edges(t.v)).collect();
         let eps = 1e-9 * scale;
         let culling_planes = {
             use rayon::prelude::*;
@@ -522,6 +522,13 @@ fn sample_points(p: &Patch, m: usize) -> [DVec3; 16] {
     x
 }
 
+/// A triangle as the segment tests read it, `v0, v1 - v0, v2 - v0`: the edges
+/// [`bvh::segment_hits`] forms, in one place so that every list of them rounds alike (and so
+/// decides alike).
+fn triangle_edges(v: [DVec3; 3]) -> [DVec3; 3] {
+    [v[0], v[1] - v[0], v[2] - v[0]]
+}
+
 /// The occluder triangles of the elements that moved, at their previous and at their new places,
 /// as [`Occluders`] holds them, to tell whether segments meet them alike at both places
 /// ([`MovedOccluders::meet_alike`]). The moved elements must be occluders at both places (not
@@ -538,16 +545,12 @@ pub struct MovedOccluders {
 impl MovedOccluders {
     /// `moved` yields each moved element's patch at the previous and at the new place.
     pub fn new<'a>(moved: impl Iterator<Item = (&'a Patch, &'a Patch)>) -> Self {
-        let edges = |p: &Patch| -> Vec<[DVec3; 3]> {
-            p.triangles().into_iter().map(|v| [v[0], v[1] - v[0], v[2] - v[0]]).collect()
-        };
         let (mut swept, mut old, mut new) = (Vec::new(), Vec::new(), Vec::new());
         for (a, b) in moved {
-            let bounds =
-                |p: &Patch| p.triangles().iter().fold(Aabb::EMPTY, |u, t| u.union(Aabb::from_points(t)));
-            swept.push(bounds(a).union(bounds(b)));
-            old.push(edges(a));
-            new.push(edges(b));
+            let (a, b) = (a.triangles(), b.triangles());
+            swept.push(a.iter().chain(&b).fold(Aabb::EMPTY, |u, t| u.union(Aabb::from_points(t))));
+            old.push(a.into_iter().map(triangle_edges).collect());
+            new.push(b.into_iter().map(triangle_edges).collect());
         }
         Self { swept, old, new }
     }
@@ -611,7 +614,7 @@ impl MovedTriangles {
     /// `moved` yields each moved element's patch at the previous and at the new frame. Elements on
     /// the scene's hull are included: they never block a segment, so testing them changes nothing.
     pub fn new<'a>(moved: impl Iterator<Item = (&'a Patch, &'a Patch)>) -> Self {
-        let tri = |v: [DVec3; 3]| ([v[0], v[1] - v[0], v[2] - v[0]], v);
+        let tri = |v: [DVec3; 3]| (triangle_edges(v), v);
         let (mut old, mut new) = (Vec::new(), Vec::new());
         for (a, b) in moved {
             old.extend(a.triangles().into_iter().map(tri));
