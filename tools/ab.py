@@ -4,9 +4,11 @@ under `out/ab/`), runs the builds in turn `--runs` times, and prints per revisio
 25th percentile and best of each frame's times pooled over the runs. This VM's speed drifts by
 30-50% within minutes, so builds are only comparable measured this way.
 
-    .venv/bin/python -m tools.ab 7244f93 HEAD [--runs 5] [--frames 16] [--demo] [--exact REV]
+    .venv/bin/python -m tools.ab 7244f93 HEAD [--runs 5] [--frames 16] [--demo] [--exact REV] [--gather]
 
-A revision given as `--exact REV` is run with `--exact` (the update without the series). The
+A revision given as `--exact REV` is run with `--exact` (the update without the series).
+`--gather` runs the corner gather after each frame, as the CLI, the C ABI and the add-on do by
+default, and adds its time and the whole frame (kernel + solve + gather). The
 worktrees and builds are kept for the next comparison; `rm -rf out/ab && git worktree prune`
 removes them.
 """
@@ -20,7 +22,7 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
-# Columns of the kernel_update table (after the frame number), and the whole frame.
+# Columns of the kernel_update table read (by their headers, without " s"); "gather" with --gather.
 COLUMNS = ["kernel", "scan", "pairs", "apply", "solve"]
 
 
@@ -31,6 +33,7 @@ def parse(argv):
     p.add_argument("--runs", type=int, default=5)
     p.add_argument("--frames", type=int, default=16)
     p.add_argument("--demo", action="store_true", help="the demo animation instead of the moving light")
+    p.add_argument("--gather", action="store_true", help="also the corner gather after each frame")
     args = p.parse_args(argv)
     if len(args.revs) + len(args.exact) < 1:
         p.error("give at least one revision")
@@ -65,16 +68,25 @@ def build(rev):
     sys.exit(f"no kernel_update executable built at {rev}")
 
 
+def columns(args):
+    return COLUMNS + (["gather"] if args.gather else [])
+
+
 def frames(executable, args, exact):
-    """Per frame after the first: the table's time columns, in seconds."""
+    """Per frame after the first: the table's time columns (`columns(args)`), in seconds."""
     cmd = [executable, "--frames", str(args.frames)]
     cmd += (["--demo"] if args.demo else []) + (["--exact"] if exact else [])
+    cmd += ["--gather"] if args.gather else []
     table = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
-    rows = []
+    rows, header = [], None
     for line in table.splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if cells and cells[0].isdigit():
-            rows.append([float(c) for c in cells[1 : 1 + len(COLUMNS)]])
+        if cells[0] == "frame":
+            header = {name.removesuffix(" s"): k for k, name in enumerate(cells)}
+        elif cells[0].isdigit() and header is not None:
+            rows.append([float(cells[header[name]]) for name in columns(args)])
+    if not rows:
+        sys.exit(f"no frames in the output of {' '.join(cmd)}")
     return rows
 
 
@@ -87,14 +99,20 @@ def main(argv):
         for key in runs:
             pooled[key] += frames(builds[key], args, key[1])
         print(f"run {r + 1} of {args.runs} done", file=sys.stderr)
-    names = [*COLUMNS, "frame (kernel + solve)"]
+    # Derived columns: sums of read ones, per frame.
+    read = columns(args)
+    derived = [("frame (kernel + solve)", ["kernel", "solve"])]
+    if args.gather:
+        derived.append(("frame + gather", ["kernel", "solve", "gather"]))
+    names = read + [name for name, _ in derived]
     print(f"{args.runs} interleaved runs of {args.frames - 1} frames each; ms: median / p25 / best\n")
     print("| build | " + " | ".join(names) + " |")
     print("|---" * (len(names) + 1) + "|")
     for (rev, exact), rows in pooled.items():
+        series = [[row[k] for row in rows] for k in range(len(read))]
+        series += [[sum(row[read.index(p)] for p in parts) for row in rows] for _, parts in derived]
         cells = []
-        for k in range(len(names)):
-            v = sorted(row[0] + row[4] if k == len(COLUMNS) else row[k] for row in rows)
+        for v in map(sorted, series):
             cells.append(f"{1e3 * statistics.median(v):.1f} / {1e3 * v[len(v) // 4]:.1f} / {1e3 * v[0]:.1f}")
         print(f"| {rev}{' --exact' if exact else ''} | " + " | ".join(cells) + " |")
 
