@@ -177,9 +177,16 @@ impl Occluders {
     }
 
     /// Which segments from the point `x` (on element `i`, front normal `n`) to `targets` (points
-    /// of element `j`, inside `bounds`) are unobstructed, written to `out` (as long as `targets`). Triangles are
-    /// first gathered from the shaft between `x` and `bounds` (usually none: no rays at all);
-    /// short lists are tested directly, long ones through the BVH.
+    /// of element `j`, inside `bounds`, in front of `x`'s tangent plane and, when `j` is planar,
+    /// with `x` in front of `j`'s plane) are unobstructed, written to `out` (as long as
+    /// `targets`). Triangles are first gathered from the shaft between `x` and `bounds` (usually
+    /// none: no rays at all); short lists are tested directly, long ones through the BVH.
+    ///
+    /// Triangles wholly behind either plane are dropped, as [`Occluders::link_visibility`] drops
+    /// them: a segment from a point in front of a plane to a point on it stays in front of it.
+    /// On `j`'s side this drops the source's coplanar neighbours (the other elements of a
+    /// subdivided light, which every shaft to one of them touches) and whatever lies behind the
+    /// source, so a corner's rays to a light are cast only where something stands between.
     pub fn point_visibility(
         &self,
         x: DVec3,
@@ -190,9 +197,13 @@ impl Occluders {
         out: &mut [bool],
     ) {
         let shaft = Shaft::new(&crate::geometry::Aabb { min: x, max: x }, bounds);
-        // Segments leave `x` to its front: triangles wholly behind its tangent plane cannot block.
+        // Segments leave `x` to its front and end on `j`: triangles wholly behind `x`'s tangent
+        // plane, or behind `j`'s plane, cannot block.
+        let (own, source) = ((n, n.dot(x)), self.culling_planes[j as usize]);
+        let both = [own, source.unwrap_or(own)];
+        let planes = &both[..1 + source.is_some() as usize];
         CANDIDATES.with_borrow_mut(|candidates| {
-            shaft_candidates(self, &shaft, &[(n, n.dot(x))], (i, j), candidates);
+            shaft_candidates(self, &shaft, planes, (i, j), candidates);
             if candidates.is_empty() {
                 out.fill(true);
             } else if candidates.len() <= BRUTE_FORCE_CANDIDATES {
@@ -1056,6 +1067,42 @@ mod tests {
             }
         }
         assert!(partial > 100 && blocked > 100, "{partial} partial, {blocked} blocked");
+    }
+
+    /// A point's segments to a source get the BVH's any-hit verdict, ray by ray, also where the
+    /// source's plane culls (the light's coplanar elements, what lies behind a wall element).
+    #[test]
+    fn point_visibility_is_the_bvh_any_hit() {
+        let scene = crate::scenes::cornell_box(5, crate::scene::Settings::default());
+        let elements = crate::system::build_elements(&scene, 1.0, crate::basis::Basis::new(0));
+        let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
+        let occ = Occluders::new(&patches, 2);
+        let targets_of = |p: &Patch| -> Vec<DVec3> {
+            (0..9).map(|k| p.point((k / 3) as f64 / 3.0 + 0.17, (k % 3) as f64 / 3.0 + 0.17)).collect()
+        };
+        let (mut culled, mut blocked, mut seen) = (0, 0, 0);
+        for i in 0..patches.len() {
+            let (x, n) = (patches[i].point(0.01, 0.01), patches[i].area_vector(0.01, 0.01).normalize());
+            for (j, pj) in patches.iter().enumerate() {
+                let in_front = |y: DVec3| n.dot(y - x) > 0.0 && pj.area_vector(0.5, 0.5).dot(x - y) > 0.0;
+                let targets: Vec<DVec3> = targets_of(pj).into_iter().filter(|&y| in_front(y)).collect();
+                if j == i || targets.is_empty() {
+                    continue;
+                }
+                let mut got = vec![false; targets.len()];
+                occ.point_visibility(x, n, (i as u32, j as u32), &pj.bounds(), &targets, &mut got);
+                culled += occ.culling_planes[j].is_some() as usize;
+                for (y, got) in targets.iter().zip(got) {
+                    let want = !occ.bvh.occluded(x, *y - x, 1e-9, 1.0 - 1e-9, i as u32, j as u32);
+                    assert_eq!(got, want, "point of {i} to {y} on {j}");
+                    (blocked, seen) = (blocked + !want as usize, seen + want as usize);
+                }
+            }
+        }
+        assert!(
+            culled > 500 && blocked > 1000 && seen > 10000,
+            "{culled} culled, {blocked} blocked, {seen} seen"
+        );
     }
 
     /// A group of sources gives each link the visibility it has alone.
