@@ -81,6 +81,8 @@ pub struct Session {
     /// The links belong to a cancelled update: the next frame rebuilds from scratch.
     stale: bool,
     frame: Option<f64>,
+    /// Frames are solved without their corner gather until [`Session::gather_corners`].
+    defer_gather: bool,
 }
 
 impl Session {
@@ -101,6 +103,7 @@ impl Session {
             animation: None,
             stale: false,
             frame: None,
+            defer_gather: false,
         })
     }
 
@@ -149,6 +152,36 @@ impl Session {
         Ok(())
     }
 
+    /// While `defer` holds, [`Session::solve_frame`] leaves the corner gather out: the frame's
+    /// corners are the face polynomials' until [`Session::gather_corners`] gathers them. For a
+    /// host that previews while the timeline is scrubbed: the gather is a third of such a frame,
+    /// and only the frame the user stops on needs it. (No effect with `corner_gather` off.)
+    pub fn set_defer_gather(&mut self, defer: bool) {
+        self.defer_gather = defer;
+    }
+
+    /// Whether the readable frame's corners still wait for their gather (it was deferred).
+    pub fn gather_pending(&self) -> bool {
+        self.scene.settings.corner_gather && self.system.as_ref().is_some_and(|s| s.corners.is_none())
+    }
+
+    /// Gathers the corners of the readable frame if its solve deferred them, updating the last
+    /// gather made (whatever frame that was: what moved since is recomputed, as between two
+    /// consecutive frames). Returns its time and counts, or `None` when there was nothing to
+    /// gather. On error (including cancel) the frame stays readable with the polynomials'
+    /// corners, and the next gather starts afresh.
+    pub fn gather_corners(&mut self, progress: Progress) -> Result<Option<(f64, GatherStats)>> {
+        if !self.gather_pending() {
+            return Ok(None);
+        }
+        let frame = self.frame.expect("a system is only kept with its frame");
+        let placed = self.scene_at(frame);
+        let sys = self.system.as_mut().expect("pending implies a system");
+        let start = Instant::now();
+        let g = self.pool.install(|| sys.gather_corners(&placed, frame, progress))?;
+        Ok(Some((start.elapsed().as_secs_f64(), g)))
+    }
+
     /// The scene as placed at `frame`: keys, then host overrides.
     fn scene_at(&self, frame: f64) -> Scene {
         let mut scene = self.scene.clone();
@@ -170,6 +203,7 @@ impl Session {
         }
         let start = Instant::now();
         let placed = self.scene_at(frame);
+        let gather = placed.settings.corner_gather && !self.defer_gather;
         let incremental = self.method != Method::Full && !self.stale;
         if let (true, Some(sys), Some(state)) = (incremental, self.system.as_mut(), self.animation.as_mut()) {
             // Keep what reads need, so a cancelled update leaves the last frame readable.
@@ -182,7 +216,7 @@ impl Session {
             );
             let outcome = self.pool.install(|| {
                 let outcome = animation::advance(sys, state, &placed, frame, progress)?;
-                if let (Outcome::Updated(_), true) = (&outcome, placed.settings.corner_gather) {
+                if let (Outcome::Updated(_), true) = (&outcome, gather) {
                     let start = Instant::now();
                     let g = sys.gather_corners(&placed, frame, progress)?;
                     return Ok((outcome, (start.elapsed().as_secs_f64(), g)));
@@ -231,11 +265,11 @@ impl Session {
         let (system, gather_seconds, g) = self.pool.install(|| -> Result<(System, f64, GatherStats)> {
             let mut sys = System::build(&placed, frame, progress)?;
             sys.solve(placed.settings.tolerance, &cancel)?;
-            let start = Instant::now();
-            let mut g = GatherStats::default();
-            if placed.settings.corner_gather {
-                g = sys.gather_corners(&placed, frame, progress)?;
+            if !gather {
+                return Ok((sys, 0.0, GatherStats::default()));
             }
+            let start = Instant::now();
+            let g = sys.gather_corners(&placed, frame, progress)?;
             Ok((sys, start.elapsed().as_secs_f64(), g))
         })?;
         let stats = FrameStats {

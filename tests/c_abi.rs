@@ -347,6 +347,64 @@ fn progress_returning_zero_cancels_and_keeps_the_previous_frame() {
     unsafe { gr_session_free(s) };
 }
 
+fn corner_radiosity(s: *const GrSession, object: u32) -> Vec<f32> {
+    let mut n = 0;
+    assert_eq!(unsafe { gr_session_corner_count(s, object, &mut n) }, GrStatus::Ok);
+    let mut out = vec![f32::NAN; 3 * n as usize];
+    assert_eq!(unsafe { gr_session_corner_radiosity(s, object, out.as_mut_ptr(), out.len()) }, GrStatus::Ok);
+    out
+}
+
+/// Gather deferred by the host: the solved frame reads the polynomials' corners, the later
+/// gather gives what solving with the gather gives, a cancelled gather keeps the frame readable,
+/// and misuse is an error, not a crash.
+#[test]
+fn deferred_gather_gathers_on_request() {
+    let mut gathered = 7u32;
+    assert_eq!(unsafe { gr_session_set_defer_gather(null_mut(), 1) }, GrStatus::NullPointer);
+    assert_eq!(
+        unsafe { gr_session_gather_corners(null_mut(), None, null_mut(), &mut gathered) },
+        GrStatus::NullPointer
+    );
+    let settings = defaults();
+    let (s, at_once) = (
+        Flat::two_patches().new_session(&settings).unwrap(),
+        Flat::two_patches().new_session(&settings).unwrap(),
+    );
+    assert_eq!(unsafe { gr_session_gather_corners(s, None, null_mut(), &mut gathered) }, GrStatus::NotSolved);
+    assert_eq!(gathered, 7, "not written on error");
+    let polynomial = {
+        let off = GrSettings { corner_gather: 0, ..settings };
+        let p = Flat::two_patches().new_session(&off).unwrap();
+        assert_eq!(unsafe { gr_session_solve_frame(p, 1.0, None, null_mut()) }, GrStatus::Ok);
+        let c = corner_radiosity(p, 0);
+        unsafe { gr_session_free(p) };
+        c
+    };
+    assert_eq!(unsafe { gr_session_solve_frame(at_once, 1.0, None, null_mut()) }, GrStatus::Ok);
+    assert_eq!(unsafe { gr_session_set_defer_gather(s, 1) }, GrStatus::Ok);
+    assert_eq!(unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) }, GrStatus::Ok);
+    assert_eq!(stats_json(s).unwrap()["gather_seconds"], 0.0);
+    assert_eq!(corner_radiosity(s, 0), polynomial);
+    assert_ne!(corner_radiosity(at_once, 0), polynomial, "the test needs corners the gather changes");
+    // Cancelled at its first progress call: the frame stays readable, with the same corners.
+    let cb = CancelAt { calls: AtomicU32::new(0), cancel_on_call: 1 };
+    let user = &cb as *const CancelAt as *mut c_void;
+    assert_eq!(
+        unsafe { gr_session_gather_corners(s, Some(cancel_at), user, &mut gathered) },
+        GrStatus::Cancelled
+    );
+    assert_eq!(corner_radiosity(s, 0), polynomial);
+    assert_eq!(unsafe { gr_session_gather_corners(s, None, null_mut(), &mut gathered) }, GrStatus::Ok);
+    assert_eq!(gathered, 1);
+    assert_eq!(corner_radiosity(s, 0), corner_radiosity(at_once, 0));
+    assert!(stats_json(s).unwrap()["gather_seconds"].as_f64().unwrap() > 0.0);
+    assert_eq!(unsafe { gr_session_gather_corners(s, None, null_mut(), &mut gathered) }, GrStatus::Ok);
+    assert_eq!(gathered, 0, "nothing left to gather");
+    unsafe { gr_session_free(s) };
+    unsafe { gr_session_free(at_once) };
+}
+
 struct Watch {
     /// Fraction of the kernel done, as f64 bits.
     fraction: AtomicU64,

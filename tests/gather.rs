@@ -264,3 +264,47 @@ fn cancel_during_the_gather_keeps_the_last_frame() {
         a.iter().zip(&b).flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).abs())).fold(0.0, f32::max);
     assert!(worst <= 1e-3 * peak, "after the cancel: {worst} vs peak {peak}");
 }
+
+/// A session that defers the gather (a host previewing while the timeline is scrubbed) reads
+/// the face polynomials' corners on the frames it skips, and its gather of the frame it stops
+/// on, made from the gather of four frames before, gives the corners of a session that gathered
+/// every frame: on the demo animation (a light and a block moving).
+#[test]
+fn deferred_gather_equals_gathering_every_frame() {
+    use galerkin_radiosity::session::{Method, Session};
+    let settings = Settings { basis_order: 1, tolerance: 1e-6, ..Settings::default() };
+    let scene = scenes::cornell_box_animated(4, 6, settings.clone());
+    let corners =
+        |s: &Session| s.face_results().unwrap().into_iter().flat_map(|r| r.corner_radiosity).collect();
+    let worst = |a: &Vec<[f32; 3]>, b: &Vec<[f32; 3]>| {
+        let peak = b.iter().flatten().fold(0.0f32, |m, x| m.max(*x));
+        a.iter().zip(b).flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).abs())).fold(0.0, f32::max) / peak
+    };
+    let mut every = Session::new(scene.clone(), Method::Incremental).unwrap();
+    let mut deferred = Session::new(scene.clone(), Method::Incremental).unwrap();
+    let polynomial_scene = Scene { settings: Settings { corner_gather: false, ..settings }, ..scene.clone() };
+    let mut polynomial = Session::new(polynomial_scene, Method::Incremental).unwrap();
+    deferred.solve_frame(1.0, &no_progress).unwrap();
+    assert!(!deferred.gather_pending());
+    deferred.set_defer_gather(true);
+    for f in 1..=6 {
+        every.solve_frame(f as f64, &no_progress).unwrap();
+        polynomial.solve_frame(f as f64, &no_progress).unwrap();
+        if f == 1 {
+            continue;
+        }
+        let stats = deferred.solve_frame(f as f64, &no_progress).unwrap();
+        assert_eq!(stats.gather_seconds, 0.0, "frame {f}");
+        assert!(deferred.gather_pending(), "frame {f}");
+        let skipped: Vec<[f32; 3]> = corners(&deferred);
+        assert_eq!(skipped, corners(&polynomial), "frame {f}: the polynomials' corners");
+    }
+    let (seconds, g) = deferred.gather_corners(&no_progress).unwrap().expect("a gather was pending");
+    assert!(seconds > 0.0 && g.recomputed > 0 && g.recomputed < g.moments, "{g:?}");
+    assert!(!deferred.gather_pending());
+    assert!(deferred.gather_corners(&no_progress).unwrap().is_none(), "nothing left to gather");
+    let (got, want) = (corners(&deferred), corners(&every));
+    let worst = worst(&got, &want);
+    eprintln!("deferred gather at frame 6: worst corner {worst:.2e} of peak");
+    assert!(worst <= 1e-6, "{worst:.2e} of peak");
+}

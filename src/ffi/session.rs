@@ -467,6 +467,75 @@ pub unsafe extern "C" fn gr_session_solve_frame(
     })
 }
 
+/// While `defer` is non-zero, `gr_session_solve_frame` leaves the corner gather out: the solved
+/// frame's corners are the face polynomials' values until `gr_session_gather_corners` gathers
+/// them. For a host that previews while the user scrubs the timeline: the gather is about a third
+/// of such a frame, and only the frame the user stops on needs it. No effect when the settings'
+/// `corner_gather` is off. Starts at 0.
+///
+/// # Safety
+/// `s` is NULL or a live session.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn gr_session_set_defer_gather(s: *mut GrSession, defer: u32) -> GrStatus {
+    boundary("gr_session_set_defer_gather", || {
+        let s = unsafe { session(s) }?;
+        s.write()?.session.set_defer_gather(defer != 0);
+        Ok(())
+    })
+}
+
+/// Gathers the corners of the last solved frame when its solve left them out (see
+/// `gr_session_set_defer_gather`), reusing the last gather made where nothing that decides a
+/// corner changed since; `GR_STATUS_OK` at once when they are gathered already or `corner_gather`
+/// is off. Writes 1 to `*gathered` (if not NULL) when it gathered, else 0. The frame statistics'
+/// `gather_seconds`, `gather_moments` and `gather_recomputed` then describe this gather.
+///
+/// `progress` and cancelling as for `gr_session_solve_frame`. On `GR_STATUS_CANCELLED` or another
+/// error the frame stays readable with the polynomials' corners, and the next gather starts
+/// afresh. `GR_STATUS_NOT_SOLVED` before the first solved frame.
+///
+/// # Safety
+/// `s` is NULL or a live session that no other thread frees during the call; `progress`, if not
+/// NULL, may be called with `user` from any thread during the call; `gathered` is NULL or points
+/// to a writable `uint32_t`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn gr_session_gather_corners(
+    s: *mut GrSession,
+    progress: GrProgressFn,
+    user: *mut c_void,
+    gathered: *mut u32,
+) -> GrStatus {
+    boundary("gr_session_gather_corners", || {
+        let s = unsafe { session(s) }?;
+        let mut state = s.write()?;
+        if state.session.frame().is_none() {
+            return Err(Failure::new(GrStatus::NotSolved, "no frame has been solved yet"));
+        }
+        s.cancel.store(false, Ordering::SeqCst);
+        let callback = Callback { f: progress, user, lock: Mutex::new(()), stopped: AtomicBool::new(false) };
+        let cancel = &*s.cancel;
+        let go_on = |fraction: f64, stage: &str| -> bool {
+            !cancel.load(Ordering::Relaxed)
+                && callback.call(fraction, stage)
+                && !cancel.load(Ordering::Relaxed)
+        };
+        let outcome = state.session.gather_corners(&go_on);
+        // The corners changed (gathered, or back to the polynomials' after a failed gather).
+        state.results = OnceLock::new();
+        let done = outcome?;
+        if let (Some((seconds, g)), Some(stats)) = (done, state.stats.as_mut()) {
+            stats.gather_seconds = seconds;
+            stats.gather_moments = g.moments;
+            stats.gather_recomputed = g.recomputed;
+        }
+        if !gathered.is_null() {
+            // SAFETY: non-NULL, writable per the contract.
+            unsafe { *gathered = u32::from(done.is_some()) };
+        }
+        Ok(())
+    })
+}
+
 /// Asks the running solve on `s` to stop; it returns `GR_STATUS_CANCELLED` promptly. Safe to
 /// call from any thread (and from the progress callback) at any time while `s` is alive. The
 /// flag is cleared when the next solve starts, so a cancel with no solve running has no effect.
