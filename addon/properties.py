@@ -69,6 +69,11 @@ class RadiositySceneSettings(bpy.types.PropertyGroup):
     live_preview: BoolProperty(
         name="Live Preview", default=False, update=_live_update,
         description="Re-solve the current frame when objects move, lights change or the frame changes")
+    live_gather_when_idle: BoolProperty(
+        name="Gather When Idle", default=True,
+        description="While the frame changes or objects move, show each frame without the corner gather "
+                    "(the face polynomials at the corners) and gather the frame the timeline rests on: "
+                    "faster scrubbing. Off: every change gathers. Background mode always gathers")
 
 
 class RadiosityObjectSettings(bpy.types.PropertyGroup):

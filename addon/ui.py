@@ -31,6 +31,9 @@ class RENDER_PT_radiosity(bpy.types.Panel):
         col.prop(p, "threads")
         col.prop(p, "collection")
         layout.prop(p, "live_preview")
+        row = layout.row()
+        row.active = p.live_preview and p.corner_gather
+        row.prop(p, "live_gather_when_idle")
 
 
 class RENDER_PT_radiosity_frames(bpy.types.Panel):

@@ -1,6 +1,7 @@
 """Times the add-on's live preview while scrubbing: what an artist waits for per frame change.
 
     .venv/bin/python -m tools.live_preview_bench [--subdiv 13] [--frames 24] [--lib A --lib B ...]
+        [--mode gather --mode idle]
 
 Builds the test suite's Cornell box (six walls of subdiv x subdiv faces, a 0.5 x 0.5 ceiling
 light keyframed across the room over 48 frames, no block: 1,015 faces at 13) under the bpy
@@ -12,6 +13,12 @@ its frame statistics, then the medians over frames 3 onward.
 
 With several ``--lib`` (paths of ``libgalerkin_radiosity.so``, e.g. two builds), each library
 runs in its own process, alternately, ``--runs`` times, so that machine noise hits all alike.
+
+``--mode`` (repeatable, run alternately like the libraries): ``gather`` gathers the corners on
+every frame change (the panel's "Gather When Idle" off); ``idle`` scrubs with it on, as the UI
+runs it (the timers are told they fire: background mode fires none), so a frame change is the
+update and the solve, and then times the gather of the frame the timeline rests on (the last),
+which the timer would run (``idle gather ms``).
 """
 
 from __future__ import annotations
@@ -29,14 +36,16 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def measure(subdiv: int, frames: int) -> list[dict]:
-    """Runs in this process (bpy imported here); one dict per frame from 2 to ``frames``."""
+def measure(subdiv: int, frames: int, mode: str = "gather") -> dict:
+    """Runs in this process (bpy imported here): ``rows``, one dict per frame from 2 to
+    ``frames``, and ``idle_gather_ms`` (``idle`` mode: the rest frame's gather)."""
     sys.path[:0] = [str(REPO), str(REPO / "tests" / "python")]
     os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="blender-user-"))
     import bpy
     import scenes
 
     import addon
+    from addon.blender import bake, live
     from addon.native import binding
 
     addon.register()
@@ -53,7 +62,12 @@ def measure(subdiv: int, frames: int) -> list[dict]:
     scenes.cornell_box(bpy, n=subdiv, light_frames=(1, 48), box=False)
     sc = bpy.context.scene
     sc.radiosity.basis_order = 2
+    sc.radiosity.live_gather_when_idle = mode == "idle"
+    if mode == "idle":
+        live._timers_run = lambda: True
     sc.radiosity.live_preview = True  # solves frame 1
+    if mode == "idle":
+        live.gather_deferred(sc)  # the timer, once frame 1 rests before the scrub
     rows = []
     for f in range(2, frames + 1):
         t = time.perf_counter()
@@ -69,7 +83,15 @@ def measure(subdiv: int, frames: int) -> list[dict]:
             "moments_recomputed": st["gather_recomputed"],
             "faces": sum(len(o.data.polygons) for o in sc.objects if o.type == "MESH"),
         })
-    return rows
+    idle_gather_ms = None
+    if mode == "idle":
+        t = time.perf_counter()
+        assert live.gather_deferred(sc), "the rest frame had no gather pending"
+        idle_gather_ms = 1e3 * (time.perf_counter() - t)
+        st = bake.held(sc).session.frame_stats()
+        print(f"idle gather: {st['gather_recomputed']} of {st['gather_moments']} moments recomputed",
+              file=sys.stderr)
+    return {"rows": rows, "idle_gather_ms": idle_gather_ms}
 
 
 def medians(rows: list[dict]) -> dict:
@@ -78,20 +100,28 @@ def medians(rows: list[dict]) -> dict:
     return {k: statistics.median(r[k] for r in keep) for k in keys}
 
 
+def _idle(ms) -> str:
+    return "" if ms is None else f"{ms:.1f}"
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--subdiv", type=int, default=13)
     ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--lib", action="append", default=[], help="library to time (repeatable)")
+    ap.add_argument("--mode", action="append", choices=("gather", "idle"), default=[],
+                    help="gather on every frame change, or when idle (repeatable; default: gather)")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # child mode
     args = ap.parse_args(argv)
+    modes = args.mode or ["gather"]
     if args.json:
-        print(json.dumps(measure(args.subdiv, args.frames)))
+        print(json.dumps(measure(args.subdiv, args.frames, modes[0])))
         return
-    if not args.lib:
-        rows = measure(args.subdiv, args.frames)
-        print(f"{rows[0]['faces']} faces")
+    if not args.lib and len(modes) == 1:
+        out = measure(args.subdiv, args.frames, modes[0])
+        rows = out["rows"]
+        print(f"{rows[0]['faces']} faces, mode {modes[0]}")
         print("| frame | frame_set ms | kernel ms | solve ms | gather ms | moments recomputed |")
         print("|---|---|---|---|---|---|")
         for r in rows:
@@ -100,19 +130,26 @@ def main(argv=None):
         m = medians(rows)
         print(f"| median 3.. | {m['frame_set_ms']:.1f} | {m['kernel_ms']:.1f} | {m['solve_ms']:.1f} | "
               f"{m['gather_ms']:.1f} | {m['moments_recomputed']:.0f} |")
+        if out["idle_gather_ms"] is not None:
+            print(f"idle gather of the rest frame: {out['idle_gather_ms']:.1f} ms")
         return
-    print("| library | run | frame_set ms | kernel ms | solve ms | gather ms | moments recomputed |")
-    print("|---|---|---|---|---|---|---|")
+    print("| library | mode | run | frame_set ms | kernel ms | solve ms | gather ms | moments recomputed "
+          "| idle gather ms |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for run in range(args.runs):
-        for lib in args.lib:
-            env = dict(os.environ, GALERKIN_RADIOSITY_LIB=lib)
-            cmd = [sys.executable, "-m", "tools.live_preview_bench", "--json",
-                   "--subdiv", str(args.subdiv), "--frames", str(args.frames)]
-            out = subprocess.run(cmd, cwd=REPO, env=env, check=True, capture_output=True, text=True).stdout
-            m = medians(json.loads(out.strip().splitlines()[-1]))
-            cells = [m["frame_set_ms"], m["kernel_ms"], m["solve_ms"], m["gather_ms"]]
-            print(f"| {lib} | {run + 1} | " + " | ".join(f"{x:.1f}" for x in cells)
-                  + f" | {m['moments_recomputed']:.0f} |", flush=True)
+        for lib in args.lib or [None]:
+            for mode in modes:
+                env = dict(os.environ)
+                if lib is not None:
+                    env["GALERKIN_RADIOSITY_LIB"] = lib
+                cmd = [sys.executable, "-m", "tools.live_preview_bench", "--json", "--mode", mode,
+                       "--subdiv", str(args.subdiv), "--frames", str(args.frames)]
+                res = subprocess.run(cmd, cwd=REPO, env=env, check=True, capture_output=True, text=True)
+                out = json.loads(res.stdout.strip().splitlines()[-1])
+                m = medians(out["rows"])
+                cells = [m["frame_set_ms"], m["kernel_ms"], m["solve_ms"], m["gather_ms"]]
+                print(f"| {lib or 'default'} | {mode} | {run + 1} | " + " | ".join(f"{x:.1f}" for x in cells)
+                      + f" | {m['moments_recomputed']:.0f} | {_idle(out['idle_gather_ms'])} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -4,6 +4,12 @@ object or changes a material re-solves the current frame incrementally, in the h
 into each object's ``Radiosity`` attribute. The solve runs on the main thread (it blocks the UI
 for its duration: keep live scenes small, or use a low basis order and Draft quality).
 
+With "Gather When Idle" (the default) a frame change solves the frame without its corner gather
+(the corners show the face polynomials, the Galerkin solution itself) and the gather runs once no
+frame change or move has come for ``IDLE_SECONDS``: scrubbing pays the update and the solve, the
+frame the timeline rests on gets its exact corners. This needs the UI's event loop, which runs
+the timer; in background mode (``blender -b``) every frame gathers at once.
+
 The baked switch is muted in the viewport while the preview is on, so the viewport shows the
 live attribute; turning the preview off un-mutes it. Objects whose colours need a copy (display
 subdivision, topology-changing modifiers) are not previewed.
@@ -21,7 +27,18 @@ from . import attributes, bake, switch
 from .export import TopologyChanged, collect, export, sample
 
 _busy = False
-stats = {"solves": 0, "last_seconds": 0.0, "last_error": None}
+stats = {"solves": 0, "last_seconds": 0.0, "last_error": None, "idle_gathers": 0}
+
+# The timeline rests once no frame change or move came for this long: then the deferred gather runs.
+IDLE_SECONDS = 0.25
+
+# The scene whose frame waits for its gather (the timer reads it).
+_pending_scene: str | None = None
+
+
+def _timers_run() -> bool:
+    """Whether ``bpy.app.timers`` fire: they need the UI's event loop (not ``blender -b``)."""
+    return not bpy.app.background
 
 
 def _collection(scene):
@@ -51,10 +68,16 @@ def update(scene, depsgraph=None) -> bool:
         _busy = False
 
 
-def _update(scene) -> bool:
-    view_layer = bpy.context.view_layer
+def _view_layer(scene):
+    """The view layer the preview collects from: the context's for the active scene."""
+    view_layer = getattr(bpy.context, "view_layer", None)  # (a timer's context may have none)
     if view_layer is None or bpy.context.scene != scene:
         view_layer = scene.view_layers[0]
+    return view_layer
+
+
+def _update(scene) -> bool:
+    view_layer = _view_layer(scene)
     if bpy.context.scene == scene:
         dg = bpy.context.evaluated_depsgraph_get()
     else:
@@ -88,20 +111,82 @@ def _update(scene) -> bool:
     if h.frame == frame and state == h.state:
         return False
     bake.apply_sample(h, smp, state)
+    defer = scene.radiosity.live_gather_when_idle and _timers_run()
     t = time.perf_counter()
-    h.session.solve_frame(frame, progress=lambda fraction, stage: True)
+    # Deferral is switched on for this solve only: the held session also serves bakes.
+    h.session.set_defer_gather(defer)
+    try:
+        h.session.solve_frame(frame, progress=lambda fraction, stage: True)
+    finally:
+        h.session.set_defer_gather(False)
     h.frame = frame
     stats["solves"] += 1
     stats["last_seconds"] = time.perf_counter() - t
     stats["last_error"] = None
-    for i, (o, obj) in enumerate(zip(rest.objects, sel.objects, strict=True)):
+    _write_corners(h, rest, sel.objects)
+    if defer:
+        _gather_when_idle(scene)
+    return True
+
+
+def _write_corners(h, rest, objects) -> None:
+    """Writes the held session's corners into each previewed object's ``Radiosity`` attribute."""
+    for i, (o, obj) in enumerate(zip(rest.objects, objects, strict=True)):
         mesh = obj.data
         if not o.original_topology or mesh.library is not None or len(mesh.loops) != o.data.loop_count:
             continue
         rgb = radiance_from_radiosity(o.data.split.to_loops(h.session.corner_radiosity(i)))
         attributes.ensure_result(mesh, rgb)
         switch.set_muted(obj, True)
-    return True
+
+
+def _gather_when_idle(scene) -> None:
+    """(Re)arms the one-shot timer that gathers ``scene``'s frame once the timeline rests."""
+    global _pending_scene
+    _pending_scene = scene.name
+    if bpy.app.timers.is_registered(on_idle):
+        bpy.app.timers.unregister(on_idle)
+    bpy.app.timers.register(on_idle, first_interval=IDLE_SECONDS)
+
+
+def on_idle():
+    """The timer: gathers the pending scene's frame (``gather_deferred``); one-shot (None)."""
+    global _pending_scene
+    name, _pending_scene = _pending_scene, None
+    scene = bpy.data.scenes.get(name) if name is not None else None
+    if scene is not None:
+        gather_deferred(scene)
+    return None
+
+
+def gather_deferred(scene) -> bool:
+    """Gathers the corners of the frame the live preview solved without them and writes them;
+    True if it gathered. Nothing to do when they were gathered, or the preview is off."""
+    global _busy
+    if _busy or bake.running or not scene.radiosity.live_preview:
+        return False
+    h = bake.held(scene)
+    if h is None or h.export is None or h.frame is None:
+        return False
+    _busy = True
+    try:
+        sel = collect(scene, _view_layer(scene), _collection(scene))
+        if [o.name for o in sel.objects] != [o.data.name for o in h.export.objects]:
+            return False  # the previewed objects changed: the next update starts over
+        if h.session.gather_corners(progress=lambda fraction, stage: True) is None:
+            return False
+        stats["idle_gathers"] += 1
+        _write_corners(h, h.export, sel.objects)
+        return True
+    except ReferenceError:
+        bake.drop_held(scene)
+        return False
+    except bake.binding().RadiosityError as e:
+        stats["last_error"] = str(e)
+        print(f"Radiosity live preview: {e}")
+        return False
+    finally:
+        _busy = False
 
 
 @persistent
@@ -135,6 +220,8 @@ def disable(scene=None) -> None:
                     (handlers.depsgraph_update_post, on_depsgraph_update)):
         while fn in lst:
             lst.remove(fn)
+    if bpy.app.timers.is_registered(on_idle):
+        bpy.app.timers.unregister(on_idle)
     if scene is not None:
         for obj in scene.objects:
             switch.set_muted(obj, False)

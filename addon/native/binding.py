@@ -124,6 +124,8 @@ def _declare(lib: ctypes.CDLL) -> None:
         "gr_session_set_object_matrix": ([_SESSION, c_uint32, _F32], c_uint32),
         "gr_session_set_material_emission": ([_SESSION, c_uint32, _F32], c_uint32),
         "gr_session_solve_frame": ([_SESSION, c_double, _PROGRESS, c_void_p], c_uint32),
+        "gr_session_set_defer_gather": ([_SESSION, c_uint32], c_uint32),
+        "gr_session_gather_corners": ([_SESSION, _PROGRESS, c_void_p, _U32], c_uint32),
         "gr_session_cancel": ([_SESSION], c_uint32),
         "gr_session_frame_stats_json": ([_SESSION, c_char_p, c_size_t, POINTER(c_size_t)], c_uint32),
         "gr_session_object_count": ([_SESSION, _U32], c_uint32),
@@ -404,6 +406,32 @@ class Session:
     def solve_frame(self, frame: float, progress: Callable[[float, str], bool | None] | None = None) -> dict:
         """Solves ``frame``; returns its statistics. ``progress(fraction, stage)`` returning False
         cancels (raises ``Cancelled``); it is called from worker threads."""
+        with self._use() as p:
+            solve = self._lib.gr_session_solve_frame
+            self._with_progress(progress, lambda cb: solve(p, float(frame), cb, None))
+            return self._stats(p)
+
+    def set_defer_gather(self, defer: bool) -> None:
+        """While ``defer`` holds, ``solve_frame`` leaves the corner gather out: the frame's corners
+        are the face polynomials' until ``gather_corners`` (a preview while the timeline is
+        scrubbed gathers only the frame it stops on)."""
+        with self._use() as p:
+            _check(self._lib, self._lib.gr_session_set_defer_gather(p, 1 if defer else 0))
+
+    def gather_corners(self, progress: Callable[[float, str], bool | None] | None = None) -> dict | None:
+        """Gathers the solved frame's corners if its solve deferred them; returns the frame's
+        statistics (their ``gather_*`` fields this gather's), or None when nothing was pending.
+        Cancelling as for ``solve_frame``; then the frame keeps the polynomials' corners."""
+        gathered = c_uint32(0)
+        with self._use() as p:
+            self._with_progress(
+                progress, lambda cb: self._lib.gr_session_gather_corners(p, cb, None, ctypes.byref(gathered))
+            )
+            return self._stats(p) if gathered.value else None
+
+    def _with_progress(self, progress, call) -> None:
+        """Runs ``call(callback)`` with ``progress`` behind a C callback (NULL when None), then
+        raises what the callback raised, or the call's error."""
         raised: list[BaseException] = []
 
         def trampoline(fraction, stage, _user):
@@ -417,13 +445,11 @@ class Session:
             return 0 if (r is not None and not r) else 1
 
         callback = _PROGRESS(trampoline) if progress is not None else _PROGRESS()  # NULL
-        with self._use() as p:
-            status = self._lib.gr_session_solve_frame(p, float(frame), callback, None)
-            del callback  # kept alive until here, after the call returned
-            if raised:
-                raise raised[0]
-            _check(self._lib, status)
-            return self._stats(p)
+        status = call(callback)
+        del callback  # kept alive until here, after the call returned
+        if raised:
+            raise raised[0]
+        _check(self._lib, status)
 
     def cancel(self) -> None:
         """Thread-safe: a running ``solve_frame`` stops soon and raises ``Cancelled``."""
