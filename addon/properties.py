@@ -69,11 +69,12 @@ class RadiositySceneSettings(bpy.types.PropertyGroup):
     live_preview: BoolProperty(
         name="Live Preview", default=False, update=_live_update,
         description="Re-solve the current frame when objects move, lights change or the frame changes")
-    live_gather_when_idle: BoolProperty(
-        name="Gather When Idle", default=True,
-        description="While the frame changes or objects move, show each frame without the corner gather "
-                    "(the face polynomials at the corners) and gather the frame the timeline rests on: "
-                    "faster scrubbing. Off: every change gathers. Background mode always gathers")
+    live_refine_when_idle: BoolProperty(
+        name="Refine When Idle", default=True,
+        description="While the frame changes or objects move, show previews: solved to ten times the "
+                    "tolerance, without the corner gather (the face polynomials at the corners); refine "
+                    "the frame the timeline rests on. Faster scrubbing. Off: every change is solved in "
+                    "full. Background mode always solves in full")
 
 
 class RadiosityObjectSettings(bpy.types.PropertyGroup):

@@ -32,8 +32,8 @@ class RENDER_PT_radiosity(bpy.types.Panel):
         col.prop(p, "collection")
         layout.prop(p, "live_preview")
         row = layout.row()
-        row.active = p.live_preview and p.corner_gather
-        row.prop(p, "live_gather_when_idle")
+        row.active = p.live_preview
+        row.prop(p, "live_refine_when_idle")
 
 
 class RENDER_PT_radiosity_frames(bpy.types.Panel):

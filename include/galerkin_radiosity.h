@@ -287,37 +287,39 @@ GrStatus gr_session_solve_frame(struct GrSession *s,
                                 void *user);
 
 /**
- * While `defer` is non-zero, `gr_session_solve_frame` leaves the corner gather out: the solved
- * frame's corners are the face polynomials' values until `gr_session_gather_corners` gathers
- * them. For a host that previews while the user scrubs the timeline: the gather is about a third
- * of such a frame, and only the frame the user stops on needs it. No effect when the settings'
- * `corner_gather` is off. Starts at 0.
+ * While `on` is non-zero, `gr_session_solve_frame` solves previews: to a looser tolerance (ten
+ * times the settings' `tolerance`, at most 1e-3 unless the tolerance is looser) and without the
+ * corner gather (the corners are the face polynomials' values), until `gr_session_refine`
+ * finishes the frame. For a host that previews while the user scrubs the timeline: such a frame
+ * costs its kernel update and a shorter solve, and only the frame the user stops on is refined.
+ * The frame statistics' `preview` says which a frame is. Starts at 0.
  *
  * # Safety
  * `s` is NULL or a live session.
  */
-GrStatus gr_session_set_defer_gather(struct GrSession *s, uint32_t defer);
+GrStatus gr_session_set_preview(struct GrSession *s, uint32_t on);
 
 /**
- * Gathers the corners of the last solved frame when its solve left them out (see
- * `gr_session_set_defer_gather`), reusing the last gather made where nothing that decides a
- * corner changed since; `GR_STATUS_OK` at once when they are gathered already or `corner_gather`
- * is off. Writes 1 to `*gathered` (if not NULL) when it gathered, else 0. The frame statistics'
- * `gather_seconds`, `gather_moments` and `gather_recomputed` then describe this gather.
+ * Brings the last solved frame from a preview (see `gr_session_set_preview`) to what a solve
+ * without previews gives: continues its solve down to the settings' tolerance, then gathers its
+ * corners (with `corner_gather` on), reusing the last gather made where nothing that decides a
+ * corner changed since. `GR_STATUS_OK` at once when the frame is no preview. Writes 1 to
+ * `*refined` (if not NULL) when it refined, else 0. The frame statistics then describe the whole
+ * frame (`preview` 0, its solve's time and shots included, the gather's fields this gather's).
  *
  * `progress` and cancelling as for `gr_session_solve_frame`. On `GR_STATUS_CANCELLED` or another
- * error the frame stays readable with the polynomials' corners, and the next gather starts
- * afresh. `GR_STATUS_NOT_SOLVED` before the first solved frame.
+ * error the frame stays readable, solved as far as the refinement came, with the polynomials'
+ * corners (the next gather starts afresh). `GR_STATUS_NOT_SOLVED` before the first solved frame.
  *
  * # Safety
  * `s` is NULL or a live session that no other thread frees during the call; `progress`, if not
- * NULL, may be called with `user` from any thread during the call; `gathered` is NULL or points
+ * NULL, may be called with `user` from any thread during the call; `refined` is NULL or points
  * to a writable `uint32_t`.
  */
-GrStatus gr_session_gather_corners(struct GrSession *s,
-                                   GrProgressFn progress,
-                                   void *user,
-                                   uint32_t *gathered);
+GrStatus gr_session_refine(struct GrSession *s,
+                           GrProgressFn progress,
+                           void *user,
+                           uint32_t *refined);
 
 /**
  * Asks the running solve on `s` to stop; it returns `GR_STATUS_CANCELLED` promptly. Safe to

@@ -14,6 +14,7 @@ use crate::error::{Error, Result};
 use crate::gather::GatherStats;
 use crate::scene::Scene;
 use crate::scene::json::ObjectResult;
+use crate::solver;
 use crate::system::{Progress, System};
 
 /// How each frame after the first is computed.
@@ -65,6 +66,43 @@ pub struct FrameStats {
     pub gather_recomputed: usize,
     /// The frame was built from scratch (first frame, `--full`, or after a topology change).
     pub full_rebuild: bool,
+    /// The frame is a preview ([`Session::set_preview`]): solved to [`preview_tolerance`],
+    /// corners from the face polynomials, until [`Session::refine`].
+    pub preview: bool,
+}
+
+/// The tolerance a preview frame is solved to: ten times the scene's, but no looser than 1e-3
+/// (where the scene's is finer than 1e-3), never finer than the scene's. At the default 1e-4
+/// that is 1e-3: worst corner 1% of the mean radiosity off a converged solve, for 40% of the
+/// solve's time (README, the tolerance sweep).
+pub fn preview_tolerance(tolerance: f64) -> f64 {
+    tolerance.max((10.0 * tolerance).min(1e-3))
+}
+
+/// What [`Session::refine`] did to a preview frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Refinement {
+    /// The rest of the solve: its time and the coefficient columns shot.
+    pub solve_seconds: f64,
+    pub shots: usize,
+    /// The corner gather's time and counts (`None` with `corner_gather` off).
+    pub gather: Option<(f64, GatherStats)>,
+}
+
+impl FrameStats {
+    /// The frame's statistics once `r` refined it: its solve's and gather's parts those of the
+    /// whole frame, no longer a preview.
+    pub fn refined(mut self, r: &Refinement) -> FrameStats {
+        self.seconds += r.solve_seconds + r.gather.map_or(0.0, |g| g.0);
+        self.solve_seconds += r.solve_seconds;
+        self.shots += r.shots;
+        if let Some((seconds, g)) = r.gather {
+            (self.gather_seconds, self.gather_moments, self.gather_recomputed) =
+                (seconds, g.moments, g.recomputed);
+        }
+        self.preview = false;
+        self
+    }
 }
 
 pub struct Session {
@@ -81,8 +119,10 @@ pub struct Session {
     /// The links belong to a cancelled update: the next frame rebuilds from scratch.
     stale: bool,
     frame: Option<f64>,
-    /// Frames are solved without their corner gather until [`Session::gather_corners`].
-    defer_gather: bool,
+    /// Frames are solved as previews ([`Session::set_preview`]).
+    preview: bool,
+    /// The readable frame is a preview that [`Session::refine`] has not refined.
+    unrefined: bool,
 }
 
 impl Session {
@@ -103,7 +143,8 @@ impl Session {
             animation: None,
             stale: false,
             frame: None,
-            defer_gather: false,
+            preview: false,
+            unrefined: false,
         })
     }
 
@@ -152,34 +193,52 @@ impl Session {
         Ok(())
     }
 
-    /// While `defer` holds, [`Session::solve_frame`] leaves the corner gather out: the frame's
-    /// corners are the face polynomials' until [`Session::gather_corners`] gathers them. For a
-    /// host that previews while the timeline is scrubbed: the gather is a third of such a frame,
-    /// and only the frame the user stops on needs it. (No effect with `corner_gather` off.)
-    pub fn set_defer_gather(&mut self, defer: bool) {
-        self.defer_gather = defer;
+    /// While `on`, [`Session::solve_frame`] solves previews: to [`preview_tolerance`] instead of
+    /// the scene's tolerance, and without the corner gather (the corners are the face
+    /// polynomials'), until [`Session::refine`] finishes the frame. For a host that previews
+    /// while the timeline is scrubbed: such a frame costs its kernel update and a shorter solve,
+    /// and only the frame the user stops on is refined. Progressive refinement keeps
+    /// `b = e + K (b - u)` at every shot, so refining continues the preview's shooting where it
+    /// stopped, and the next frame's update starts from whichever state is readable.
+    pub fn set_preview(&mut self, on: bool) {
+        self.preview = on;
     }
 
-    /// Whether the readable frame's corners still wait for their gather (it was deferred).
-    pub fn gather_pending(&self) -> bool {
-        self.scene.settings.corner_gather && self.system.as_ref().is_some_and(|s| s.corners.is_none())
+    /// Whether the readable frame is a preview not yet refined.
+    pub fn unrefined(&self) -> bool {
+        self.unrefined && self.system.is_some()
     }
 
-    /// Gathers the corners of the readable frame if its solve deferred them, updating the last
-    /// gather made (whatever frame that was: what moved since is recomputed, as between two
-    /// consecutive frames). Returns its time and counts, or `None` when there was nothing to
-    /// gather. On error (including cancel) the frame stays readable with the polynomials'
-    /// corners, and the next gather starts afresh.
-    pub fn gather_corners(&mut self, progress: Progress) -> Result<Option<(f64, GatherStats)>> {
-        if !self.gather_pending() {
+    /// Brings the readable frame from a preview to what [`Session::solve_frame`] gives without
+    /// previews: shoots the rest of its solve down to the scene's tolerance, then gathers its
+    /// corners (with `corner_gather` on), updating the last gather made whatever frame that was
+    /// (what moved since is recomputed, as between two consecutive frames). Returns what it
+    /// did, or `None` when the frame was no preview. On error (including cancel) the frame
+    /// stays readable: its solution as far as the shooting came (a consistent state, closer to
+    /// converged), its corners the polynomials', and the next gather starts afresh.
+    pub fn refine(&mut self, progress: Progress) -> Result<Option<Refinement>> {
+        if !self.unrefined() {
             return Ok(None);
         }
         let frame = self.frame.expect("a system is only kept with its frame");
         let placed = self.scene_at(frame);
-        let sys = self.system.as_mut().expect("pending implies a system");
-        let start = Instant::now();
-        let g = self.pool.install(|| sys.gather_corners(&placed, frame, progress))?;
-        Ok(Some((start.elapsed().as_secs_f64(), g)))
+        let sys = self.system.as_mut().expect("checked by unrefined");
+        let cancel = || !progress(1.0, "solve");
+        let refinement = self.pool.install(|| -> Result<Refinement> {
+            let start = Instant::now();
+            let stop = placed.settings.tolerance * sys.emitted_power();
+            let shot = solver::shoot(&sys.links, &sys.reflectance, &mut sys.solution, stop, &cancel)?;
+            let solve_seconds = start.elapsed().as_secs_f64();
+            let mut gather = None;
+            if placed.settings.corner_gather {
+                let start = Instant::now();
+                let g = sys.gather_corners(&placed, frame, progress)?;
+                gather = Some((start.elapsed().as_secs_f64(), g));
+            }
+            Ok(Refinement { solve_seconds, shots: shot.shots, gather })
+        })?;
+        self.unrefined = false;
+        Ok(Some(refinement))
     }
 
     /// The scene as placed at `frame`: keys, then host overrides.
@@ -203,7 +262,11 @@ impl Session {
         }
         let start = Instant::now();
         let placed = self.scene_at(frame);
-        let gather = placed.settings.corner_gather && !self.defer_gather;
+        let mut placed = placed;
+        if self.preview {
+            placed.settings.tolerance = preview_tolerance(placed.settings.tolerance);
+        }
+        let gather = placed.settings.corner_gather && !self.preview;
         let incremental = self.method != Method::Full && !self.stale;
         if let (true, Some(sys), Some(state)) = (incremental, self.system.as_mut(), self.animation.as_mut()) {
             // Keep what reads need, so a cancelled update leaves the last frame readable.
@@ -248,9 +311,11 @@ impl Session {
                         gather_seconds,
                         gather_moments: g.moments,
                         gather_recomputed: g.recomputed,
+                        preview: self.preview,
                         ..Default::default()
                     };
                     self.frame = Some(frame);
+                    self.unrefined = self.preview;
                     return Ok(stats);
                 }
                 Ok((Outcome::NeedsRebuild, _)) => {}
@@ -285,12 +350,14 @@ impl Session {
             gather_moments: g.moments,
             gather_recomputed: g.recomputed,
             full_rebuild: true,
+            preview: self.preview,
             ..Default::default()
         };
         self.animation = Some(AnimationState::new(system.elements.len(), self.method == Method::Incremental));
         self.system = Some(system);
         self.stale = false;
         self.frame = Some(frame);
+        self.unrefined = self.preview;
         Ok(stats)
     }
 

@@ -355,52 +355,55 @@ fn corner_radiosity(s: *const GrSession, object: u32) -> Vec<f32> {
     out
 }
 
-/// Gather deferred by the host: the solved frame reads the polynomials' corners, the later
-/// gather gives what solving with the gather gives, a cancelled gather keeps the frame readable,
-/// and misuse is an error, not a crash.
+/// Previews refined on request: a preview frame reads the polynomials' corners, refining it gives
+/// what solving without previews gives, a cancelled refinement keeps the frame readable, and
+/// misuse is an error, not a crash.
 #[test]
-fn deferred_gather_gathers_on_request() {
-    let mut gathered = 7u32;
-    assert_eq!(unsafe { gr_session_set_defer_gather(null_mut(), 1) }, GrStatus::NullPointer);
-    assert_eq!(
-        unsafe { gr_session_gather_corners(null_mut(), None, null_mut(), &mut gathered) },
-        GrStatus::NullPointer
-    );
-    let settings = defaults();
-    let (s, at_once) = (
-        Flat::two_patches().new_session(&settings).unwrap(),
-        Flat::two_patches().new_session(&settings).unwrap(),
-    );
-    assert_eq!(unsafe { gr_session_gather_corners(s, None, null_mut(), &mut gathered) }, GrStatus::NotSolved);
-    assert_eq!(gathered, 7, "not written on error");
+fn previews_are_refined_on_request() {
+    let mut refined = 7u32;
+    assert_eq!(unsafe { gr_session_set_preview(null_mut(), 1) }, GrStatus::NullPointer);
+    let st = unsafe { gr_session_refine(null_mut(), None, null_mut(), &mut refined) };
+    assert_eq!(st, GrStatus::NullPointer);
+    // Tight, so that the two shooting paths to it agree far closer than the checks below.
+    let settings = GrSettings { tolerance: 1e-8, ..defaults() };
+    let new = || Flat::two_patches().new_session(&settings).unwrap();
+    let (s, at_once) = (new(), new());
+    assert_eq!(unsafe { gr_session_refine(s, None, null_mut(), &mut refined) }, GrStatus::NotSolved);
+    assert_eq!(refined, 7, "not written on error");
     let polynomial = {
-        let off = GrSettings { corner_gather: 0, ..settings };
-        let p = Flat::two_patches().new_session(&off).unwrap();
+        let p = Flat::two_patches().new_session(&GrSettings { corner_gather: 0, ..settings }).unwrap();
         assert_eq!(unsafe { gr_session_solve_frame(p, 1.0, None, null_mut()) }, GrStatus::Ok);
         let c = corner_radiosity(p, 0);
         unsafe { gr_session_free(p) };
         c
     };
+    let close = |a: &[f32], b: &[f32], rel: f32| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= rel * y.abs());
     assert_eq!(unsafe { gr_session_solve_frame(at_once, 1.0, None, null_mut()) }, GrStatus::Ok);
-    assert_eq!(unsafe { gr_session_set_defer_gather(s, 1) }, GrStatus::Ok);
+    assert_eq!(unsafe { gr_session_set_preview(s, 1) }, GrStatus::Ok);
     assert_eq!(unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) }, GrStatus::Ok);
-    assert_eq!(stats_json(s).unwrap()["gather_seconds"], 0.0);
-    assert_eq!(corner_radiosity(s, 0), polynomial);
-    assert_ne!(corner_radiosity(at_once, 0), polynomial, "the test needs corners the gather changes");
-    // Cancelled at its first progress call: the frame stays readable, with the same corners.
+    let stats = stats_json(s).unwrap();
+    assert_eq!((stats["preview"].as_bool(), stats["gather_seconds"].as_f64()), (Some(true), Some(0.0)));
+    let preview_shots = stats["shots"].as_u64().unwrap();
+    assert!(close(&corner_radiosity(s, 0), &polynomial, 1e-4), "the polynomials at the corners");
+    assert!(
+        !close(&corner_radiosity(at_once, 0), &polynomial, 1e-3),
+        "the test needs corners the gather changes"
+    );
+    // Cancelled at its first progress call: the frame stays readable, with the polynomials' corners.
     let cb = CancelAt { calls: AtomicU32::new(0), cancel_on_call: 1 };
     let user = &cb as *const CancelAt as *mut c_void;
-    assert_eq!(
-        unsafe { gr_session_gather_corners(s, Some(cancel_at), user, &mut gathered) },
-        GrStatus::Cancelled
+    assert_eq!(unsafe { gr_session_refine(s, Some(cancel_at), user, &mut refined) }, GrStatus::Cancelled);
+    assert!(close(&corner_radiosity(s, 0), &polynomial, 1e-4));
+    assert_eq!(unsafe { gr_session_refine(s, None, null_mut(), &mut refined) }, GrStatus::Ok);
+    assert_eq!(refined, 1);
+    assert!(close(&corner_radiosity(s, 0), &corner_radiosity(at_once, 0), 1e-6));
+    let stats = stats_json(s).unwrap();
+    assert_eq!(stats["preview"].as_bool(), Some(false));
+    assert!(
+        stats["gather_seconds"].as_f64().unwrap() > 0.0 && stats["shots"].as_u64().unwrap() >= preview_shots
     );
-    assert_eq!(corner_radiosity(s, 0), polynomial);
-    assert_eq!(unsafe { gr_session_gather_corners(s, None, null_mut(), &mut gathered) }, GrStatus::Ok);
-    assert_eq!(gathered, 1);
-    assert_eq!(corner_radiosity(s, 0), corner_radiosity(at_once, 0));
-    assert!(stats_json(s).unwrap()["gather_seconds"].as_f64().unwrap() > 0.0);
-    assert_eq!(unsafe { gr_session_gather_corners(s, None, null_mut(), &mut gathered) }, GrStatus::Ok);
-    assert_eq!(gathered, 0, "nothing left to gather");
+    assert_eq!(unsafe { gr_session_refine(s, None, null_mut(), &mut refined) }, GrStatus::Ok);
+    assert_eq!(refined, 0, "nothing left to refine");
     unsafe { gr_session_free(s) };
     unsafe { gr_session_free(at_once) };
 }

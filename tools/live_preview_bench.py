@@ -1,7 +1,7 @@
 """Times the add-on's live preview while scrubbing: what an artist waits for per frame change.
 
     .venv/bin/python -m tools.live_preview_bench [--subdiv 13] [--frames 24] [--lib A --lib B ...]
-        [--mode gather --mode idle]
+        [--mode full --mode idle]
 
 Builds the test suite's Cornell box (six walls of subdiv x subdiv faces, a 0.5 x 0.5 ceiling
 light keyframed across the room over 48 frames, no block: 1,015 faces at 13) under the bpy
@@ -14,11 +14,11 @@ its frame statistics, then the medians over frames 3 onward.
 With several ``--lib`` (paths of ``libgalerkin_radiosity.so``, e.g. two builds), each library
 runs in its own process, alternately, ``--runs`` times, so that machine noise hits all alike.
 
-``--mode`` (repeatable, run alternately like the libraries): ``gather`` gathers the corners on
-every frame change (the panel's "Gather When Idle" off); ``idle`` scrubs with it on, as the UI
-runs it (the timers are told they fire: background mode fires none), so a frame change is the
-update and the solve, and then times the gather of the frame the timeline rests on (the last),
-which the timer would run (``idle gather ms``).
+``--mode`` (repeatable, run alternately like the libraries): ``full`` solves every frame change
+in full (the panel's "Refine When Idle" off); ``idle`` scrubs with it on, as the UI runs it (the
+timers are told they fire: background mode fires none), so a frame change is a preview (the
+kernel update and a solve to ten times the tolerance, no gather), and then times the refinement
+of the frame the timeline rests on (the last), which the timer would run (``idle refine ms``).
 """
 
 from __future__ import annotations
@@ -36,9 +36,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def measure(subdiv: int, frames: int, mode: str = "gather") -> dict:
+def measure(subdiv: int, frames: int, mode: str = "full") -> dict:
     """Runs in this process (bpy imported here): ``rows``, one dict per frame from 2 to
-    ``frames``, and ``idle_gather_ms`` (``idle`` mode: the rest frame's gather)."""
+    ``frames``, and ``idle_refine_ms`` (``idle`` mode: the rest frame's refinement)."""
     sys.path[:0] = [str(REPO), str(REPO / "tests" / "python")]
     os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="blender-user-"))
     import bpy
@@ -62,12 +62,12 @@ def measure(subdiv: int, frames: int, mode: str = "gather") -> dict:
     scenes.cornell_box(bpy, n=subdiv, light_frames=(1, 48), box=False)
     sc = bpy.context.scene
     sc.radiosity.basis_order = 2
-    sc.radiosity.live_gather_when_idle = mode == "idle"
+    sc.radiosity.live_refine_when_idle = mode == "idle"
     if mode == "idle":
         live._timers_run = lambda: True
     sc.radiosity.live_preview = True  # solves frame 1
     if mode == "idle":
-        live.gather_deferred(sc)  # the timer, once frame 1 rests before the scrub
+        live.refine(sc)  # the timer, once frame 1 rests before the scrub
     rows = []
     for f in range(2, frames + 1):
         t = time.perf_counter()
@@ -83,15 +83,15 @@ def measure(subdiv: int, frames: int, mode: str = "gather") -> dict:
             "moments_recomputed": st["gather_recomputed"],
             "faces": sum(len(o.data.polygons) for o in sc.objects if o.type == "MESH"),
         })
-    idle_gather_ms = None
+    idle_refine_ms = None
     if mode == "idle":
         t = time.perf_counter()
-        assert live.gather_deferred(sc), "the rest frame had no gather pending"
-        idle_gather_ms = 1e3 * (time.perf_counter() - t)
+        assert live.refine(sc), "the rest frame was no preview"
+        idle_refine_ms = 1e3 * (time.perf_counter() - t)
         st = bake.held(sc).session.frame_stats()
-        print(f"idle gather: {st['gather_recomputed']} of {st['gather_moments']} moments recomputed",
-              file=sys.stderr)
-    return {"rows": rows, "idle_gather_ms": idle_gather_ms}
+        print(f"idle refine: {st['gather_recomputed']} of {st['gather_moments']} moments recomputed, "
+              f"{st['shots']} shots in all", file=sys.stderr)
+    return {"rows": rows, "idle_refine_ms": idle_refine_ms}
 
 
 def medians(rows: list[dict]) -> dict:
@@ -109,12 +109,12 @@ def main(argv=None):
     ap.add_argument("--subdiv", type=int, default=13)
     ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--lib", action="append", default=[], help="library to time (repeatable)")
-    ap.add_argument("--mode", action="append", choices=("gather", "idle"), default=[],
-                    help="gather on every frame change, or when idle (repeatable; default: gather)")
+    ap.add_argument("--mode", action="append", choices=("full", "idle"), default=[],
+                    help="solve every frame change in full, or refine when idle (repeatable; default: full)")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # child mode
     args = ap.parse_args(argv)
-    modes = args.mode or ["gather"]
+    modes = args.mode or ["full"]
     if args.json:
         print(json.dumps(measure(args.subdiv, args.frames, modes[0])))
         return
@@ -130,11 +130,11 @@ def main(argv=None):
         m = medians(rows)
         print(f"| median 3.. | {m['frame_set_ms']:.1f} | {m['kernel_ms']:.1f} | {m['solve_ms']:.1f} | "
               f"{m['gather_ms']:.1f} | {m['moments_recomputed']:.0f} |")
-        if out["idle_gather_ms"] is not None:
-            print(f"idle gather of the rest frame: {out['idle_gather_ms']:.1f} ms")
+        if out["idle_refine_ms"] is not None:
+            print(f"idle refinement of the rest frame: {out['idle_refine_ms']:.1f} ms")
         return
     print("| library | mode | run | frame_set ms | kernel ms | solve ms | gather ms | moments recomputed "
-          "| idle gather ms |")
+          "| idle refine ms |")
     print("|---|---|---|---|---|---|---|---|---|")
     for run in range(args.runs):
         for lib in args.lib or [None]:
@@ -149,7 +149,7 @@ def main(argv=None):
                 m = medians(out["rows"])
                 cells = [m["frame_set_ms"], m["kernel_ms"], m["solve_ms"], m["gather_ms"]]
                 print(f"| {lib or 'default'} | {mode} | {run + 1} | " + " | ".join(f"{x:.1f}" for x in cells)
-                      + f" | {m['moments_recomputed']:.0f} | {_idle(out['idle_gather_ms'])} |", flush=True)
+                      + f" | {m['moments_recomputed']:.0f} | {_idle(out['idle_refine_ms'])} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -4,11 +4,13 @@ object or changes a material re-solves the current frame incrementally, in the h
 into each object's ``Radiosity`` attribute. The solve runs on the main thread (it blocks the UI
 for its duration: keep live scenes small, or use a low basis order and Draft quality).
 
-With "Gather When Idle" (the default) a frame change solves the frame without its corner gather
-(the corners show the face polynomials, the Galerkin solution itself) and the gather runs once no
-frame change or move has come for ``IDLE_SECONDS``: scrubbing pays the update and the solve, the
-frame the timeline rests on gets its exact corners. This needs the UI's event loop, which runs
-the timer; in background mode (``blender -b``) every frame gathers at once.
+With "Refine When Idle" (the default) a frame change solves a *preview* of the frame: to ten
+times the tolerance (at most 1e-3) and without the corner gather (the corners show the face
+polynomials, the Galerkin solution itself). Once no frame change or move has come for
+``IDLE_SECONDS``, a timer refines the frame the timeline rests on: the rest of its solve, then its
+gather. Scrubbing pays the kernel update and a shorter solve; the resting frame gets what a bake
+gives. This needs the UI's event loop, which runs the timer; in background mode (``blender -b``)
+every frame is solved in full at once.
 
 The baked switch is muted in the viewport while the preview is on, so the viewport shows the
 live attribute; turning the preview off un-mutes it. Objects whose colours need a copy (display
@@ -27,12 +29,12 @@ from . import attributes, bake, switch
 from .export import TopologyChanged, collect, export, sample
 
 _busy = False
-stats = {"solves": 0, "last_seconds": 0.0, "last_error": None, "idle_gathers": 0}
+stats = {"solves": 0, "last_seconds": 0.0, "last_error": None, "refinements": 0}
 
-# The timeline rests once no frame change or move came for this long: then the deferred gather runs.
+# The timeline rests once no frame change or move came for this long: then the preview is refined.
 IDLE_SECONDS = 0.25
 
-# The scene whose frame waits for its gather (the timer reads it).
+# The scene whose frame waits for its refinement (the timer reads it).
 _pending_scene: str | None = None
 
 
@@ -111,21 +113,21 @@ def _update(scene) -> bool:
     if h.frame == frame and state == h.state:
         return False
     bake.apply_sample(h, smp, state)
-    defer = scene.radiosity.live_gather_when_idle and _timers_run()
+    preview = scene.radiosity.live_refine_when_idle and _timers_run()
     t = time.perf_counter()
-    # Deferral is switched on for this solve only: the held session also serves bakes.
-    h.session.set_defer_gather(defer)
+    # Previews are switched on for this solve only: the held session also serves bakes.
+    h.session.set_preview(preview)
     try:
         h.session.solve_frame(frame, progress=lambda fraction, stage: True)
     finally:
-        h.session.set_defer_gather(False)
+        h.session.set_preview(False)
     h.frame = frame
     stats["solves"] += 1
     stats["last_seconds"] = time.perf_counter() - t
     stats["last_error"] = None
     _write_corners(h, rest, sel.objects)
-    if defer:
-        _gather_when_idle(scene)
+    if preview:
+        _refine_when_idle(scene)
     return True
 
 
@@ -140,8 +142,8 @@ def _write_corners(h, rest, objects) -> None:
         switch.set_muted(obj, True)
 
 
-def _gather_when_idle(scene) -> None:
-    """(Re)arms the one-shot timer that gathers ``scene``'s frame once the timeline rests."""
+def _refine_when_idle(scene) -> None:
+    """(Re)arms the one-shot timer that refines ``scene``'s frame once the timeline rests."""
     global _pending_scene
     _pending_scene = scene.name
     if bpy.app.timers.is_registered(on_idle):
@@ -150,18 +152,19 @@ def _gather_when_idle(scene) -> None:
 
 
 def on_idle():
-    """The timer: gathers the pending scene's frame (``gather_deferred``); one-shot (None)."""
+    """The timer: refines the pending scene's frame (``refine``); one-shot (None)."""
     global _pending_scene
     name, _pending_scene = _pending_scene, None
     scene = bpy.data.scenes.get(name) if name is not None else None
     if scene is not None:
-        gather_deferred(scene)
+        refine(scene)
     return None
 
 
-def gather_deferred(scene) -> bool:
-    """Gathers the corners of the frame the live preview solved without them and writes them;
-    True if it gathered. Nothing to do when they were gathered, or the preview is off."""
+def refine(scene) -> bool:
+    """Refines the frame the live preview solved as a preview (the rest of its solve, its corner
+    gather) and writes its corners; True if it refined. Nothing to do when the frame is refined
+    already, or the preview is off."""
     global _busy
     if _busy or bake.running or not scene.radiosity.live_preview:
         return False
@@ -173,9 +176,9 @@ def gather_deferred(scene) -> bool:
         sel = collect(scene, _view_layer(scene), _collection(scene))
         if [o.name for o in sel.objects] != [o.data.name for o in h.export.objects]:
             return False  # the previewed objects changed: the next update starts over
-        if h.session.gather_corners(progress=lambda fraction, stage: True) is None:
+        if h.session.refine(progress=lambda fraction, stage: True) is None:
             return False
-        stats["idle_gathers"] += 1
+        stats["refinements"] += 1
         _write_corners(h, h.export, sel.objects)
         return True
     except ReferenceError:

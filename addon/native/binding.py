@@ -124,8 +124,8 @@ def _declare(lib: ctypes.CDLL) -> None:
         "gr_session_set_object_matrix": ([_SESSION, c_uint32, _F32], c_uint32),
         "gr_session_set_material_emission": ([_SESSION, c_uint32, _F32], c_uint32),
         "gr_session_solve_frame": ([_SESSION, c_double, _PROGRESS, c_void_p], c_uint32),
-        "gr_session_set_defer_gather": ([_SESSION, c_uint32], c_uint32),
-        "gr_session_gather_corners": ([_SESSION, _PROGRESS, c_void_p, _U32], c_uint32),
+        "gr_session_set_preview": ([_SESSION, c_uint32], c_uint32),
+        "gr_session_refine": ([_SESSION, _PROGRESS, c_void_p, _U32], c_uint32),
         "gr_session_cancel": ([_SESSION], c_uint32),
         "gr_session_frame_stats_json": ([_SESSION, c_char_p, c_size_t, POINTER(c_size_t)], c_uint32),
         "gr_session_object_count": ([_SESSION, _U32], c_uint32),
@@ -411,23 +411,23 @@ class Session:
             self._with_progress(progress, lambda cb: solve(p, float(frame), cb, None))
             return self._stats(p)
 
-    def set_defer_gather(self, defer: bool) -> None:
-        """While ``defer`` holds, ``solve_frame`` leaves the corner gather out: the frame's corners
-        are the face polynomials' until ``gather_corners`` (a preview while the timeline is
-        scrubbed gathers only the frame it stops on)."""
+    def set_preview(self, on: bool) -> None:
+        """While ``on``, ``solve_frame`` solves previews: to a looser tolerance (ten times the
+        settings', at most 1e-3) and without the corner gather (the corners are the face
+        polynomials'), until ``refine``. For a preview while the timeline is scrubbed."""
         with self._use() as p:
-            _check(self._lib, self._lib.gr_session_set_defer_gather(p, 1 if defer else 0))
+            _check(self._lib, self._lib.gr_session_set_preview(p, 1 if on else 0))
 
-    def gather_corners(self, progress: Callable[[float, str], bool | None] | None = None) -> dict | None:
-        """Gathers the solved frame's corners if its solve deferred them; returns the frame's
-        statistics (their ``gather_*`` fields this gather's), or None when nothing was pending.
-        Cancelling as for ``solve_frame``; then the frame keeps the polynomials' corners."""
-        gathered = c_uint32(0)
+    def refine(self, progress: Callable[[float, str], bool | None] | None = None) -> dict | None:
+        """Brings a preview frame to what a solve without previews gives (the rest of its solve,
+        then its corner gather); returns the frame's statistics, or None when it was no preview.
+        Cancelling as for ``solve_frame``; then the frame stays readable as far as it came."""
+        refined = c_uint32(0)
         with self._use() as p:
             self._with_progress(
-                progress, lambda cb: self._lib.gr_session_gather_corners(p, cb, None, ctypes.byref(gathered))
+                progress, lambda cb: self._lib.gr_session_refine(p, cb, None, ctypes.byref(refined))
             )
-            return self._stats(p) if gathered.value else None
+            return self._stats(p) if refined.value else None
 
     def _with_progress(self, progress, call) -> None:
         """Runs ``call(callback)`` with ``progress`` behind a C callback (NULL when None), then

@@ -133,60 +133,59 @@ def test_live_preview_follows_moves_and_frame_changes(blender):
     assert floor.modifiers[-1].show_viewport
 
 
-def test_live_preview_gathers_when_the_timeline_rests(blender, monkeypatch):
-    """With "Gather When Idle", a frame change shows the face polynomials at the corners and arms
-    a one-shot timer; the timer gathers the frame the timeline rests on, which then shows what a
-    preview gathering at once shows. A bake after a deferred frame still gathers every frame.
-    Background mode fires no timers (and so gathers at once): here the preview is told timers
-    run, and the timer's callback is called as the UI's event loop would call it."""
+def test_live_preview_refines_when_the_timeline_rests(blender, monkeypatch):
+    """With "Refine When Idle", a frame change shows a preview (a looser solve, the face
+    polynomials at the corners) and arms a one-shot timer; the timer refines the frame the
+    timeline rests on, which then shows what a preview solving in full shows. A bake after a
+    preview frame still solves every frame in full. Background mode fires no timers (and so
+    solves in full at once): here the preview is told timers run, and the timer's callback is
+    called as the UI's event loop would call it."""
     bpy = blender
     from addon.blender import bake, live
 
     objs = scenes.cornell_box(bpy, light_frames=(1, 3))
     floor, sc = objs["Floor"], bpy.context.scene
     sc.radiosity.basis_order = 1
-    sc.radiosity.live_gather_when_idle = True
+    sc.radiosity.tolerance = 1e-7  # two shooting paths to it agree far closer than checked
+    sc.radiosity.live_refine_when_idle = True
 
     def frames_1_2_3():
-        """A new held session previewing frames 1 (gathered at once: background mode), 2, 3."""
+        """A new held session previewing frames 1, 2, 3."""
         sc.frame_set(1)
         bake.drop_held(sc)
         sc.radiosity.live_preview = True
+        if bpy.app.timers.is_registered(live.on_idle):
+            live.on_idle()  # frame 1 rests before the scrub
         sc.frame_set(2)
         sc.frame_set(3)
 
-    frames_1_2_3()
+    frames_1_2_3()  # background mode: solved in full at once
     assert not bpy.app.timers.is_registered(live.on_idle)
-    gathered3 = _live_values(floor)
+    full3 = _live_values(floor)
     sc.radiosity.live_preview = False
 
-    idle_gathers = live.stats["idle_gathers"]
+    refinements = live.stats["refinements"]
     with monkeypatch.context() as m:
         m.setattr(live, "_timers_run", lambda: True)
-        sc.frame_set(1)
-        bake.drop_held(sc)
-        sc.radiosity.live_preview = True  # frame 1 deferred too (timers "run"): gather it
-        live.on_idle()
-        sc.frame_set(2)
-        sc.frame_set(3)
+        frames_1_2_3()
+        assert live.stats["refinements"] == refinements + 1  # frame 1
         assert bpy.app.timers.is_registered(live.on_idle)
-        polynomial3 = _live_values(floor)
+        preview3 = _live_values(floor)
         # The polynomials light the floor under the box; the gather does not.
-        assert np.abs(polynomial3 - gathered3).max() > 0.05 * gathered3.max()
+        assert np.abs(preview3 - full3).max() > 0.05 * full3.max()
 
         assert live.on_idle() is None  # one-shot
-        assert live.stats["idle_gathers"] == idle_gathers + 2
-        # The same solves, and a gather made from frame 1's instead of frame 2's.
-        np.testing.assert_allclose(_live_values(floor), gathered3, rtol=1e-6, atol=1e-7)
-        live.on_idle()  # nothing pending: nothing gathered
-        assert live.stats["idle_gathers"] == idle_gathers + 2
+        assert live.stats["refinements"] == refinements + 2
+        np.testing.assert_allclose(_live_values(floor), full3, rtol=1e-5, atol=1e-6)
+        live.on_idle()  # nothing pending: nothing refined
+        assert live.stats["refinements"] == refinements + 2
 
-        sc.frame_set(2)  # deferred again; the preview turned off before the timer fires
+        sc.frame_set(2)  # a preview again; the live preview turned off before the timer fires
         sc.radiosity.live_preview = False
     assert not bpy.app.timers.is_registered(live.on_idle)
-    scenes.bake(bpy)  # reuses the held session, which gathers every frame it bakes
-    np.testing.assert_allclose(scenes.stored(floor.data, 3), gathered3, rtol=0.02, atol=1e-3)
-    assert live.stats["idle_gathers"] == idle_gathers + 2
+    scenes.bake(bpy)  # reuses the held session, which solves every frame it bakes in full
+    np.testing.assert_allclose(scenes.stored(floor.data, 3), full3, rtol=0.02, atol=1e-3)
+    assert live.stats["refinements"] == refinements + 2
 
 
 def test_live_preview_without_a_bake(blender):
