@@ -9,7 +9,8 @@
 //! `corner_gather` on runs it: its time, moments held and moments recomputed), `--save PATH` /
 //! `--check PATH` (write, or compare against, every frame's link store and solution, and with
 //! `--gather` its corners: the link store must match bit for bit, the solution and the corners
-//! within 1e-6 of peak).
+//! within 1e-6 of peak), `--tolerance T` (the solve's, default 1e-4; a host's preview frame is
+//! solved to 1e-3, `session::preview_tolerance`).
 //!
 //! Prints per frame `kernel_seconds` and the counts that do not depend on timing noise (pairs
 //! whose shafts were tested against the swept box, link visibility checks, segments tested).
@@ -64,7 +65,8 @@ fn main() {
     let save = arg(&args, "--save");
     let check = arg(&args, "--check");
     let threads: usize = arg(&args, "--threads").map_or(0, |v| v.parse().unwrap());
-    let settings = Settings { basis_order: 2, corner_gather: false, threads, ..Settings::default() };
+    let tolerance: f64 = arg(&args, "--tolerance").map_or(Settings::default().tolerance, |v| v.parse().unwrap());
+    let settings = Settings { basis_order: 2, corner_gather: false, threads, tolerance, ..Settings::default() };
     let flag = |name: &str| args.iter().any(|a| a == name);
     let scene = if flag("--demo") {
         scenes::cornell_box_animated(subdiv, 48, settings)

@@ -674,7 +674,8 @@ pub unsafe extern "C" fn gr_session_face_radiosity(
 /// Writes the radiosity (RGB, W/m^2) at each face corner of object `object` at the last solved
 /// frame: 3 floats per corner, faces in order, corners in face order. `out` holds `len` floats,
 /// at least 3 x the corner count. With `corner_gather` on (the default) these are gathered at
-/// each corner with its own shadow rays; otherwise each face's polynomial there.
+/// each corner with its own shadow rays, except on a preview frame (`gr_session_set_preview`)
+/// until it is refined; otherwise each face's polynomial there.
 ///
 /// # Safety
 /// `s` is NULL or a live session; `out` is NULL or points to `len` writable floats.
