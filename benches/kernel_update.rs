@@ -65,8 +65,10 @@ fn main() {
     let save = arg(&args, "--save");
     let check = arg(&args, "--check");
     let threads: usize = arg(&args, "--threads").map_or(0, |v| v.parse().unwrap());
-    let tolerance: f64 = arg(&args, "--tolerance").map_or(Settings::default().tolerance, |v| v.parse().unwrap());
-    let settings = Settings { basis_order: 2, corner_gather: false, threads, tolerance, ..Settings::default() };
+    let tolerance: f64 =
+        arg(&args, "--tolerance").map_or(Settings::default().tolerance, |v| v.parse().unwrap());
+    let settings =
+        Settings { basis_order: 2, corner_gather: false, threads, tolerance, ..Settings::default() };
     let flag = |name: &str| args.iter().any(|a| a == name);
     let scene = if flag("--demo") {
         scenes::cornell_box_animated(subdiv, 48, settings)
