@@ -214,8 +214,9 @@ impl Session {
     /// corners (with `corner_gather` on), updating the last gather made whatever frame that was
     /// (what moved since is recomputed, as between two consecutive frames). Returns what it
     /// did, or `None` when the frame was no preview. On error (including cancel) the frame
-    /// stays readable: its solution as far as the shooting came (a consistent state, closer to
-    /// converged), its corners the polynomials', and the next gather starts afresh.
+    /// stays readable and still a preview: its solution as far as the shooting came (a
+    /// consistent state, closer to converged), its corners the polynomials' (after a cancel
+    /// inside the gather, the next gather starts afresh).
     pub fn refine(&mut self, progress: Progress) -> Result<Option<Refinement>> {
         if !self.unrefined() {
             return Ok(None);
@@ -261,8 +262,7 @@ impl Session {
             return Err(Error::InvalidArgument(format!("frame {frame} is not finite")));
         }
         let start = Instant::now();
-        let placed = self.scene_at(frame);
-        let mut placed = placed;
+        let mut placed = self.scene_at(frame);
         if self.preview {
             placed.settings.tolerance = preview_tolerance(placed.settings.tolerance);
         }

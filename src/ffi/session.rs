@@ -432,6 +432,23 @@ impl Callback {
     }
 }
 
+/// Runs `work` with the progress function a long call gives the session: the host's `progress`
+/// (serialized, see [`Callback`]) and the session's cancel flag, which is cleared first.
+fn with_progress<T>(
+    s: &GrSession,
+    progress: GrProgressFn,
+    user: *mut c_void,
+    work: impl FnOnce(crate::system::Progress) -> T,
+) -> T {
+    s.cancel.store(false, Ordering::SeqCst);
+    let callback = Callback { f: progress, user, lock: Mutex::new(()), stopped: AtomicBool::new(false) };
+    let cancel = &*s.cancel;
+    let go_on = |fraction: f64, stage: &str| -> bool {
+        !cancel.load(Ordering::Relaxed) && callback.call(fraction, stage) && !cancel.load(Ordering::Relaxed)
+    };
+    work(&go_on)
+}
+
 /// Solves `frame` (finite; object placements and emissions as overridden so far). Blocks until
 /// the frame is solved, cancelled or fails. Clears the cancel flag when it starts.
 ///
@@ -452,15 +469,7 @@ pub unsafe extern "C" fn gr_session_solve_frame(
     boundary("gr_session_solve_frame", || {
         let s = unsafe { session(s) }?;
         let mut state = s.write()?;
-        s.cancel.store(false, Ordering::SeqCst);
-        let callback = Callback { f: progress, user, lock: Mutex::new(()), stopped: AtomicBool::new(false) };
-        let cancel = &*s.cancel;
-        let go_on = |fraction: f64, stage: &str| -> bool {
-            !cancel.load(Ordering::Relaxed)
-                && callback.call(fraction, stage)
-                && !cancel.load(Ordering::Relaxed)
-        };
-        let stats = state.session.solve_frame(frame, &go_on)?;
+        let stats = with_progress(s, progress, user, |go_on| state.session.solve_frame(frame, go_on))?;
         state.stats = Some(stats);
         state.results = OnceLock::new();
         Ok(())
@@ -513,15 +522,7 @@ pub unsafe extern "C" fn gr_session_refine(
         if state.session.frame().is_none() {
             return Err(Failure::new(GrStatus::NotSolved, "no frame has been solved yet"));
         }
-        s.cancel.store(false, Ordering::SeqCst);
-        let callback = Callback { f: progress, user, lock: Mutex::new(()), stopped: AtomicBool::new(false) };
-        let cancel = &*s.cancel;
-        let go_on = |fraction: f64, stage: &str| -> bool {
-            !cancel.load(Ordering::Relaxed)
-                && callback.call(fraction, stage)
-                && !cancel.load(Ordering::Relaxed)
-        };
-        let outcome = state.session.refine(&go_on);
+        let outcome = with_progress(s, progress, user, |go_on| state.session.refine(go_on));
         // The solution and corners changed, refined or not (a cancel keeps the shots made).
         state.results = OnceLock::new();
         let done = outcome?;

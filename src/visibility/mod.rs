@@ -1024,15 +1024,21 @@ mod tests {
         assert!(hits > 500 && misses > 500, "{hits} hits, {misses} misses");
     }
 
+    /// The elements of a 5 x 5 Cornell box (blocks and light included) and their occluders.
+    fn cornell_box_occluders() -> (Vec<Patch>, Occluders) {
+        let scene = crate::scenes::cornell_box(5, crate::scene::Settings::default());
+        let elements = crate::system::build_elements(&scene, 1.0, crate::basis::Basis::new(0));
+        let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
+        let occ = Occluders::new(&patches, 2);
+        (patches, occ)
+    }
+
     /// Links whose planes cull nothing take their visibility from the shaft's candidates alone,
     /// however many there are: the same masks as any-hit rays through the whole BVH (on facing
     /// pairs; a ray lying in a box face is missed by the BVH's slab test, not by the candidates).
     #[test]
     fn shaft_candidates_give_the_bvh_any_hit_masks() {
-        let scene = crate::scenes::cornell_box(5, crate::scene::Settings::default());
-        let elements = crate::system::build_elements(&scene, 1.0, crate::basis::Basis::new(0));
-        let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
-        let occ = Occluders::new(&patches, 2);
+        let (patches, occ) = cornell_box_occluders();
         let (m, cells) = (2, 4);
         let (mut partial, mut blocked) = (0, 0);
         for i in 0..patches.len() {
@@ -1073,10 +1079,7 @@ mod tests {
     /// source's plane culls (the light's coplanar elements, what lies behind a wall element).
     #[test]
     fn point_visibility_is_the_bvh_any_hit() {
-        let scene = crate::scenes::cornell_box(5, crate::scene::Settings::default());
-        let elements = crate::system::build_elements(&scene, 1.0, crate::basis::Basis::new(0));
-        let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
-        let occ = Occluders::new(&patches, 2);
+        let (patches, occ) = cornell_box_occluders();
         let targets_of = |p: &Patch| -> Vec<DVec3> {
             (0..9).map(|k| p.point((k / 3) as f64 / 3.0 + 0.17, (k % 3) as f64 / 3.0 + 0.17)).collect()
         };
@@ -1108,10 +1111,7 @@ mod tests {
     /// A group of sources gives each link the visibility it has alone.
     #[test]
     fn group_visibility_is_link_visibility() {
-        let scene = crate::scenes::cornell_box(5, crate::scene::Settings::default());
-        let elements = crate::system::build_elements(&scene, 1.0, crate::basis::Basis::new(0));
-        let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
-        let occ = Occluders::new(&patches, 2);
+        let (patches, occ) = cornell_box_occluders();
         let mut partial = 0;
         for i in 0..patches.len() {
             for start in ((i + 1)..patches.len()).step_by(7) {
