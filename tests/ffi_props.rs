@@ -57,6 +57,10 @@ enum Op {
     Stats(usize),
     Counts(u32),
     Cancel,
+    /// `gr_session_set_preview` on or off.
+    Preview(bool),
+    /// `gr_session_refine`, cancelled at progress call `.0` (`u32::MAX`: never).
+    Refine(u32),
 }
 
 #[derive(Clone, Debug)]
@@ -68,6 +72,8 @@ struct Case {
     fault: Fault,
     /// Solve frame 1 before the ops.
     solve_first: bool,
+    /// Previews on (`gr_session_set_preview`) before that solve.
+    preview: bool,
     ops: Vec<Op>,
 }
 
@@ -196,6 +202,8 @@ fn op(objects: u32, materials: u32) -> impl Strategy<Value = Op> {
         (0usize..400).prop_map(Op::Stats),
         index(objects).prop_map(Op::Counts),
         Just(Op::Cancel),
+        any::<bool>().prop_map(Op::Preview),
+        prop_oneof![3 => Just(u32::MAX), 1 => 0u32..4].prop_map(Op::Refine),
     ]
 }
 
@@ -211,12 +219,21 @@ fn case() -> impl Strategy<Value = Case> {
             prop::collection::vec(object(nm), no as usize),
             any::<bool>(),
             fault(),
-            any::<bool>(),
+            (any::<bool>(), any::<bool>()),
             prop::collection::vec(op(no, nm), 0..8),
         )
-            .prop_map(|(settings, materials, objects, with_matrices, fault, solve_first, ops)| {
-                Case { settings, materials, objects, with_matrices, fault, solve_first, ops }
-            })
+            .prop_map(
+                |(settings, materials, objects, with_matrices, fault, (solve_first, preview), ops)| Case {
+                    settings,
+                    materials,
+                    objects,
+                    with_matrices,
+                    fault,
+                    solve_first,
+                    preview,
+                    ops,
+                },
+            )
     })
 }
 
@@ -249,6 +266,7 @@ static RUNS: AtomicUsize = AtomicUsize::new(0);
 static SESSIONS: AtomicUsize = AtomicUsize::new(0);
 static SOLVED: AtomicUsize = AtomicUsize::new(0);
 static CANCELLED: AtomicUsize = AtomicUsize::new(0);
+static REFINED: AtomicUsize = AtomicUsize::new(0);
 static READS: AtomicUsize = AtomicUsize::new(0);
 static DIVERGED: AtomicUsize = AtomicUsize::new(0);
 
@@ -407,6 +425,9 @@ fn run_ops(s: *mut GrSession, c: &Case) -> Result<(), TestCaseError> {
     let mut n = 0u32;
     check("gr_session_object_count", unsafe { gr_session_object_count(s, &mut n) })?;
     prop_assert_eq!(n as usize, c.objects.len());
+    if c.preview {
+        prop_assert_eq!(check("set_preview", unsafe { gr_session_set_preview(s, 1) })?, GrStatus::Ok);
+    }
     if c.solve_first {
         let st = check("solve_frame", unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) })?;
         if st == GrStatus::Ok {
@@ -525,6 +546,25 @@ fn run_ops(s: *mut GrSession, c: &Case) -> Result<(), TestCaseError> {
             Op::Cancel => {
                 check("cancel", unsafe { gr_session_cancel(s) })?;
             }
+            Op::Preview(on) => {
+                let st = check("set_preview", unsafe { gr_session_set_preview(s, u32::from(*on)) })?;
+                prop_assert_eq!(st, GrStatus::Ok);
+            }
+            Op::Refine(calls) => {
+                let (mut left, mut refined) = (*calls, 7u32);
+                let st = check("refine", unsafe {
+                    gr_session_refine(s, Some(stop_after), (&raw mut left).cast(), &mut refined)
+                })?;
+                match st {
+                    GrStatus::Ok => {
+                        prop_assert!(refined <= 1, "refined = {refined}");
+                        REFINED.fetch_add(refined as _, Ordering::Relaxed);
+                    }
+                    GrStatus::Cancelled => _ = CANCELLED.fetch_add(1, Ordering::Relaxed),
+                    GrStatus::NotSolved => prop_assert!(!solved, "refine: no frame, after a solve"),
+                    _ => diverged(st)?,
+                }
+            }
         }
     }
     Ok(())
@@ -543,11 +583,12 @@ fn arbitrary_input_never_crashes() {
     let mut runner = TestRunner::new(config);
     let result = runner.run(&case(), |c| run(&c));
     eprintln!(
-        "{cases} cases ({} runs): {} sessions made, {} frames solved, {} cancelled, {} diverged, {} \
-         radiosity reads",
+        "{cases} cases ({} runs): {} sessions made, {} frames solved, {} previews refined, {} \
+         cancelled, {} diverged, {} radiosity reads",
         RUNS.load(Ordering::Relaxed),
         SESSIONS.load(Ordering::Relaxed),
         SOLVED.load(Ordering::Relaxed),
+        REFINED.load(Ordering::Relaxed),
         CANCELLED.load(Ordering::Relaxed),
         DIVERGED.load(Ordering::Relaxed),
         READS.load(Ordering::Relaxed),
