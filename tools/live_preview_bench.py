@@ -42,6 +42,7 @@ def measure(subdiv: int, frames: int, mode: str = "full") -> dict:
     sys.path[:0] = [str(REPO), str(REPO / "tests" / "python")]
     os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="blender-user-"))
     import bpy
+    import numpy as np
     import scenes
 
     import addon
@@ -83,15 +84,26 @@ def measure(subdiv: int, frames: int, mode: str = "full") -> dict:
             "moments_recomputed": st["gather_recomputed"],
             "faces": sum(len(o.data.polygons) for o in sc.objects if o.type == "MESH"),
         })
-    idle_refine_ms = None
+    idle_refine_ms, preview_error = None, None
     if mode == "idle":
+        session = bake.held(sc).session
+
+        def corners():
+            return np.concatenate([session.corner_radiosity(i).ravel() for i in range(session.object_count)])
+
+        preview = corners()
         t = time.perf_counter()
         assert live.refine(sc), "the rest frame was no preview"
         idle_refine_ms = 1e3 * (time.perf_counter() - t)
-        st = bake.held(sc).session.frame_stats()
+        refined = corners()
+        # What the preview showed against the refined frame, relative to the mean radiosity.
+        mean = refined.mean()
+        preview_error = {"rms": float(np.sqrt(np.mean((preview - refined) ** 2)) / mean),
+                         "worst": float(np.abs(preview - refined).max() / mean)}
+        st = session.frame_stats()
         print(f"idle refine: {st['gather_recomputed']} of {st['gather_moments']} moments recomputed, "
               f"{st['shots']} shots in all", file=sys.stderr)
-    return {"rows": rows, "idle_refine_ms": idle_refine_ms}
+    return {"rows": rows, "idle_refine_ms": idle_refine_ms, "preview_error": preview_error}
 
 
 def medians(rows: list[dict]) -> dict:
@@ -102,6 +114,10 @@ def medians(rows: list[dict]) -> dict:
 
 def _idle(ms) -> str:
     return "" if ms is None else f"{ms:.1f}"
+
+
+def _error(e) -> str:
+    return "" if e is None else f"{100 * e['rms']:.1f}% / {100 * e['worst']:.0f}%"
 
 
 def main(argv=None):
@@ -131,11 +147,13 @@ def main(argv=None):
         print(f"| median 3.. | {m['frame_set_ms']:.1f} | {m['kernel_ms']:.1f} | {m['solve_ms']:.1f} | "
               f"{m['gather_ms']:.1f} | {m['moments_recomputed']:.0f} |")
         if out["idle_refine_ms"] is not None:
-            print(f"idle refinement of the rest frame: {out['idle_refine_ms']:.1f} ms")
+            e = out["preview_error"]
+            print(f"idle refinement of the rest frame: {out['idle_refine_ms']:.1f} ms; its preview's corners "
+                  f"were off by {100 * e['rms']:.1f}% RMS, {100 * e['worst']:.0f}% worst, of the mean")
         return
     print("| library | mode | run | frame_set ms | kernel ms | solve ms | gather ms | moments recomputed "
-          "| idle refine ms |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "| idle refine ms | preview off refined, RMS / worst of mean |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for run in range(args.runs):
         for lib in args.lib or [None]:
             for mode in modes:
@@ -149,7 +167,8 @@ def main(argv=None):
                 m = medians(out["rows"])
                 cells = [m["frame_set_ms"], m["kernel_ms"], m["solve_ms"], m["gather_ms"]]
                 print(f"| {lib or 'default'} | {mode} | {run + 1} | " + " | ".join(f"{x:.1f}" for x in cells)
-                      + f" | {m['moments_recomputed']:.0f} | {_idle(out['idle_refine_ms'])} |", flush=True)
+                      + f" | {m['moments_recomputed']:.0f} | {_idle(out['idle_refine_ms'])} | "
+                      + _error(out["preview_error"]) + " |", flush=True)
 
 
 if __name__ == "__main__":
