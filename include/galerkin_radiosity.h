@@ -308,8 +308,9 @@ GrStatus gr_session_set_preview(struct GrSession *s, uint32_t on);
  * frame (`preview` 0, its solve's time and shots included, the gather's fields this gather's).
  *
  * `progress` and cancelling as for `gr_session_solve_frame`. On `GR_STATUS_CANCELLED` or another
- * error the frame stays readable, solved as far as the refinement came, with the polynomials'
- * corners (the next gather starts afresh). `GR_STATUS_NOT_SOLVED` before the first solved frame.
+ * error the frame stays readable and a preview (refine it again later), solved as far as the
+ * refinement came, with the polynomials' corners; after a cancel inside the gather the next
+ * gather starts afresh. `GR_STATUS_NOT_SOLVED` before the first solved frame.
  *
  * # Safety
  * `s` is NULL or a live session that no other thread frees during the call; `progress`, if not
