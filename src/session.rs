@@ -105,6 +105,18 @@ impl FrameStats {
     }
 }
 
+/// The corner gather of `sys` placed as `placed` is at `frame`, and its time in seconds.
+fn timed_gather(
+    sys: &mut System,
+    placed: &Scene,
+    frame: f64,
+    progress: Progress,
+) -> Result<(f64, GatherStats)> {
+    let start = Instant::now();
+    let g = sys.gather_corners(placed, frame, progress)?;
+    Ok((start.elapsed().as_secs_f64(), g))
+}
+
 pub struct Session {
     scene: Scene,
     method: Method,
@@ -232,9 +244,7 @@ impl Session {
             let solve_seconds = start.elapsed().as_secs_f64();
             let mut gather = None;
             if placed.settings.corner_gather {
-                let start = Instant::now();
-                let g = sys.gather_corners(&placed, frame, progress)?;
-                gather = Some((start.elapsed().as_secs_f64(), g));
+                gather = Some(timed_gather(sys, &placed, frame, progress)?);
             }
             Ok(Refinement { solve_seconds, shots: shot.shots, gather })
         })?;
@@ -280,9 +290,7 @@ impl Session {
             let outcome = self.pool.install(|| {
                 let outcome = animation::advance(sys, state, &placed, frame, progress)?;
                 if let (Outcome::Updated(_), true) = (&outcome, gather) {
-                    let start = Instant::now();
-                    let g = sys.gather_corners(&placed, frame, progress)?;
-                    return Ok((outcome, (start.elapsed().as_secs_f64(), g)));
+                    return Ok((outcome, timed_gather(sys, &placed, frame, progress)?));
                 }
                 Ok((outcome, (0.0, GatherStats::default())))
             });
@@ -333,9 +341,8 @@ impl Session {
             if !gather {
                 return Ok((sys, 0.0, GatherStats::default()));
             }
-            let start = Instant::now();
-            let g = sys.gather_corners(&placed, frame, progress)?;
-            Ok((sys, start.elapsed().as_secs_f64(), g))
+            let (seconds, g) = timed_gather(&mut sys, &placed, frame, progress)?;
+            Ok((sys, seconds, g))
         })?;
         let stats = FrameStats {
             frame,
