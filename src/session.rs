@@ -85,6 +85,9 @@ pub struct Refinement {
     /// The rest of the solve: its time and the coefficient columns shot.
     pub solve_seconds: f64,
     pub shots: usize,
+    /// The frame was built and solved afresh instead (its links were those of a cancelled
+    /// update): the kernels' time, and the solve's above.
+    pub rebuilt: Option<f64>,
     /// The corner gather's time and counts (`None` with `corner_gather` off).
     pub gather: Option<(f64, GatherStats)>,
 }
@@ -93,7 +96,9 @@ impl FrameStats {
     /// The frame's statistics once `r` refined it: its solve's and gather's parts those of the
     /// whole frame, no longer a preview.
     pub fn refined(mut self, r: &Refinement) -> FrameStats {
-        self.seconds += r.solve_seconds + r.gather.map_or(0.0, |g| g.0);
+        let kernel_seconds = r.rebuilt.unwrap_or(0.0);
+        self.seconds += kernel_seconds + r.solve_seconds + r.gather.map_or(0.0, |g| g.0);
+        self.kernel_seconds += kernel_seconds;
         self.solve_seconds += r.solve_seconds;
         self.shots += r.shots;
         if let Some((seconds, g)) = r.gather {
@@ -101,6 +106,7 @@ impl FrameStats {
                 (seconds, g.moments, g.recomputed);
         }
         self.preview = false;
+        self.full_rebuild |= r.rebuilt.is_some();
         self
     }
 }
@@ -228,13 +234,31 @@ impl Session {
     /// did, or `None` when the frame was no preview. On error (including cancel) the frame
     /// stays readable and still a preview: its solution as far as the shooting came (a
     /// consistent state, closer to converged), its corners the polynomials' (after a cancel
-    /// inside the gather, the next gather starts afresh).
+    /// inside the gather, the next gather starts afresh). After a cancelled
+    /// [`Session::solve_frame`] the readable frame's solution is back but its links are the
+    /// cancelled frame's, so the frame is then built and solved afresh
+    /// ([`Refinement::rebuilt`]).
     pub fn refine(&mut self, progress: Progress) -> Result<Option<Refinement>> {
         if !self.unrefined() {
             return Ok(None);
         }
         let frame = self.frame.expect("a system is only kept with its frame");
         let placed = self.scene_at(frame);
+        if self.stale {
+            // The next frame's update was cancelled: its solution was put back, its links were
+            // not, and shooting through them would mix the two frames. Solved afresh.
+            let (system, seconds, g) =
+                self.rebuild(&placed, frame, placed.settings.corner_gather, progress)?;
+            let r = Refinement {
+                rebuilt: Some(system.stats.kernel_seconds),
+                solve_seconds: system.stats.solve_seconds,
+                shots: system.stats.shots,
+                gather: placed.settings.corner_gather.then_some((seconds, g)),
+            };
+            self.keep_rebuilt(system, frame);
+            self.unrefined = false;
+            return Ok(Some(r));
+        }
         let sys = self.system.as_mut().expect("checked by unrefined");
         let cancel = || !progress(1.0, "solve");
         let refinement = self.pool.install(|| -> Result<Refinement> {
@@ -246,7 +270,7 @@ impl Session {
             if placed.settings.corner_gather {
                 gather = Some(timed_gather(sys, &placed, frame, progress)?);
             }
-            Ok(Refinement { solve_seconds, shots: shot.shots, gather })
+            Ok(Refinement { solve_seconds, shots: shot.shots, rebuilt: None, gather })
         })?;
         self.unrefined = false;
         Ok(Some(refinement))
@@ -334,16 +358,7 @@ impl Session {
                 }
             }
         }
-        let cancel = || !progress(1.0, "solve");
-        let (system, gather_seconds, g) = self.pool.install(|| -> Result<(System, f64, GatherStats)> {
-            let mut sys = System::build(&placed, frame, progress)?;
-            sys.solve(placed.settings.tolerance, &cancel)?;
-            if !gather {
-                return Ok((sys, 0.0, GatherStats::default()));
-            }
-            let (seconds, g) = timed_gather(&mut sys, &placed, frame, progress)?;
-            Ok((sys, seconds, g))
-        })?;
+        let (system, gather_seconds, g) = self.rebuild(&placed, frame, gather, progress)?;
         let stats = FrameStats {
             frame,
             seconds: start.elapsed().as_secs_f64(),
@@ -360,12 +375,38 @@ impl Session {
             preview: self.preview,
             ..Default::default()
         };
+        self.keep_rebuilt(system, frame);
+        self.unrefined = self.preview;
+        Ok(stats)
+    }
+
+    /// `placed` at `frame` built and solved from scratch, and gathered when `gather`, with the
+    /// gather's time.
+    fn rebuild(
+        &self,
+        placed: &Scene,
+        frame: f64,
+        gather: bool,
+        progress: Progress,
+    ) -> Result<(System, f64, GatherStats)> {
+        let cancel = || !progress(1.0, "solve");
+        self.pool.install(|| {
+            let mut sys = System::build(placed, frame, progress)?;
+            sys.solve(placed.settings.tolerance, &cancel)?;
+            if !gather {
+                return Ok((sys, 0.0, GatherStats::default()));
+            }
+            let (seconds, g) = timed_gather(&mut sys, placed, frame, progress)?;
+            Ok((sys, seconds, g))
+        })
+    }
+
+    /// Makes a rebuilt `system` the readable frame, with a fresh animation state.
+    fn keep_rebuilt(&mut self, system: System, frame: f64) {
         self.animation = Some(AnimationState::new(system.elements.len(), self.method == Method::Incremental));
         self.system = Some(system);
         self.stale = false;
         self.frame = Some(frame);
-        self.unrefined = self.preview;
-        Ok(stats)
     }
 
     fn solved(&self) -> Result<&System> {

@@ -500,6 +500,8 @@ pub unsafe extern "C" fn gr_session_set_preview(s: *mut GrSession, on: u32) -> G
 /// corner changed since. `GR_STATUS_OK` at once when the frame is no preview. Writes 1 to
 /// `*refined` (if not NULL) when it refined, else 0. The frame statistics then describe the whole
 /// frame (`preview` 0, its solve's time and shots included, the gather's fields this gather's).
+/// After a cancelled `gr_session_solve_frame` the frame is built and solved afresh instead (its
+/// links were the cancelled frame's; the statistics' `full_rebuild` true).
 ///
 /// `progress` and cancelling as for `gr_session_solve_frame`. On `GR_STATUS_CANCELLED` or another
 /// error the frame stays readable and a preview (refine it again later), solved as far as the
