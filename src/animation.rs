@@ -545,16 +545,16 @@ pub fn advance(
                         let changed = state.visibility_changed.get(p as usize).copied().unwrap_or(NEVER);
                         vis == *old_vis && (changed == NEVER || state.updates - changed >= CALM_UPDATES)
                     });
-                    let expand = both_translated && vis != Visibility::Blocked && calm;
+                    let ((ci, ri), (cj, rj)) = (geom.sphere(iu), geom.sphere(ju));
+                    let npts = ctx.points_for(ci.distance(cj) / (ri + rj));
+                    let expand =
+                        both_translated && vis != Visibility::Blocked && calm && npts >= MIN_SERIES_POINTS;
                     let r_min = (state.use_series && expand)
                         .then(|| series::eligible(&patches[iu], &patches[ju], dir))
                         .flatten()
                         .filter(|r| SERIES_MAX_T * r >= MIN_SERIES_FRAMES * motion.length());
                     match r_min {
                         Some(r_min) => {
-                            let (ci, ri) = patches[iu].bounding_sphere();
-                            let (cj, rj) = patches[ju].bounding_sphere();
-                            let npts = ctx.points_for(ci.distance(cj) / (ri + rj));
                             let terms = series::expand(
                                 basis,
                                 ctx.vis_axis,
@@ -576,7 +576,11 @@ pub fn advance(
                             if reason == Reason::Translation
                                 && state.use_series
                                 && existing_series.is_none()
-                                && !series::clip_invariant(&patches[iu], &patches[ju], dir)
+                                && !series::clip_invariant_with(
+                                    (&patches[iu], geom.plane(iu)),
+                                    (&patches[ju], geom.plane(ju)),
+                                    dir,
+                                )
                             {
                                 reason = Reason::HalfSpace;
                             }
@@ -903,6 +907,16 @@ fn mark_visibility_change(state: &mut AnimationState, p: PairId) {
 /// drops those too: 6.6-6.9 ms). `--exact` there: 4.8 ms.
 const MIN_SERIES_FRAMES: f64 = 15.0;
 
+/// Gauss points per axis below which a pair is not expanded: its quadrature is cheaper than
+/// reading its series. Timed in the moving-light box's frames (session 11, `perf` of
+/// `kernel_update` with and without `--exact`, 39 frames each), a series evaluation takes 1.5 us
+/// there, not the 0.3-0.4 us it takes with its terms in cache (above): its ~4.5 KB of terms come
+/// from memory, the solve having streamed the link store through the caches since the last
+/// frame. A 3 x 3-point quadrature (81 point pairs, order 2's far and middle rules) takes 0.65 us,
+/// so those pairs are recomputed; from 4 x 4 points (256 point pairs, ~2 us: order 2's near rule,
+/// order 3's far one, or adaptive quadrature off) the series pays.
+const MIN_SERIES_POINTS: usize = 4;
+
 crate::simd::multiversion! {
     /// `out[v] += rho (G_new - G_old) x[v]` for one receiver (its `nb` coefficients, reflectance
     /// `rho`) and the coefficients `x[v]` of one source, for the two vectors `b` and `sigma` at
@@ -960,8 +974,8 @@ mod tests {
     /// light-floor pairs' masks change frame after frame. No pair is expanded before its
     /// visibility has held for `CALM_UPDATES` updates, and pairs whose visibility changed are
     /// expanded again once it has.
-    #[test]
-    fn pairs_are_expanded_only_after_their_visibility_has_held() {
+    /// The scene of [`pairs_are_expanded_only_after_their_visibility_has_held`], frames 1-81.
+    fn light_past_an_occluder(settings: Settings) -> Scene {
         let p = DVec3::new;
         let floor =
             subdivided_quad("floor", [p(0., 0., 0.), p(1., 0., 0.), p(1., 1., 0.), p(0., 1., 0.)], 4, 0);
@@ -986,9 +1000,19 @@ mod tests {
             Material { name: "grey".into(), reflectance: [0.5; 3], emission: [0.0; 3] },
             Material { name: "light".into(), reflectance: [0.0; 3], emission: [5.0; 3] },
         ];
-        let settings = Settings { basis_order: 1, corner_gather: false, ..Settings::default() };
-        let scene =
-            Scene::new(settings, (1, 81), materials, vec![vec![]; 2], vec![floor, occluder, light]).unwrap();
+        Scene::new(settings, (1, 81), materials, vec![vec![]; 2], vec![floor, occluder, light]).unwrap()
+    }
+
+    #[test]
+    fn pairs_are_expanded_only_after_their_visibility_has_held() {
+        // Every pair on the 4 x 4-point rule, so that the series pays (`MIN_SERIES_POINTS`).
+        let settings = Settings {
+            basis_order: 1,
+            corner_gather: false,
+            adaptive_quadrature: false,
+            ..Settings::default()
+        };
+        let scene = light_past_an_occluder(settings);
         let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
         sys.solve(scene.settings.tolerance, &|| false).unwrap();
         let mut state = AnimationState::new(sys.elements.len(), true);
@@ -1021,5 +1045,50 @@ mod tests {
         }
         assert!(changes >= 10, "only {changes} visibility changes: the shadow does not sweep the floor");
         assert!(late_expansions > 0, "no pair was expanded again after its visibility changed");
+    }
+
+    /// Pairs whose quadrature is cheaper than reading a series are recomputed, not expanded:
+    /// with adaptive quadrature on, order 1 takes 2, 3 or 4 points per axis by distance, and
+    /// every pair holding a series is on the 4-point rule (here none is), while with it off
+    /// (every pair on 4 points) pairs are expanded; order 3's far rule has 4 points, and its
+    /// pairs are expanded with adaptive quadrature on.
+    #[test]
+    fn only_pairs_on_a_dear_rule_are_expanded() {
+        let held = |order: usize, adaptive: bool| -> Vec<(usize, usize)> {
+            let settings = Settings {
+                basis_order: order,
+                corner_gather: false,
+                adaptive_quadrature: adaptive,
+                ..Settings::default()
+            };
+            let scene = light_past_an_occluder(settings);
+            let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
+            sys.solve(scene.settings.tolerance, &|| false).unwrap();
+            let mut state = AnimationState::new(sys.elements.len(), true);
+            let rule = GaussLegendre::new(scene.settings.quadrature_order);
+            let ctx = PairContext { basis: sys.basis, rule: &rule, vis_axis: 4, adaptive };
+            let mut held = Vec::new();
+            for f in 2..=40 {
+                advance(&mut sys, &mut state, &scene, f as f64, &no_progress).unwrap();
+                for (p, ser) in state.series.iter().enumerate() {
+                    if ser.is_some() {
+                        let pair = sys.links.pair(p as PairId);
+                        let (a, b) =
+                            (sys.elements[pair.a as usize].patch, sys.elements[pair.b as usize].patch);
+                        let ((ca, ra), (cb, rb)) = (a.bounding_sphere(), b.bounding_sphere());
+                        held.push((p, ctx.points_for(ca.distance(cb) / (ra + rb))));
+                    }
+                }
+            }
+            held
+        };
+        let adaptive = held(1, true);
+        // (4, not the constant: the test is that 3-point pairs stay unexpanded.)
+        let cheap = adaptive.iter().filter(|&&(_, n)| n < 4).count();
+        assert_eq!(cheap, 0, "{cheap} series held by pairs on a rule under 4 points");
+        assert!(!held(1, false).is_empty(), "on the 4-point rule no pair was expanded");
+        let order_3 = held(3, true);
+        assert!(!order_3.is_empty(), "order 3, adaptive: no pair was expanded");
+        assert!(order_3.iter().all(|&(_, n)| n >= 4), "order 3 has no rule under 4 points");
     }
 }

@@ -136,6 +136,16 @@ impl<'a> ElementGeometry<'a> {
     pub fn face_each_other(&self, i: usize, j: usize) -> bool {
         self.info[i].may_face(&self.patches[j]) && self.info[j].may_face(&self.patches[i])
     }
+
+    /// Element `e`'s bounding sphere (centre, radius).
+    pub fn sphere(&self, e: usize) -> (DVec3, f64) {
+        self.info[e].sphere
+    }
+
+    /// Element `e`'s plane ([`Patch::front_plane`]): `None` when it is not planar.
+    pub fn plane(&self, e: usize) -> Option<FrontPlane> {
+        self.info[e].plane
+    }
 }
 
 /// True when some point of `b` may lie in front of `a` (conservative for non-planar patches).

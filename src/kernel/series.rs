@@ -17,7 +17,7 @@ use glam::DVec3;
 
 use super::samples::Samples;
 use crate::basis::Basis;
-use crate::geometry::Patch;
+use crate::geometry::{FrontPlane, Patch};
 use crate::visibility::Visibility;
 
 /// Highest power of `p` kept.
@@ -146,11 +146,21 @@ const PARALLEL: f64 = 1e-9;
 /// ceiling: its plane cuts the walls' top row, whose parts above it it never lights, wherever it
 /// slides.
 pub fn clip_invariant(a: &Patch, b: &Patch, dir: DVec3) -> bool {
-    let side = |x: &Patch, other: &Patch| match x.front_plane() {
+    clip_invariant_with((a, a.front_plane()), (b, b.front_plane()), dir)
+}
+
+/// [`clip_invariant`] with each patch's [`Patch::front_plane`] given (computed once per element
+/// and frame instead of per pair).
+pub fn clip_invariant_with(
+    (a, plane_a): (&Patch, Option<FrontPlane>),
+    (b, plane_b): (&Patch, Option<FrontPlane>),
+    dir: DVec3,
+) -> bool {
+    let side = |x: &Patch, plane: Option<FrontPlane>, other: &Patch| match plane {
         Some(plane) => plane.all_in_front(other) || plane.normal.dot(dir).abs() <= PARALLEL,
         None => in_front_of_cone(x, other),
     };
-    side(a, b) && side(b, a)
+    side(a, plane_a, b) && side(b, plane_b, a)
 }
 
 /// Pairs the series applies to along unit `dir`: the kernel's clipping invariant
