@@ -974,8 +974,15 @@ mod tests {
     /// light-floor pairs' masks change frame after frame. No pair is expanded before its
     /// visibility has held for `CALM_UPDATES` updates, and pairs whose visibility changed are
     /// expanded again once it has.
-    /// The scene of [`pairs_are_expanded_only_after_their_visibility_has_held`], frames 1-81.
-    fn light_past_an_occluder(settings: Settings) -> Scene {
+    /// The scene of [`pairs_are_expanded_only_after_their_visibility_has_held`], frames 1-81, at
+    /// basis `order` (corners from the polynomials), solved at frame 1, and a fresh update state.
+    fn light_past_an_occluder(order: usize, adaptive: bool) -> (Scene, System, AnimationState) {
+        let settings = Settings {
+            basis_order: order,
+            corner_gather: false,
+            adaptive_quadrature: adaptive,
+            ..Settings::default()
+        };
         let p = DVec3::new;
         let floor =
             subdivided_quad("floor", [p(0., 0., 0.), p(1., 0., 0.), p(1., 1., 0.), p(0., 1., 0.)], 4, 0);
@@ -1000,22 +1007,18 @@ mod tests {
             Material { name: "grey".into(), reflectance: [0.5; 3], emission: [0.0; 3] },
             Material { name: "light".into(), reflectance: [0.0; 3], emission: [5.0; 3] },
         ];
-        Scene::new(settings, (1, 81), materials, vec![vec![]; 2], vec![floor, occluder, light]).unwrap()
+        let scene =
+            Scene::new(settings, (1, 81), materials, vec![vec![]; 2], vec![floor, occluder, light]).unwrap();
+        let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
+        sys.solve(scene.settings.tolerance, &|| false).unwrap();
+        let state = AnimationState::new(sys.elements.len(), true);
+        (scene, sys, state)
     }
 
     #[test]
     fn pairs_are_expanded_only_after_their_visibility_has_held() {
         // Every pair on the 4 x 4-point rule, so that the series pays (`MIN_SERIES_POINTS`).
-        let settings = Settings {
-            basis_order: 1,
-            corner_gather: false,
-            adaptive_quadrature: false,
-            ..Settings::default()
-        };
-        let scene = light_past_an_occluder(settings);
-        let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
-        sys.solve(scene.settings.tolerance, &|| false).unwrap();
-        let mut state = AnimationState::new(sys.elements.len(), true);
+        let (scene, mut sys, mut state) = light_past_an_occluder(1, false);
         let reference = |s: &AnimationState| -> Vec<Option<(DVec3, DVec3)>> {
             s.series.iter().map(|x| x.as_ref().map(|x| (x.ref_a, x.ref_b))).collect()
         };
@@ -1055,16 +1058,7 @@ mod tests {
     #[test]
     fn only_pairs_on_a_dear_rule_are_expanded() {
         let held = |order: usize, adaptive: bool| -> Vec<(usize, usize)> {
-            let settings = Settings {
-                basis_order: order,
-                corner_gather: false,
-                adaptive_quadrature: adaptive,
-                ..Settings::default()
-            };
-            let scene = light_past_an_occluder(settings);
-            let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
-            sys.solve(scene.settings.tolerance, &|| false).unwrap();
-            let mut state = AnimationState::new(sys.elements.len(), true);
+            let (scene, mut sys, mut state) = light_past_an_occluder(order, adaptive);
             let rule = GaussLegendre::new(scene.settings.quadrature_order);
             let ctx = PairContext { basis: sys.basis, rule: &rule, vis_axis: 4, adaptive };
             let mut held = Vec::new();
