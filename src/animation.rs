@@ -970,12 +970,8 @@ mod tests {
     use crate::scenes::subdivided_quad;
     use crate::system::no_progress;
 
-    /// A light sliding over a floor past a thin occluder, whose shadow sweeps the floor: the
-    /// light-floor pairs' masks change frame after frame. No pair is expanded before its
-    /// visibility has held for `CALM_UPDATES` updates, and pairs whose visibility changed are
-    /// expanded again once it has.
-    /// The scene of [`pairs_are_expanded_only_after_their_visibility_has_held`], frames 1-81, at
-    /// basis `order` (corners from the polynomials), solved at frame 1, and a fresh update state.
+    /// A light sliding over a floor past a thin occluder, frames 1-81, at basis `order` (corners
+    /// from the polynomials), solved at frame 1, and a fresh update state.
     fn light_past_an_occluder(order: usize, adaptive: bool) -> (Scene, System, AnimationState) {
         let settings = Settings {
             basis_order: order,
@@ -1015,6 +1011,9 @@ mod tests {
         (scene, sys, state)
     }
 
+    /// The occluder's shadow sweeps the floor: the light-floor pairs' masks change frame after
+    /// frame. No pair is expanded before its visibility has held for `CALM_UPDATES` updates, and
+    /// pairs whose visibility changed are expanded again once it has.
     #[test]
     fn pairs_are_expanded_only_after_their_visibility_has_held() {
         // Every pair on the 4 x 4-point rule, so that the series pays (`MIN_SERIES_POINTS`).
