@@ -545,16 +545,23 @@ pub fn advance(
                         let changed = state.visibility_changed.get(p as usize).copied().unwrap_or(NEVER);
                         vis == *old_vis && (changed == NEVER || state.updates - changed >= CALM_UPDATES)
                     });
-                    let ((ci, ri), (cj, rj)) = (geom.sphere(iu), geom.sphere(ju));
-                    let npts = ctx.points_for(ci.distance(cj) / (ri + rj));
-                    let expand =
-                        both_translated && vis != Visibility::Blocked && calm && npts >= MIN_SERIES_POINTS;
-                    let r_min = (state.use_series && expand)
+                    // The pair's Gauss points per axis, asked only of pairs that may be expanded.
+                    let points = || {
+                        let ((ci, ri), (cj, rj)) = (geom.sphere(iu), geom.sphere(ju));
+                        ctx.points_for(ci.distance(cj) / (ri + rj))
+                    };
+                    let expand = state.use_series
+                        && both_translated
+                        && vis != Visibility::Blocked
+                        && calm
+                        && points() >= MIN_SERIES_POINTS;
+                    let r_min = expand
                         .then(|| series::eligible(&patches[iu], &patches[ju], dir))
                         .flatten()
                         .filter(|r| SERIES_MAX_T * r >= MIN_SERIES_FRAMES * motion.length());
                     match r_min {
                         Some(r_min) => {
+                            let npts = points();
                             let terms = series::expand(
                                 basis,
                                 ctx.vis_axis,
