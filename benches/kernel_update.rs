@@ -10,7 +10,8 @@
 //! `--check PATH` (write, or compare against, every frame's link store and solution, and with
 //! `--gather` its corners: the link store must match bit for bit, the solution and the corners
 //! within 1e-6 of peak), `--tolerance T` (the solve's, default 1e-4; a host's preview frame is
-//! solved to 1e-3, `session::preview_tolerance`).
+//! solved to 1e-3, `session::preview_tolerance`), `--order N` (the basis order, default 2),
+//! `--fixed-rule` (adaptive quadrature off: every pair on the full rule, where the series pays).
 //!
 //! Prints per frame `kernel_seconds` and the counts that do not depend on timing noise (pairs
 //! whose shafts were tested against the swept box, link visibility checks, segments tested).
@@ -67,9 +68,16 @@ fn main() {
     let threads: usize = arg(&args, "--threads").map_or(0, |v| v.parse().unwrap());
     let tolerance: f64 =
         arg(&args, "--tolerance").map_or(Settings::default().tolerance, |v| v.parse().unwrap());
-    let settings =
-        Settings { basis_order: 2, corner_gather: false, threads, tolerance, ..Settings::default() };
+    let basis_order: usize = arg(&args, "--order").map_or(2, |v| v.parse().unwrap());
     let flag = |name: &str| args.iter().any(|a| a == name);
+    let settings = Settings {
+        basis_order,
+        corner_gather: false,
+        threads,
+        tolerance,
+        adaptive_quadrature: !flag("--fixed-rule"),
+        ..Settings::default()
+    };
     let scene = if flag("--demo") {
         scenes::cornell_box_animated(subdiv, 48, settings)
     } else if flag("--room") {

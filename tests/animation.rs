@@ -13,9 +13,9 @@ fn settings() -> Settings {
     Settings { basis_order: 2, tolerance: 1e-5, corner_gather: false, ..Settings::default() }
 }
 
-/// [`settings`] where the series pays: with adaptive quadrature off every pair takes the full
-/// 4 x 4-point rule, dearer than reading a series (`animation::MIN_SERIES_POINTS`); with it on,
-/// order 2's far pairs take 3 x 3 points and are recomputed instead.
+/// [`settings`] where the series is used: with adaptive quadrature off every pair takes the full
+/// 4 x 4-point rule, which costs about what reading a series costs (`animation::MIN_SERIES_POINTS`);
+/// with it on, order 2's far pairs take 3 x 3 points, cheaper, and are recomputed instead.
 fn series_settings() -> Settings {
     Settings { adaptive_quadrature: false, ..settings() }
 }

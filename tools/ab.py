@@ -5,12 +5,14 @@ under `out/ab/`), runs the builds in turn `--runs` times, and prints per revisio
 30-50% within minutes, so builds are only comparable measured this way.
 
     .venv/bin/python -m tools.ab 7244f93 HEAD [--runs 5] [--frames 16] [--demo] [--exact REV] [--gather]
+        [--bench-arg=--order --bench-arg=3 ...]
 
 A revision given as `--exact REV` is run with `--exact` (the update without the series).
+`--bench-arg` passes an option on to every run of `kernel_update` (`--order 3`, `--fixed-rule`:
+the settings where a quadrature is dear, so that the default method uses the series).
 `--gather` runs the corner gather after each frame, as the CLI, the C ABI and the add-on do by
-default, and adds its time and the whole frame (kernel + solve + gather). The
-worktrees and builds are kept for the next comparison; `rm -rf out/ab && git worktree prune`
-removes them.
+default, and adds its time and the whole frame (kernel + solve + gather). The worktrees and
+builds are kept for the next comparison; `rm -rf out/ab && git worktree prune` removes them.
 """
 
 import argparse
@@ -34,6 +36,7 @@ def parse(argv):
     p.add_argument("--frames", type=int, default=16)
     p.add_argument("--demo", action="store_true", help="the demo animation instead of the moving light")
     p.add_argument("--gather", action="store_true", help="also the corner gather after each frame")
+    p.add_argument("--bench-arg", action="append", default=[], help="an option for every kernel_update run")
     args = p.parse_args(argv)
     if len(args.revs) + len(args.exact) < 1:
         p.error("give at least one revision")
@@ -76,7 +79,7 @@ def frames(executable, args, exact):
     """Per frame after the first: the table's time columns (`columns(args)`), in seconds."""
     cmd = [executable, "--frames", str(args.frames)]
     cmd += (["--demo"] if args.demo else []) + (["--exact"] if exact else [])
-    cmd += ["--gather"] if args.gather else []
+    cmd += (["--gather"] if args.gather else []) + args.bench_arg
     table = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
     rows, header = [], None
     for line in table.splitlines():
