@@ -3,8 +3,13 @@
 //! Each new frame: place the elements, find the pairs whose kernel changed, update them, and turn
 //! the change into initial unshot energy, eq. (9):
 //! `Delta b_i = Delta e_i + sum_j Delta K_ij b_j + sum_j (K_ij + Delta K_ij) Delta b_j`,
-//! so `unshot = Delta e + Delta K b` (with the previous frame's `b`), and progressive shooting with
-//! the new kernel propagates the rest, starting from the previous solution (3.4).
+//! so `unshot += Delta e + Delta K (b - u)`, and progressive shooting with the new kernel
+//! propagates the rest, starting from the previous solution (3.4). The seed's `b` is a converged
+//! solution; ours keeps the shooting invariant `b = e + K (b - u)` with an unshot part `u`, and
+//! the new kernel keeps it only with the part already shot, `b - u`: `Delta K b` leaves `b` off by
+//! `Delta K u`. That is not always small: the stopping test weighs an unshot value by the power it
+//! would deliver, so an element shut in a closed box keeps its unshot (transfer ~0), and once the
+//! box opened the frame was wrong (a lamp 21% too dark, `tests/animation_random.rs`).
 //!
 //! Which pairs change: every pair whose two elements moved relative to each other, and every pair
 //! whose shaft the bounds a moving object sweeps (old and new positions, a box per object) may
@@ -29,6 +34,7 @@ use crate::error::{Error, Result};
 use crate::geometry::{Aabb, Patch};
 use crate::kernel::PairContext;
 use crate::kernel::assemble::{ElementGeometry, KeptGeometry, integrate_visible_into};
+use crate::kernel::pair::SEPARATION;
 use crate::kernel::series::{self, PairSeries, SERIES_MAX_T, SERIES_ORDER};
 use crate::links::{LinkStore, PairId, ReplacedBlocks};
 use crate::quadrature::GaussLegendre;
@@ -78,7 +84,7 @@ pub struct UpdateStats {
     pub kernel_seconds: f64,
     /// Parts of `kernel_seconds`: placing the elements and finding the candidates; deciding
     /// each candidate's visibility and kernel (series, quadrature, expansion); writing the
-    /// store and forming `Delta K b`.
+    /// store and forming `Delta K (b - u)`.
     pub scan_seconds: f64,
     pub pairs_seconds: f64,
     pub apply_seconds: f64,
@@ -345,7 +351,7 @@ pub fn advance(
     // of the state: it goes back only with a finished solve (it must describe the kernel the
     // changes below start from).
     let replay = state.replay.take();
-    // `Delta K sigma`, for the replay, formed with `Delta K b` (zero without a replay).
+    // `Delta K sigma`, for the replay, formed with `Delta K (b - u)` (zero without a replay).
     let mut delta_k_sigma = vec![[0.0f64; 3]; n * nb];
 
     if stats.moved_elements > 0 {
@@ -514,6 +520,14 @@ pub fn advance(
                 None => Visibility::Full,
             };
             let existing_series = id.and_then(|p| state.series.get(p as usize)).and_then(|s| s.as_deref());
+            // The one Gauss product a fresh build integrates the pair with now (points per axis),
+            // `None` when it is near enough to be split (`integrate_pair_into`): a series stands
+            // for the kernel only while the pair keeps the rule it was expanded on.
+            let rule_now = || {
+                let ((ci, ri), (cj, rj)) = (geom.sphere(iu), geom.sphere(ju));
+                let ratio = ci.distance(cj) / (ri + rj);
+                (ratio > SEPARATION).then(|| ctx.points_for(ratio))
+            };
             let decision = match kind {
                 Candidate::VisibilityOnly => {
                     if vis == *old_vis || (id.is_none() && vis == Visibility::Blocked) {
@@ -528,7 +542,7 @@ pub fn advance(
                     let mut reason =
                         if both_translated { Reason::Translation } else { Reason::NonTranslation };
                     if let (true, Some(ser)) = (state.use_series, existing_series) {
-                        match series_check(ser, state, &patches, iu, ju, &vis, old_vis) {
+                        match series_check(ser, state, &patches, (iu, ju), rule_now(), (&vis, old_vis)) {
                             Ok(p) => {
                                 let kernel = Kernel::Series(ser, p);
                                 return Ok(Some(Decision { i, j, id, vis, kernel, reason: Reason::Series }));
@@ -545,23 +559,18 @@ pub fn advance(
                         let changed = state.visibility_changed.get(p as usize).copied().unwrap_or(NEVER);
                         vis == *old_vis && (changed == NEVER || state.updates - changed >= CALM_UPDATES)
                     });
-                    // The pair's Gauss points per axis, asked only of pairs that may be expanded.
-                    let points = || {
-                        let ((ci, ri), (cj, rj)) = (geom.sphere(iu), geom.sphere(ju));
-                        ctx.points_for(ci.distance(cj) / (ri + rj))
-                    };
+                    // (The pair's rule is asked only of pairs that may be expanded.)
                     let expand = state.use_series
                         && both_translated
                         && vis != Visibility::Blocked
                         && calm
-                        && points() >= MIN_SERIES_POINTS;
+                        && rule_now().is_some_and(|n| n >= MIN_SERIES_POINTS);
                     let r_min = expand
                         .then(|| series::eligible(&patches[iu], &patches[ju], dir))
                         .flatten()
                         .filter(|r| SERIES_MAX_T * r >= MIN_SERIES_FRAMES * motion.length());
-                    match r_min {
-                        Some(r_min) => {
-                            let npts = points();
+                    match r_min.zip(rule_now()) {
+                        Some((r_min, npts)) => {
                             let terms = series::expand(
                                 basis,
                                 ctx.vis_axis,
@@ -575,6 +584,7 @@ pub fn advance(
                                 (patches[iu].corners[0], patches[ju].corners[0]),
                                 r_min,
                                 (state.epochs[iu], state.epochs[ju]),
+                                npts,
                                 terms,
                             );
                             Decision { i, j, id, vis, kernel: Kernel::Expanded(Box::new(ser)), reason }
@@ -598,7 +608,7 @@ pub fn advance(
             };
             Ok(Some(decision))
         };
-        // The new blocks of a decided pair, rounded to the store's f32 (Delta K b, below, is then
+        // The new blocks of a decided pair, rounded to the store's f32 (Delta K (b - u), below, is then
         // the change of the stored kernel).
         let emit = |batch: &mut UpdateBatch, d: Decision| {
             let n2 = nb * nb;
@@ -726,7 +736,8 @@ pub fn advance(
             }
         }
         sys.links.replace_blocks(&rewrites, &mut replaced);
-        // Delta K b with the previous frame's b, both receivers of each changed pair (eq. 9),
+        // Delta K (b - u) with the previous frame's b and u (the part already shot: module docs),
+        // both receivers of each changed pair (eq. 9),
         // summed per receiver in parallel: the changes are listed by receiver (a counting sort),
         // so each task owns its rows of Delta b and sums them in change order, whatever the
         // threads (a fold over changes allocated and summed a whole Delta b per run, slower
@@ -770,7 +781,13 @@ pub fn advance(
         };
         let no_replay = vec![[0.0f64; 3]; n * nb];
         let sigma = replay.as_ref().map_or(&no_replay[..], Replay::sigma);
-        let b = &sys_ref.solution.b;
+        let solution = &sys_ref.solution;
+        let sent: Vec<[f64; 3]> = solution
+            .b
+            .iter()
+            .zip(&solution.unshot)
+            .map(|(b, u)| std::array::from_fn(|c| b[c] - u[c]))
+            .collect();
         let outputs = delta_b.par_chunks_mut(nb).zip(delta_k_sigma.par_chunks_mut(nb));
         outputs.enumerate().for_each(|(r, (out_b, out_sigma))| {
             let mine = &received[first[r] as usize..first[r + 1] as usize];
@@ -785,7 +802,7 @@ pub fn advance(
                 let (source, new, old) = blocks_of(entry);
                 let s = source as usize * nb..(source as usize + 1) * nb;
                 let rho = sys_ref.reflectance[r];
-                delta_kb([&mut *out_b, &mut *out_sigma], rho, [&b[s.clone()], &sigma[s]], new, old);
+                delta_kb([&mut *out_b, &mut *out_sigma], rho, [&sent[s.clone()], &sigma[s]], new, old);
             }
         });
         drop((rewrites, fresh));
@@ -836,17 +853,24 @@ pub fn advance(
 }
 
 /// The displacement `p` at which the stored series gives this frame's kernel, or why it cannot.
+/// `rule` is the Gauss product the pair takes at its new position (`None`: split), `vis` its new
+/// visibility and `old_vis` the stored one.
 fn series_check(
     ser: &PairSeries,
     state: &AnimationState,
     patches: &[Patch],
-    i: usize,
-    j: usize,
-    vis: &Visibility,
-    old_vis: &Visibility,
+    (i, j): (usize, usize),
+    rule: Option<usize>,
+    (vis, old_vis): (&Visibility, &Visibility),
 ) -> std::result::Result<f64, Reason> {
     if ser.epochs != (state.epochs[i], state.epochs[j]) {
         return Err(Reason::NonTranslation);
+    }
+    // Out of the series' domain, as beyond its bound: the quadrature it was integrated with is no
+    // longer the pair's (a stop-and-reverse brought a pair expanded at 1.5006 radii-sums to 1.4983,
+    // where a fresh build splits it: 2e-2 of the peak block entry apart; `PairSeries::points`).
+    if rule != Some(ser.points) {
+        return Err(Reason::Bound);
     }
     if !series::clip_invariant(&patches[i], &patches[j], ser.dir) {
         return Err(Reason::HalfSpace);
@@ -868,7 +892,7 @@ fn series_check(
 
 const _: () = assert!(SERIES_ORDER >= 2);
 
-/// A pair's kernel change for `Delta K b`: `new = [G_ij | G_ji]`, `old` the two blocks replaced
+/// A pair's kernel change for `Delta K (b - u)`: `new = [G_ij | G_ji]`, `old` the two blocks replaced
 /// (zero for a new pair).
 struct KernelChange<'a> {
     i: u32,
@@ -877,7 +901,7 @@ struct KernelChange<'a> {
     old: [&'a [f32]; 2],
 }
 
-/// How many changes ahead `Delta K b` prefetches blocks.
+/// How many changes ahead `Delta K (b - u)` prefetches blocks.
 const PREFETCH_CHANGES: usize = 4;
 
 /// Moving objects up to which each gets its own swept box (each box costs a test per pair).
@@ -930,8 +954,8 @@ const MIN_SERIES_POINTS: usize = 4;
 
 crate::simd::multiversion! {
     /// `out[v] += rho (G_new - G_old) x[v]` for one receiver (its `nb` coefficients, reflectance
-    /// `rho`) and the coefficients `x[v]` of one source, for the two vectors `b` and `sigma` at
-    /// once: the blocks are read once, and the six channels of the two vectors make one vector
+    /// `rho`) and the coefficients `x[v]` of one source, for the two vectors `b - u` and `sigma`
+    /// at once: the blocks are read once, and the six channels of the two vectors make one vector
     /// register (a multiply per block entry instead of six).
     fn delta_kb(out: [&mut [[f64; 3]]; 2], rho: [f64; 3], x: [&[[f64; 3]]; 2], new: &[f32], old: &[f32]) {
         match x[0].len() {

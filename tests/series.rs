@@ -296,7 +296,7 @@ fn series_of_a_wall_straddling_a_sliding_light_matches_the_exact_kernel() {
             "{name}: eligible for a motion that crosses the light's plane"
         );
         let terms = series::expand(basis, 4, &samples(&w), &samples(&light), &Visibility::Full, dir);
-        let ser = PairSeries::new(dir, (w.corners[0], light.corners[0]), r_min, (0, 0), terms);
+        let ser = PairSeries::new(dir, (w.corners[0], light.corners[0]), r_min, (0, 0), 4, terms);
         for t in [0.0, 0.05, 0.1, 0.2] {
             let d = t * r_min * dir;
             let moved = Patch { corners: light.corners.map(|c| c + d) };

@@ -191,6 +191,13 @@ pub struct PairSeries {
     pub r_min: f64,
     /// Shape epochs of `a` and `b` at the reference (a non-translation bumps them).
     pub epochs: (u32, u32),
+    /// Gauss points per axis of the single product the terms were integrated with (the pair
+    /// separated: [`eligible`]). The series is that quadrature's kernel as a polynomial in `p`,
+    /// so it stands for the pair's kernel only while the pair still takes that rule: a pair that
+    /// comes nearer than [`super::pair::SEPARATION`] is split adaptively, and one that crosses
+    /// [`super::pair::MID`] or [`super::pair::FAR`] changes rule (2e-2 of the peak block entry
+    /// apart, seen by `tests/animation_random.rs`).
+    pub points: usize,
     /// `Phi_n` for `n = 0..=SERIES_ORDER`, each `[G_ab | G_ba]`, `nb x nb` each.
     pub terms: Vec<f32>,
     /// `max_kl |Phi_n^kl|` for each `n`.
@@ -198,12 +205,14 @@ pub struct PairSeries {
 }
 
 impl PairSeries {
-    /// The series of `terms` ([`expand`]) about the reference corners `ref_a`, `ref_b`.
+    /// The series of `terms` ([`expand`] with `points` Gauss points per axis) about the reference
+    /// corners `ref_a`, `ref_b`.
     pub fn new(
         dir: DVec3,
         (ref_a, ref_b): (DVec3, DVec3),
         r_min: f64,
         epochs: (u32, u32),
+        points: usize,
         terms: Vec<f32>,
     ) -> Self {
         let len = terms.len() / (SERIES_ORDER + 1);
@@ -211,7 +220,7 @@ impl PairSeries {
         for (norm, t) in norms.iter_mut().zip(terms.chunks_exact(len)) {
             *norm = t.iter().fold(0.0, |m, x| m.max(x.abs()));
         }
-        Self { dir, ref_a, ref_b, r_min, epochs, terms, norms }
+        Self { dir, ref_a, ref_b, r_min, epochs, points, terms, norms }
     }
 
     /// The highest power of `p` evaluation keeps: the smallest `m` whose dropped terms add up to
@@ -320,7 +329,7 @@ mod tests {
             .flat_map(|n| (0..len).map(move |k| (((k * 7 + n * 3) % 11) as f64 - 5.0) * decay.powi(n as i32)))
             .map(|x| x as f32)
             .collect();
-        PairSeries::new(DVec3::X, (DVec3::ZERO, DVec3::Y), 1.0, (0, 0), terms)
+        PairSeries::new(DVec3::X, (DVec3::ZERO, DVec3::Y), 1.0, (0, 0), 4, terms)
     }
 
     /// All `SERIES_ORDER + 1` terms, Horner.
