@@ -120,6 +120,9 @@ pub struct AnimationState {
     /// batches' blocks and the blocks the store replaced.
     block_pool: Vec<Vec<f32>>,
     replaced: ReplacedBlocks,
+    /// `b - u` of the last solution, the part already shot (`Delta K (b - u)`, module docs), kept
+    /// for the same reason.
+    sent: Vec<[f64; 3]>,
     /// The last solve's shots, replayed as the next frame's first guess.
     replay: Option<Replay>,
     /// Updates made so far.
@@ -140,6 +143,7 @@ impl AnimationState {
             culled: None,
             block_pool: Vec::new(),
             replaced: ReplacedBlocks::default(),
+            sent: Vec::new(),
             replay: None,
             updates: 0,
             visibility_changed: Vec::new(),
@@ -782,12 +786,11 @@ pub fn advance(
         let no_replay = vec![[0.0f64; 3]; n * nb];
         let sigma = replay.as_ref().map_or(&no_replay[..], Replay::sigma);
         let solution = &sys_ref.solution;
-        let sent: Vec<[f64; 3]> = solution
-            .b
-            .iter()
-            .zip(&solution.unshot)
-            .map(|(b, u)| std::array::from_fn(|c| b[c] - u[c]))
-            .collect();
+        let mut sent = std::mem::take(&mut state.sent);
+        sent.clear();
+        sent.extend(
+            solution.b.iter().zip(&solution.unshot).map(|(b, u)| std::array::from_fn(|c| b[c] - u[c])),
+        );
         let outputs = delta_b.par_chunks_mut(nb).zip(delta_k_sigma.par_chunks_mut(nb));
         outputs.enumerate().for_each(|(r, (out_b, out_sigma))| {
             let mine = &received[first[r] as usize..first[r + 1] as usize];
@@ -806,6 +809,7 @@ pub fn advance(
             }
         });
         drop((rewrites, fresh));
+        state.sent = sent;
         state.block_pool = batches.into_iter().map(|b| b.blocks).collect();
         state.replaced = replaced;
         stats.apply_seconds = start.elapsed().as_secs_f64() - stats.scan_seconds - stats.pairs_seconds;
