@@ -7,6 +7,8 @@ use galerkin_radiosity::session::{FrameStats, Method, Session};
 use galerkin_radiosity::system::no_progress;
 use glam::{DMat4, DVec3};
 
+mod common;
+
 fn settings() -> Settings {
     // Corners from the polynomials: these tests compare the solver's methods (tests/gather.rs
     // covers the gather).
@@ -204,23 +206,7 @@ fn replayed_shots_follow_the_motion() {
 #[test]
 fn exact_update_keeps_the_link_store_of_a_fresh_build() {
     use galerkin_radiosity::animation::{self, AnimationState, Outcome};
-    use galerkin_radiosity::links::LinkStore;
     use galerkin_radiosity::system::System;
-    use std::collections::HashMap;
-
-    // Both blocks of every pair with a non-zero kernel, by (min, max) element.
-    fn blocks(links: &LinkStore) -> HashMap<(u32, u32), Vec<f32>> {
-        let mut out = HashMap::new();
-        for p in 0..links.len() as u32 {
-            let pair = links.pair(p);
-            let (a, b) = (pair.a.min(pair.b), pair.a.max(pair.b));
-            let v: Vec<f32> = links.block(p, a).into_iter().chain(links.block(p, b)).collect();
-            if v.iter().any(|&x| x != 0.0) {
-                out.insert((a, b), v);
-            }
-        }
-        out
-    }
 
     // The demo animation: the light and the short block move, casting moving shadows on static
     // pairs (floor to walls, walls to the tall block).
@@ -237,18 +223,8 @@ fn exact_update_keeps_the_link_store_of_a_fresh_build() {
         };
         visibility_recomputed += stats.recomputed_visibility;
         let fresh = System::build(&scene, f as f64, &no_progress).unwrap();
-        let (got, want) = (blocks(&sys.links), blocks(&fresh.links));
-        let peak = want.values().flatten().fold(0.0f32, |m, x| m.max(x.abs()));
-        let zeros = vec![0.0f32; want.values().next().unwrap().len()];
-        let mut worst = (0.0f32, (0, 0));
-        for key in got.keys().chain(want.keys()) {
-            let (g, w) = (got.get(key).unwrap_or(&zeros), want.get(key).unwrap_or(&zeros));
-            let d = g.iter().zip(w).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
-            if d > worst.0 {
-                worst = (d, *key);
-            }
-        }
-        assert!(worst.0 <= 1e-5 * peak, "frame {f}: pair {:?} off by {} (peak {peak})", worst.1, worst.0);
+        let (worst, pair) = common::link_difference(&sys.links, &fresh.links);
+        assert!(worst <= 1e-5, "frame {f}: pair {pair:?} off by {worst:e} of the peak block entry");
     }
     // Not vacuous: static pairs did change visibility and were recomputed.
     assert!(visibility_recomputed > 50, "{visibility_recomputed} static pairs recomputed for visibility");

@@ -53,15 +53,16 @@
 //! `ANIMATION_RANDOM_CASES=n` runs seeds `1..=n` instead of the fixed ones (1,000 take about 5
 //! minutes). A failing case prints its seed, its scene in words and how to rerun it.
 
-use std::collections::HashMap;
 use std::f64::consts::PI;
 
 use galerkin_radiosity::animation::{self, AnimationState, Outcome, UpdateStats};
-use galerkin_radiosity::links::LinkStore;
 use galerkin_radiosity::scene::{EmissionKey, Key, KeyTransform, Material, Object, Scene, Settings};
 use galerkin_radiosity::scenes;
 use galerkin_radiosity::system::{System, no_progress};
 use glam::{DMat4, DVec3};
+
+mod common;
+use common::{link_difference, worse};
 
 /// Seeds of the fixed run.
 const CASES: u64 = 96;
@@ -513,48 +514,9 @@ fn try_generate(seed: u64, rng: &mut Rng) -> Option<Case> {
     Some(Case { scene, description })
 }
 
-/// Both blocks of every pair with a non-zero kernel, by (min, max) element.
-fn blocks(links: &LinkStore) -> HashMap<(u32, u32), Vec<f32>> {
-    let mut out = HashMap::new();
-    for p in 0..links.len() as u32 {
-        let pair = links.pair(p);
-        let (a, b) = (pair.a.min(pair.b), pair.a.max(pair.b));
-        let v: Vec<f32> = links.block(p, a).into_iter().chain(links.block(p, b)).collect();
-        if v.iter().any(|&x| x != 0.0) {
-            out.insert((a, b), v);
-        }
-    }
-    out
-}
-
-/// The largest of `a` and `b`, a NaN counting as larger than anything (a NaN must fail a bound).
-fn worse(a: f32, b: f32) -> f32 {
-    if b > a || b.is_nan() { b } else { a }
-}
-
 /// Whether `d` is within `bound` (a NaN is not).
 fn within(d: f32, bound: f32) -> bool {
     d <= bound
-}
-
-/// The worst block entry of `got` off `want` (pairs missing from one side count as zero),
-/// relative to `want`'s peak block entry, and the pair where it is.
-fn link_difference(got: &LinkStore, want: &LinkStore) -> (f32, (u32, u32)) {
-    let (got, want) = (blocks(got), blocks(want));
-    let peak = want.values().flatten().fold(0.0f32, |m, x| m.max(x.abs()));
-    let Some(len) = want.values().chain(got.values()).next().map(Vec::len) else {
-        return (0.0, (0, 0));
-    };
-    let zeros = vec![0.0f32; len];
-    let mut worst = (0.0f32, (0, 0));
-    for key in got.keys().chain(want.keys()) {
-        let (g, w) = (got.get(key).unwrap_or(&zeros), want.get(key).unwrap_or(&zeros));
-        let d = g.iter().zip(w).map(|(x, y)| (x - y).abs()).fold(0.0f32, worse);
-        if worse(worst.0, d) != worst.0 {
-            worst = (d, *key);
-        }
-    }
-    (worst.0 / peak.max(f32::MIN_POSITIVE), worst.1)
 }
 
 /// Every corner's radiosity, clamped at 0 as `Session::face_results` reports it, and whether its
