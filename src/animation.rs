@@ -612,8 +612,8 @@ pub fn advance(
             };
             Ok(Some(decision))
         };
-        // The new blocks of a decided pair, rounded to the store's f32 (Delta K (b - u), below, is then
-        // the change of the stored kernel).
+        // The new blocks of a decided pair, rounded to the store's f32 (Delta K (b - u), below, is
+        // then the change of the stored kernel).
         let emit = |batch: &mut UpdateBatch, d: Decision| {
             let n2 = nb * nb;
             let (iu, ju) = (d.i as usize, d.j as usize);
@@ -740,12 +740,11 @@ pub fn advance(
             }
         }
         sys.links.replace_blocks(&rewrites, &mut replaced);
-        // Delta K (b - u) with the previous frame's b and u (the part already shot: module docs),
-        // both receivers of each changed pair (eq. 9),
-        // summed per receiver in parallel: the changes are listed by receiver (a counting sort),
-        // so each task owns its rows of Delta b and sums them in change order, whatever the
-        // threads (a fold over changes allocated and summed a whole Delta b per run, slower
-        // than one thread).
+        // Delta K (b - u) with the previous frame's b and u (the part already shot: module docs)
+        // for both receivers of each changed pair (eq. 9), summed per receiver in parallel: the
+        // changes are listed by receiver (a counting sort), so each task owns its rows of Delta b
+        // and sums them in change order, whatever the threads (a fold over changes allocated and
+        // summed a whole Delta b per run, slower than one thread).
         let zeros = vec![0.0f32; n2];
         let changes: Vec<KernelChange> = rewrites
             .iter()
