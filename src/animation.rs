@@ -53,7 +53,8 @@ pub struct UpdateStats {
     pub links_series: usize,
     /// Pairs recomputed by quadrature, all reasons.
     pub links_recomputed: usize,
-    /// Series abandoned: `p` beyond `SERIES_MAX_T r_min`.
+    /// Series abandoned: `p` beyond `SERIES_MAX_T r_min`, or the pair no longer on the Gauss rule
+    /// it was expanded with (`PairSeries::points`).
     pub recomputed_bound: usize,
     /// Series abandoned: the motion left the expansion direction.
     pub recomputed_direction: usize,
