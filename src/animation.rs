@@ -525,14 +525,6 @@ pub fn advance(
                 None => Visibility::Full,
             };
             let existing_series = id.and_then(|p| state.series.get(p as usize)).and_then(|s| s.as_deref());
-            // The one Gauss product a fresh build integrates the pair with now (points per axis),
-            // `None` when it is near enough to be split (`integrate_pair_into`): a series stands
-            // for the kernel only while the pair keeps the rule it was expanded on.
-            let rule_now = || {
-                let ((ci, ri), (cj, rj)) = (geom.sphere(iu), geom.sphere(ju));
-                let ratio = ci.distance(cj) / (ri + rj);
-                (ratio > SEPARATION).then(|| ctx.points_for(ratio))
-            };
             let decision = match kind {
                 Candidate::VisibilityOnly => {
                     if vis == *old_vis || (id.is_none() && vis == Visibility::Blocked) {
@@ -546,8 +538,17 @@ pub fn advance(
                     let both_translated = translated[iu] && translated[ju];
                     let mut reason =
                         if both_translated { Reason::Translation } else { Reason::NonTranslation };
+                    // The one Gauss product a fresh build integrates the pair with now (points per
+                    // axis), `None` when it is near enough to be split (`integrate_pair_into`): a
+                    // series stands for the kernel only while the pair keeps the rule it was
+                    // expanded on.
+                    let rule = {
+                        let ((ci, ri), (cj, rj)) = (geom.sphere(iu), geom.sphere(ju));
+                        let ratio = ci.distance(cj) / (ri + rj);
+                        (ratio > SEPARATION).then(|| ctx.points_for(ratio))
+                    };
                     if let (true, Some(ser)) = (state.use_series, existing_series) {
-                        match series_check(ser, state, &patches, (iu, ju), rule_now(), (&vis, old_vis)) {
+                        match series_check(ser, state, &patches, (iu, ju), rule, (&vis, old_vis)) {
                             Ok(p) => {
                                 let kernel = Kernel::Series(ser, p);
                                 return Ok(Some(Decision { i, j, id, vis, kernel, reason: Reason::Series }));
@@ -564,17 +565,16 @@ pub fn advance(
                         let changed = state.visibility_changed.get(p as usize).copied().unwrap_or(NEVER);
                         vis == *old_vis && (changed == NEVER || state.updates - changed >= CALM_UPDATES)
                     });
-                    // (The pair's rule is asked only of pairs that may be expanded.)
                     let expand = state.use_series
                         && both_translated
                         && vis != Visibility::Blocked
                         && calm
-                        && rule_now().is_some_and(|n| n >= MIN_SERIES_POINTS);
+                        && rule.is_some_and(|n| n >= MIN_SERIES_POINTS);
                     let r_min = expand
                         .then(|| series::eligible(&patches[iu], &patches[ju], dir))
                         .flatten()
                         .filter(|r| SERIES_MAX_T * r >= MIN_SERIES_FRAMES * motion.length());
-                    match r_min.zip(rule_now()) {
+                    match r_min.zip(rule) {
                         Some((r_min, npts)) => {
                             let terms = series::expand(
                                 basis,

@@ -39,7 +39,7 @@ pub fn subdivided_quad(name: &str, p: [DVec3; 4], n: usize, material: u32) -> Ob
 }
 
 /// Reorders a quad so that its front normal points toward `target` (or away when `away`).
-fn facing(mut p: [DVec3; 4], target: DVec3, away: bool) -> [DVec3; 4] {
+pub fn facing(mut p: [DVec3; 4], target: DVec3, away: bool) -> [DVec3; 4] {
     let n = (p[1] - p[0]).cross(p[2] - p[0]);
     let centre = (p[0] + p[1] + p[2] + p[3]) / 4.0;
     if (n.dot(target - centre) < 0.0) != away {
@@ -200,7 +200,8 @@ pub fn cornell_box_moving_light(n: usize, frames: i64, settings: Settings) -> Sc
     scene
 }
 
-fn translation_keys(keys: &[(f64, DVec3)]) -> Vec<Key> {
+/// Keys translating an object by `t` at each `(frame, t)`.
+pub fn translation_keys(keys: &[(f64, DVec3)]) -> Vec<Key> {
     keys.iter().map(|&(frame, t)| Key { frame, transform: KeyTransform::Translation(t) }).collect()
 }
 
@@ -226,8 +227,16 @@ fn room(w: f64, h: f64, d: f64, n: f64, materials: [u32; 6]) -> Vec<Object> {
         .collect()
 }
 
-/// A panel `u x v` centred at `centre` facing `normal` (one quad split `k x k`).
-fn panel(name: &str, centre: DVec3, u: DVec3, v: DVec3, normal: DVec3, k: usize, material: u32) -> Object {
+/// A panel `u x v` (half extents) centred at `centre` facing `normal` (one quad split `k x k`).
+pub fn panel(
+    name: &str,
+    centre: DVec3,
+    u: DVec3,
+    v: DVec3,
+    normal: DVec3,
+    k: usize,
+    material: u32,
+) -> Object {
     let q = [centre - u - v, centre + u - v, centre + u + v, centre - u + v];
     subdivided_quad(name, facing(q, centre + normal, false), k, material)
 }

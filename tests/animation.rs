@@ -64,16 +64,12 @@ fn assert_matches_full(scene: &Scene, what: &str) -> Vec<FrameStats> {
     incremental
 }
 
-fn translation_keys(points: &[(f64, DVec3)]) -> Vec<Key> {
-    points.iter().map(|&(frame, t)| Key { frame, transform: KeyTransform::Translation(t) }).collect()
-}
-
 /// A light panel moving along the ceiling of the Cornell box.
 #[test]
 fn moving_ceiling_light_matches_full() {
     let mut scene = scenes::cornell_box(4, series_settings());
     let light = scene.objects.iter_mut().find(|o| o.name == "Light").unwrap();
-    light.animation = translation_keys(&[(1.0, DVec3::ZERO), (6.0, DVec3::new(-0.03, 0.0, 0.02))]);
+    light.animation = scenes::translation_keys(&[(1.0, DVec3::ZERO), (6.0, DVec3::new(-0.03, 0.0, 0.02))]);
     scene.frames = (1, 6);
     let stats = assert_matches_full(&scene, "ceiling light");
     assert!(stats.iter().any(|s| s.links_series > 0), "a straight translation of the light uses the series");
@@ -91,7 +87,7 @@ fn ceiling_light_sliding_past_walls_it_straddles_uses_the_series() {
     let mut scene = scenes::cornell_box(4, series_settings());
     scene.objects.retain(|o| !o.name.ends_with("Block"));
     let light = scene.objects.iter_mut().find(|o| o.name == "Light").unwrap();
-    light.animation = translation_keys(&[(1.0, DVec3::ZERO), (6.0, DVec3::new(-0.03, 0.0, 0.02))]);
+    light.animation = scenes::translation_keys(&[(1.0, DVec3::ZERO), (6.0, DVec3::new(-0.03, 0.0, 0.02))]);
     scene.frames = (1, 6);
     let stats = assert_matches_full(&scene, "ceiling light, no blocks");
     for s in &stats {
@@ -134,7 +130,7 @@ fn occluder_passing_a_wall_lamp_matches_full() {
         1,
         2,
     );
-    panel.animation = translation_keys(&[(1.0, p(0., -0.5, 0.)), (5.0, p(0., 0.6, 0.))]);
+    panel.animation = scenes::translation_keys(&[(1.0, p(0., -0.5, 0.)), (5.0, p(0., 0.6, 0.))]);
     objects.push(panel);
     let materials = vec![
         Material { name: "white".into(), reflectance: [0.7; 3], emission: [0.0; 3] },
@@ -156,7 +152,7 @@ fn circle_rotation_and_emission_keys_match_full() {
         })
         .collect();
     let light = scene.objects.iter_mut().find(|o| o.name == "Light").unwrap();
-    light.animation = translation_keys(&circle);
+    light.animation = scenes::translation_keys(&circle);
     // The tall block turns about its own vertical axis.
     let tall = scene.objects.iter_mut().find(|o| o.name == "TallBlock").unwrap();
     let pivot = DVec3::new(0.368, 0.0, 0.351);
@@ -185,7 +181,8 @@ fn replayed_shots_follow_the_motion() {
     let light = scene.objects.iter_mut().find(|o| o.name == "Light").unwrap();
     let x = |d: f64| DVec3::new(d, 0.0, 0.0);
     // Steady to frame 5, still to frame 7, back from 7 to 9.
-    light.animation = translation_keys(&[(1.0, x(0.0)), (5.0, x(-0.04)), (7.0, x(-0.04)), (9.0, x(0.0))]);
+    light.animation =
+        scenes::translation_keys(&[(1.0, x(0.0)), (5.0, x(-0.04)), (7.0, x(-0.04)), (9.0, x(0.0))]);
     scene.frames = (1, 9);
     assert_matches_full(&scene, "move, stop, return");
     let scale: Vec<f64> = bake(&scene, Method::Incremental).iter().map(|(_, s)| s.replay_scale).collect();

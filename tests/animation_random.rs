@@ -133,34 +133,19 @@ struct Case {
     description: Vec<String>,
 }
 
-/// A quad `p` split `n x n`, its front toward `target`.
-fn quad_toward(name: &str, mut p: [DVec3; 4], n: usize, material: u32, target: DVec3) -> Object {
-    let normal = (p[1] - p[0]).cross(p[2] - p[0]);
-    let centre = p.iter().copied().sum::<DVec3>() / 4.0;
-    if normal.dot(target - centre) < 0.0 {
-        p.reverse();
-    }
-    scenes::subdivided_quad(name, p, n, material)
-}
-
-/// An axis-aligned rectangle centred at `c`, spanning `u` and `v` (half extents) and facing `normal`.
-fn panel(name: &str, c: DVec3, u: DVec3, v: DVec3, normal: DVec3, n: usize, material: u32) -> Object {
-    quad_toward(name, [c - u - v, c + u - v, c + u + v, c - u + v], n, material, c + normal)
-}
-
 /// An axis-aligned box `c +- h` of outward faces split `n x n`; without its bottom (it stands on
 /// something, as the Cornell box's blocks do) unless `bottom`.
 fn block(name: &str, c: DVec3, h: DVec3, n: usize, material: u32, bottom: bool) -> Object {
     let (x, y, z) = (DVec3::X * h.x, DVec3::Y * h.y, DVec3::Z * h.z);
     let mut faces = vec![
-        panel("top", c + y, x, z, DVec3::Y, n, material),
-        panel("side", c + x, y, z, DVec3::X, n, material),
-        panel("side", c - x, y, z, -DVec3::X, n, material),
-        panel("side", c + z, x, y, DVec3::Z, n, material),
-        panel("side", c - z, x, y, -DVec3::Z, n, material),
+        scenes::panel("top", c + y, x, z, DVec3::Y, n, material),
+        scenes::panel("side", c + x, y, z, DVec3::X, n, material),
+        scenes::panel("side", c - x, y, z, -DVec3::X, n, material),
+        scenes::panel("side", c + z, x, y, DVec3::Z, n, material),
+        scenes::panel("side", c - z, x, y, -DVec3::Z, n, material),
     ];
     if bottom {
-        faces.push(panel("bottom", c - y, x, z, -DVec3::Y, n, material));
+        faces.push(scenes::panel("bottom", c - y, x, z, -DVec3::Y, n, material));
     }
     scenes::merge(name, faces)
 }
@@ -192,13 +177,8 @@ fn room(rng: &mut Rng, objects: &mut Vec<Object>, description: &mut Vec<String>)
     let p = DVec3::new;
     let inside = p(0.5, 0.5, 0.5);
     let n = rng.int(3, 5);
-    objects.push(quad_toward(
-        "floor",
-        [p(0., 0., 0.), p(1., 0., 0.), p(1., 0., 1.), p(0., 0., 1.)],
-        n,
-        0,
-        inside,
-    ));
+    let floor = [p(0., 0., 0.), p(1., 0., 0.), p(1., 0., 1.), p(0., 0., 1.)];
+    objects.push(scenes::subdivided_quad("floor", scenes::facing(floor, inside, false), n, 0));
     let mut words = vec![format!("floor {n}x{n}")];
     let walls = [
         ("wall x=0", [p(0., 0., 0.), p(0., 1., 0.), p(0., 1., 1.), p(0., 0., 1.)], 1),
@@ -223,7 +203,7 @@ fn room(rng: &mut Rng, objects: &mut Vec<Object>, description: &mut Vec<String>)
         } else {
             words.push(format!("{name} {m}x{m}"));
         }
-        objects.push(quad_toward(name, q, m, material, inside));
+        objects.push(scenes::subdivided_quad(name, scenes::facing(q, inside, false), m, material));
     }
     description.push(format!("room: {}", words.join(", ")));
     present
@@ -235,12 +215,13 @@ fn emitter(rng: &mut Rng, k: usize, material: u32) -> Thing {
     let s = rng.range(0.06, 0.14);
     if rng.chance(0.6) {
         let c = DVec3::new(rng.range(0.3, 0.7), rng.range(0.85, 0.97), rng.range(0.3, 0.7));
-        let object = panel(&format!("lamp{k}"), c, DVec3::X * s, DVec3::Z * s, -DVec3::Y, n, material);
+        let object =
+            scenes::panel(&format!("lamp{k}"), c, DVec3::X * s, DVec3::Z * s, -DVec3::Y, n, material);
         let what = format!("ceiling lamp{k} at {c:.3} half {s:.3} {n}x{n}, facing down");
         Thing { object, centre: c, half: DVec3::new(s, 0.0, s), kind: Kind::CeilingLamp, what }
     } else {
         let c = DVec3::new(rng.range(0.01, 0.03), rng.range(0.3, 0.7), rng.range(0.3, 0.7));
-        let object = panel(&format!("lamp{k}"), c, DVec3::Y * s, DVec3::Z * s, DVec3::X, n, material);
+        let object = scenes::panel(&format!("lamp{k}"), c, DVec3::Y * s, DVec3::Z * s, DVec3::X, n, material);
         let what = format!("wall lamp{k} at {c:.3} half {s:.3} {n}x{n}, facing +x");
         Thing { object, centre: c, half: DVec3::new(0.0, s, s), kind: Kind::WallLamp, what }
     }
@@ -257,7 +238,7 @@ fn occluder(rng: &mut Rng, k: usize, material: u32) -> Thing {
             let h = DVec3::new(rng.range(0.06, 0.2), 0.0, rng.range(0.06, 0.2));
             let up = rng.chance(0.5);
             let normal = if up { DVec3::Y } else { -DVec3::Y };
-            let object = panel(&name, c, DVec3::X * h.x, DVec3::Z * h.z, normal, n, material);
+            let object = scenes::panel(&name, c, DVec3::X * h.x, DVec3::Z * h.z, normal, n, material);
             let what = format!(
                 "horizontal panel {name} at {c:.3} half {h:.3} {n}x{n}, facing {}",
                 if up { "up" } else { "down" }
@@ -270,7 +251,7 @@ fn occluder(rng: &mut Rng, k: usize, material: u32) -> Thing {
             let (a, b) = (rng.range(0.06, 0.2), rng.range(0.08, 0.2));
             let (u, normal) = if along_x { (DVec3::X * a, DVec3::Z) } else { (DVec3::Z * a, DVec3::X) };
             let normal = if rng.chance(0.5) { normal } else { -normal };
-            let object = panel(&name, c, u, DVec3::Y * b, normal, n, material);
+            let object = scenes::panel(&name, c, u, DVec3::Y * b, normal, n, material);
             let what =
                 format!("vertical panel {name} at {c:.3} facing {normal} half {a:.3} x {b:.3} {n}x{n}");
             Thing { object, centre: c, half: u.abs() + DVec3::Y * b, kind: Kind::VerticalPanel, what }
@@ -288,10 +269,6 @@ fn occluder(rng: &mut Rng, k: usize, material: u32) -> Thing {
             Thing { object, centre: c, half: h, kind: Kind::Box(on_floor), what }
         }
     }
-}
-
-fn translations(keys: &[(f64, DVec3)]) -> Vec<Key> {
-    keys.iter().map(|&(frame, t)| Key { frame, transform: KeyTransform::Translation(t) }).collect()
 }
 
 fn matrices(keys: &[(f64, DMat4)]) -> Vec<Key> {
@@ -324,7 +301,10 @@ fn animate(rng: &mut Rng, thing: &mut Thing, last: usize, walls: [bool; 4]) -> S
     let (keys, what) = match rng.pick(choices) {
         0 => {
             let d = planar(rng.direction()) * speed * (l - 1.0);
-            (translations(&[(1.0, DVec3::ZERO), (l, d)]), format!("{pace} straight translation by {d:.4}"))
+            (
+                scenes::translation_keys(&[(1.0, DVec3::ZERO), (l, d)]),
+                format!("{pace} straight translation by {d:.4}"),
+            )
         }
         1 => {
             // A circle of radius r through the rest position, in a random plane, keyed every frame.
@@ -342,7 +322,10 @@ fn animate(rng: &mut Rng, thing: &mut Thing, last: usize, walls: [bool; 4]) -> S
                     (f as f64, r * ((t.cos() - 1.0) * a + t.sin() * b))
                 })
                 .collect();
-            (translations(&keys), format!("{pace} curve: circle radius {r:.3}, {step:.3} rad a frame"))
+            (
+                scenes::translation_keys(&keys),
+                format!("{pace} curve: circle radius {r:.3}, {step:.3} rad a frame"),
+            )
         }
         2 => {
             // A move out and back: it stops for a frame at the far end when there are frames
@@ -356,7 +339,7 @@ fn animate(rng: &mut Rng, thing: &mut Thing, last: usize, walls: [bool; 4]) -> S
             };
             let at: Vec<String> = keys.iter().map(|(f, _)| format!("{f}")).collect();
             (
-                translations(&keys),
+                scenes::translation_keys(&keys),
                 format!("{pace} move by {d:.4}, stop and reverse (keys at {})", at.join(", ")),
             )
         }
@@ -366,7 +349,10 @@ fn animate(rng: &mut Rng, thing: &mut Thing, last: usize, walls: [bool; 4]) -> S
             let mut d = rng.direction();
             d.y *= 0.3;
             let d = d.normalize() * rng.range(0.15, 0.3);
-            (translations(&[(1.0, -d), (l, d)]), format!("pass from {:.3} to {:.3}", c - d, c + d))
+            (
+                scenes::translation_keys(&[(1.0, -d), (l, d)]),
+                format!("pass from {:.3} to {:.3}", c - d, c + d),
+            )
         }
         4 => {
             let axis =
@@ -410,7 +396,7 @@ fn animate(rng: &mut Rng, thing: &mut Thing, last: usize, walls: [bool; 4]) -> S
                 _ => (DVec3::new(0.0, -(c.y - thing.half.y - gap), 0.0), "the floor"),
             };
             (
-                translations(&[(1.0, DVec3::ZERO), (reach, d), (l, d)]),
+                scenes::translation_keys(&[(1.0, DVec3::ZERO), (reach, d), (l, d)]),
                 format!("moves onto {onto}, gap {gap}, by {d:.3} by frame {reach}"),
             )
         }
@@ -899,17 +885,13 @@ fn panel_taken_out_of_a_box_lights_the_lamp_again() {
     let p = DVec3::new;
     let settings =
         Settings { basis_order: 1, tolerance: SOLVE_TOLERANCE, corner_gather: false, ..Settings::default() };
-    let floor = quad_toward(
-        "floor",
-        [p(0., 0., 0.), p(1., 0., 0.), p(1., 0., 1.), p(0., 0., 1.)],
-        4,
-        0,
-        p(0.5, 1.0, 0.5),
-    );
-    let lamp = panel("lamp", p(0.5, 0.9, 0.5), DVec3::X * 0.15, DVec3::Z * 0.15, -DVec3::Y, 1, 1);
-    let mut shelf = panel("panel", p(0.5, 0.8, 0.5), DVec3::X * 0.12, DVec3::Z * 0.12, DVec3::Y, 1, 2);
+    let floor = [p(0., 0., 0.), p(1., 0., 0.), p(1., 0., 1.), p(0., 0., 1.)];
+    let floor = scenes::subdivided_quad("floor", scenes::facing(floor, p(0.5, 1.0, 0.5), false), 4, 0);
+    let lamp = scenes::panel("lamp", p(0.5, 0.9, 0.5), DVec3::X * 0.15, DVec3::Z * 0.15, -DVec3::Y, 1, 1);
+    let mut shelf =
+        scenes::panel("panel", p(0.5, 0.8, 0.5), DVec3::X * 0.12, DVec3::Z * 0.12, DVec3::Y, 1, 2);
     let into_box = p(0.2, 0.3, 0.8) - p(0.5, 0.8, 0.5);
-    shelf.animation = translations(&[(1.0, DVec3::ZERO), (2.0, into_box), (3.0, DVec3::ZERO)]);
+    shelf.animation = scenes::translation_keys(&[(1.0, DVec3::ZERO), (2.0, into_box), (3.0, DVec3::ZERO)]);
     let closed = block("box", p(0.2, 0.3, 0.8), DVec3::splat(0.15), 1, 0, true);
     let materials = vec![
         Material { name: "white".into(), reflectance: [0.7; 3], emission: [0.0; 3] },
