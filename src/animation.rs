@@ -32,6 +32,7 @@ use glam::DVec3;
 
 use crate::error::{Error, Result};
 use crate::geometry::{Aabb, Patch};
+use crate::hemisphere;
 use crate::kernel::PairContext;
 use crate::kernel::assemble::{ElementGeometry, KeptGeometry, integrate_visible_into};
 use crate::kernel::pair::SEPARATION;
@@ -808,6 +809,32 @@ pub fn advance(
                 delta_kb([&mut *out_b, &mut *out_sigma], rho, [&sent[s.clone()], &sigma[s]], new, old);
             }
         });
+        // The hemisphere bound follows the changed rows (crate::hemisphere): a receiver whose
+        // bounded reflectance goes from rho' to rho'' changes the kernel by (rho'' - rho') G_new,
+        // taken on (b - u) and on sigma like the block changes above.
+        let bounds: Vec<(usize, [f64; 3])> = (0..n)
+            .into_par_iter()
+            .filter(|&r| first[r] < first[r + 1])
+            .filter_map(|r| {
+                let rho = next.materials[new_elements[r].material as usize].reflectance;
+                let bounded = hemisphere::bounded_reflectance(&sys_ref.links, r as u32, rho);
+                (bounded != sys_ref.reflectance[r]).then_some((r, bounded))
+            })
+            .collect();
+        for &(r, bounded) in &bounds {
+            let change: [f64; 3] = std::array::from_fn(|c| bounded[c] - sys_ref.reflectance[r][c]);
+            let on_sent = solver::gather_row(&sys_ref.links, r as u32, &sent);
+            let on_sigma = solver::gather_row(&sys_ref.links, r as u32, sigma);
+            for k in 0..nb {
+                for c in 0..3 {
+                    delta_b[r * nb + k][c] += change[c] * on_sent[k][c];
+                    delta_k_sigma[r * nb + k][c] += change[c] * on_sigma[k][c];
+                }
+            }
+        }
+        for (r, bounded) in bounds {
+            sys.reflectance[r] = bounded;
+        }
         drop((rewrites, fresh));
         state.sent = sent;
         state.block_pool = batches.into_iter().map(|b| b.blocks).collect();
@@ -838,19 +865,26 @@ pub fn advance(
     // The transfers were moved with the previous areas; a scaled element reweighs them all.
     sys.links.set_receiver_areas(&sys.areas());
     sys.emission = emission;
-    sys.reflectance = sys.elements.iter().map(|e| next.materials[e.material as usize].reflectance).collect();
+    let surface: Vec<[f64; 3]> =
+        sys.elements.iter().map(|e| next.materials[e.material as usize].reflectance).collect();
+    if surface != sys.surface_reflectance {
+        // A material changed: Delta K is not formed for that (as before the bound), the bound
+        // is taken afresh.
+        sys.reflectance = crate::system::bounded_reflectances(&sys.links, &surface);
+        sys.surface_reflectance = surface;
+    }
 
     let solve_start = std::time::Instant::now();
     // Replay the last frame's shots, then shoot what is left; record this frame's for the next.
     let before = sys.solution.clone();
     // (Under other reflectances than the recorded ones the replay would not keep the invariant.)
-    if let Some(r) = replay.as_ref().filter(|r| r.applies_to(&sys.reflectance)) {
+    if let Some(r) = replay.as_ref().filter(|r| r.applies_to(&sys.surface_reflectance)) {
         stats.replay_scale = r.apply(&mut sys.solution, &delta_k_sigma, sys.links.transfers());
     }
     let stop = s.tolerance * sys.emitted_power();
     let cancel = || !progress(1.0, "solve");
     let shot = solver::shoot(&sys.links, &sys.reflectance, &mut sys.solution, stop, &cancel)?;
-    state.replay = Some(Replay::record(&before, &sys.solution, &sys.reflectance));
+    state.replay = Some(Replay::record(&before, &sys.solution, &sys.surface_reflectance));
     stats.solve_seconds = solve_start.elapsed().as_secs_f64();
     stats.shots = shot.shots;
     Ok(Outcome::Updated(stats))

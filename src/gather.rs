@@ -51,6 +51,7 @@ use crate::kernel::samples::Samples;
 use crate::links::ElementId;
 use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
+use crate::solids::Solids;
 use crate::system::{Progress, System, corner_params};
 use crate::visibility::shaft::Shaft;
 use crate::visibility::{MovedOccluders, Occluders, Visibility, cell_of};
@@ -113,6 +114,8 @@ pub struct CornerGather {
     occluded: bool,
     /// Per element, on the scene's hull (not an occluder) in this gather's occluders.
     hull: Vec<bool>,
+    /// Per point, inside another closed surface (empty: none are, or visibility is off).
+    buried: Vec<bool>,
 }
 
 /// What this frame's gather did.
@@ -229,6 +232,10 @@ impl CornerGather {
             Some(p) => patches.iter().zip(&p.patches).map(|(a, b)| a != b).collect(),
             None => vec![true; patches.len()],
         };
+        let kept_buried = previous
+            .as_ref()
+            .filter(|p| !moved.iter().any(|&m| m) && p.occluded == occluders.is_some())
+            .map(|p| p.buried.clone());
         let mut swept: Vec<Aabb> = Vec::new();
         if let Some(p) = &previous {
             // One box per moved element while they are few (tighter: fewer shafts crossed), else
@@ -375,7 +382,18 @@ impl CornerGather {
                 rows.into_iter().zip(values).map(|((row, n), v)| Ok((row, n, v))).collect()
             })
             .collect::<Result<_>>()?;
-        let values: Vec<[f64; 3]> = gathered.iter().map(|g| g.2).collect();
+        let mut values: Vec<[f64; 3]> = gathered.iter().map(|g| g.2).collect();
+        // A point inside another closed surface receives nothing (crate::solids); which points
+        // are is decided again only when something moved.
+        let buried = match kept_buried {
+            Some(b) => b,
+            None if occluders.is_some() => buried_points(sys, scene, &patches, &points),
+            None => Vec::new(),
+        };
+        for (k, _) in buried.iter().enumerate().filter(|(_, b)| **b) {
+            let e = points[k].at.expect("a buried point is on an element").0;
+            values[k] = sys.emission[e * nb];
+        }
         let rows: Vec<(Row, usize)> = gathered.into_iter().map(|(r, n, _)| (r, n)).collect();
         let stats = GatherStats {
             points: points.len(),
@@ -399,6 +417,7 @@ impl CornerGather {
             pairs: sys.links.len(),
             occluded: occluders.is_some(),
             hull,
+            buried,
         };
         Ok((out, kept, stats))
     }
@@ -438,6 +457,22 @@ fn corner_points(sys: &System, scene: &Scene) -> (Vec<CornerPoint>, Vec<usize>, 
         per_object.push(point_of_corner.len() - before);
     }
     (points, point_of_corner, per_object)
+}
+
+/// Per point, whether it lies inside another closed surface of the scene ([`Solids`]).
+fn buried_points(sys: &System, scene: &Scene, patches: &[Patch], points: &[CornerPoint]) -> Vec<bool> {
+    let solids = Solids::new(&sys.elements, scene.objects.len());
+    if solids.is_empty() {
+        return Vec::new();
+    }
+    points
+        .par_iter()
+        .map(|p| {
+            p.at.is_some_and(|(e, s, t)| {
+                solids.buries(patches[e].point(s, t), patches[e].area_vector(s, t).normalize_or_zero())
+            })
+        })
+        .collect()
 }
 
 /// `eps` plus a margin for testing the union of the swept boxes against a corner-source shaft:
@@ -488,7 +523,8 @@ fn source_irradiance<const K: usize>(sys: &System, rows: [&Row; K]) -> [[f64; 3]
     irradiance
 }
 
-/// [`radiosity`] from the sources' part of the irradiance: the feet's added, then `E + rho` times it.
+/// [`radiosity`] from the sources' part of the irradiance: the feet's added, bounded by the
+/// point's hemisphere, then `E + rho` times it.
 fn finish(sys: &System, i: usize, row: &Row, mut irradiance: [f64; 3]) -> [f64; 3] {
     let nb = sys.basis.len();
     for foot in &row.feet {
@@ -497,8 +533,16 @@ fn finish(sys: &System, i: usize, row: &Row, mut irradiance: [f64; 3]) -> [f64; 
             irradiance[c] += foot.weight as f64 * b[c];
         }
     }
-    let (rho, e) = (sys.reflectance[i], sys.emission[i * nb]);
-    std::array::from_fn(|c| e[c] + rho[c] * irradiance[c])
+    let bound = if sys.corner_bound { crate::hemisphere::bound(form_factor_sum(row, nb)) } else { 1.0 };
+    let (rho, e) = (sys.surface_reflectance[i], sys.emission[i * nb]);
+    std::array::from_fn(|c| e[c] + rho[c] * bound * irradiance[c])
+}
+
+/// The point's form factors summed over its sources (`m_j^0`, `Gamma_0 = 1`) and feet: at most 1
+/// for a point that sees its hemisphere ([`crate::hemisphere`]).
+fn form_factor_sum(row: &Row, nb: usize) -> f64 {
+    let sources: f64 = row.moments.iter().step_by(nb).map(|&m| m as f64).sum();
+    sources + row.feet.iter().map(|f| f.weight as f64).sum::<f64>()
 }
 
 /// The link's visibility bits from the corner's cell to each of the source's `cells` cells: bit `s`

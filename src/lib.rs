@@ -9,10 +9,12 @@
 
 pub mod animation;
 pub mod basis;
+pub mod diagnose;
 pub mod error;
 pub mod ffi;
 pub mod gather;
 pub mod geometry;
+pub mod hemisphere;
 pub mod kernel;
 pub mod links;
 pub mod quadrature;
@@ -21,6 +23,7 @@ pub mod scene;
 pub mod scenes;
 pub mod session;
 mod simd;
+pub mod solids;
 pub mod solver;
 pub mod system;
 pub mod visibility;

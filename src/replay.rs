@@ -31,8 +31,8 @@ pub struct Replay {
     sigma: Vec<[f64; 3]>,
     /// `K sigma` with the kernel of that solve: the change of `b` the shots made.
     k_sigma: Vec<[f64; 3]>,
-    /// The reflectances of that kernel (`K = rho G`); a replay under others would break the
-    /// invariant.
+    /// The surface reflectances of that kernel (`K = rho G`); a replay under others would break
+    /// the invariant. (Changes of the hemisphere bound are kernel changes, in `Delta K sigma`.)
     reflectance: Vec<[f64; 3]>,
 }
 

@@ -206,7 +206,7 @@ pub fn translation_keys(keys: &[(f64, DVec3)]) -> Vec<Key> {
 }
 
 /// An axis-aligned room `w x h x d` (x, y up, z), walls split `n` per metre, faces inward.
-fn room(w: f64, h: f64, d: f64, n: f64, materials: [u32; 6]) -> Vec<Object> {
+pub fn room(w: f64, h: f64, d: f64, n: f64, materials: [u32; 6]) -> Vec<Object> {
     let c = DVec3::new(0.0, h / 2.0, 0.0);
     let (x, z) = (w / 2.0, d / 2.0);
     let p = DVec3::new;
@@ -323,4 +323,110 @@ pub fn billiard(n: f64, frames: i64, settings: Settings) -> Scene {
 /// An emission key list for tests: material `m` ramps from `from` to `to` between two frames.
 pub fn emission_ramp(from: (f64, [f64; 3]), to: (f64, [f64; 3])) -> Vec<EmissionKey> {
     vec![EmissionKey { frame: from.0, emission: from.1 }, EmissionKey { frame: to.0, emission: to.1 }]
+}
+
+/// A closed triangle mesh like a sculpted or scanned model: an icosphere of radius `radius`
+/// subdivided `subdivisions` times (20 4^s faces), each vertex pushed out along its normal by
+/// up to `bump` of the radius by a fixed pseudo-random field, so that neighbouring faces meet at
+/// concave as well as convex edges. Faces outward.
+pub fn bumpy_sphere(
+    name: &str,
+    centre: DVec3,
+    radius: f64,
+    subdivisions: u32,
+    bump: f64,
+    material: u32,
+) -> Object {
+    let t = (1.0 + 5f64.sqrt()) / 2.0;
+    let mut vertices: Vec<DVec3> = [
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| DVec3::new(x, y, z).normalize())
+    .collect();
+    let mut faces: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..subdivisions {
+        let mut mid = std::collections::HashMap::new();
+        let mut midpoint = |a: u32, b: u32, vertices: &mut Vec<DVec3>| {
+            *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                vertices.push(((vertices[a as usize] + vertices[b as usize]) / 2.0).normalize());
+                vertices.len() as u32 - 1
+            })
+        };
+        faces = faces
+            .iter()
+            .flat_map(|&[a, b, c]| {
+                let (ab, bc, ca) = (
+                    midpoint(a, b, &mut vertices),
+                    midpoint(b, c, &mut vertices),
+                    midpoint(c, a, &mut vertices),
+                );
+                [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+            })
+            .collect();
+    }
+    // A smooth deterministic field: a few products of sines of the direction.
+    let field = |d: DVec3| {
+        ((3.1 * d.x + 1.3).sin() * (2.7 * d.y - 0.4).sin() + (4.3 * d.z + 2.1).sin() * (3.7 * d.x).cos())
+            * 0.5
+    };
+    let vertices = vertices.iter().map(|&d| centre + d * radius * (1.0 + bump * field(d))).collect();
+    Object {
+        name: name.into(),
+        vertices,
+        faces: faces.into_iter().map(|f| f.to_vec()).collect(),
+        face_materials: vec![material; 20 * 4usize.pow(subdivisions)],
+        matrix: DMat4::IDENTITY,
+        animation: Vec::new(),
+    }
+}
+
+/// A closed axis-aligned box from `min` to `max`, each side split `n x n`, faces outward (or
+/// inward when `inward`).
+pub fn box_mesh(name: &str, min: DVec3, max: DVec3, n: usize, inward: bool, material: u32) -> Object {
+    let c = (min + max) / 2.0;
+    let p = |x: f64, y: f64, z: f64| DVec3::new(x, y, z);
+    let (a, b) = (min, max);
+    let sides = [
+        [p(a.x, a.y, a.z), p(b.x, a.y, a.z), p(b.x, b.y, a.z), p(a.x, b.y, a.z)],
+        [p(a.x, a.y, b.z), p(b.x, a.y, b.z), p(b.x, b.y, b.z), p(a.x, b.y, b.z)],
+        [p(a.x, a.y, a.z), p(a.x, b.y, a.z), p(a.x, b.y, b.z), p(a.x, a.y, b.z)],
+        [p(b.x, a.y, a.z), p(b.x, b.y, a.z), p(b.x, b.y, b.z), p(b.x, a.y, b.z)],
+        [p(a.x, a.y, a.z), p(b.x, a.y, a.z), p(b.x, a.y, b.z), p(a.x, a.y, b.z)],
+        [p(a.x, b.y, a.z), p(b.x, b.y, a.z), p(b.x, b.y, b.z), p(a.x, b.y, b.z)],
+    ];
+    let parts = sides.iter().map(|s| subdivided_quad(name, facing(*s, c, !inward), n, material)).collect();
+    merge(name, parts)
 }

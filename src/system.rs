@@ -114,6 +114,16 @@ fn element(
     Element { object, face, domain, patch, material, area, moments }
 }
 
+/// [`crate::hemisphere::bounded_reflectance`] of every element.
+pub fn bounded_reflectances(links: &LinkStore, surface: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    use rayon::prelude::*;
+    surface
+        .par_iter()
+        .enumerate()
+        .map(|(i, &rho)| crate::hemisphere::bounded_reflectance(links, i as u32, rho))
+        .collect()
+}
+
 /// Timings and counts of one build and solve.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct SystemStats {
@@ -133,7 +143,14 @@ pub struct System {
     pub basis: Basis,
     pub elements: Vec<Element>,
     pub links: LinkStore,
+    /// The reflectance the solver's kernel `K = rho G` uses per element: the surface's, bounded
+    /// so that the element takes in at most its hemisphere ([`crate::hemisphere`]).
     pub reflectance: Vec<[f64; 3]>,
+    /// The surfaces' own reflectance per element (the corner gather applies its own bound).
+    pub surface_reflectance: Vec<[f64; 3]>,
+    /// Whether corners are bounded by their hemisphere (off only to measure the raw sums,
+    /// [`crate::diagnose::corner_sums`]).
+    pub corner_bound: bool,
     /// Emission coefficients `e_i^k` (eq. 5): constant exitance projects onto `k = 0` only.
     pub emission: Vec<[f64; 3]>,
     pub solution: Coefficients,
@@ -172,7 +189,9 @@ impl System {
         links.set_receiver_areas(&elements.iter().map(|e| e.area).collect::<Vec<_>>());
         let kernel_seconds = start.elapsed().as_secs_f64();
         let nb = basis.len();
-        let reflectance = elements.iter().map(|e| scene.materials[e.material as usize].reflectance).collect();
+        let surface_reflectance: Vec<[f64; 3]> =
+            elements.iter().map(|e| scene.materials[e.material as usize].reflectance).collect();
+        let reflectance = bounded_reflectances(&links, &surface_reflectance);
         let mut emission = vec![[0.0; 3]; elements.len() * nb];
         for (i, e) in elements.iter().enumerate() {
             emission[i * nb] = scene.emission_at(e.material as usize, frame);
@@ -196,6 +215,8 @@ impl System {
             elements,
             links,
             reflectance,
+            surface_reflectance,
+            corner_bound: true,
             emission,
             solution,
             corners: None,
