@@ -327,6 +327,11 @@ pub fn advance(
     let patches: Vec<Patch> = new_elements.iter().map(|e| e.patch).collect();
     let old: Vec<&Patch> = sys.elements.iter().map(|e| &e.patch).collect();
     let moved: Vec<bool> = (0..n).map(|e| patches[e] != *old[e]).collect();
+    // A face that starts or stops covering a coplanar one changes that one's weight as a source,
+    // so every pair of it (crate::overlap): rebuild, which is rare.
+    if moved.iter().any(|&m| m) && crate::overlap::source_weights(&patches) != sys.source_weights {
+        return Ok(Outcome::NeedsRebuild);
+    }
     let scene_scale = patches.iter().fold(Aabb::EMPTY, |b, p| b.union(p.bounds())).diagonal().length();
     let eps = 1e-12 * scene_scale.max(1e-300);
     // This frame's motion of each element, and whether it is a pure translation.
@@ -642,6 +647,8 @@ pub fn advance(
             if d.id.is_none() && !exchanges {
                 return;
             }
+            let (ij, ji) = scratch.split_at_mut(n2);
+            geom.weigh(iu, ju, ij, ji);
             batch.blocks.extend(scratch.iter().map(|&x| x as f32));
             let vis = if exchanges { d.vis } else { Visibility::Blocked };
             batch.updates.push(PairUpdate { i: d.i, j: d.j, id: d.id, vis, series, reason: d.reason });

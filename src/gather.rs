@@ -72,6 +72,17 @@ const GAUSS_POINTS: usize = 3;
 /// factor times the basis at its centre.
 const MAX_DEPTH: u32 = 12;
 
+/// A corner whose normal and a source's are opposed by more than this cosine faces the source.
+const FACING: f64 = 0.5;
+
+/// A corner facing a source from closer than this fraction of the source's radius takes the part
+/// of the source next to it from a foot ([`Gather::near_facing`]).
+const NEAR_FACING: f64 = 0.2;
+
+/// The part of a faced source within this many times the distance counts with the foot's `B`: a
+/// disc of radius `sqrt(15) d`, 15/16 of a parallel plane's form factor.
+const FOOT_BALL: f64 = 4.0;
+
 /// Moved elements up to this many are tested one by one against a kept moment's rays
 /// ([`Gather::unchanged`]); with more, a swept box entering the shaft recomputes the moment.
 const MAX_MOVED_OCCLUDERS: usize = 64;
@@ -434,6 +445,10 @@ fn corner_points(sys: &System, scene: &Scene) -> (Vec<CornerPoint>, Vec<usize>, 
         let before = point_of_corner.len();
         for (f, face) in obj.faces.iter().enumerate() {
             for (&v, (s, t)) in face.iter().zip(corner_params(face.len())) {
+                // A triangle's apex is the collapsed edge t = 1: the inset corner (1, 1) would lie
+                // on the edge P1 P2 (INSET^2 inside), seeing the neighbour across it edge-on;
+                // halfway along the collapsed edge it lies INSET inside along the median.
+                let s = if face.len() == 3 && t == 1.0 { 0.5 } else { s };
                 let (si, ti) = (s.clamp(INSET, 1.0 - INSET), t.clamp(INSET, 1.0 - INSET));
                 let at = sys.element_of_face(o, f, si, ti);
                 let material = obj.face_materials[f];
@@ -469,7 +484,9 @@ fn buried_points(sys: &System, scene: &Scene, patches: &[Patch], points: &[Corne
         .par_iter()
         .map(|p| {
             p.at.is_some_and(|(e, s, t)| {
-                solids.buries(patches[e].point(s, t), patches[e].area_vector(s, t).normalize_or_zero())
+                let (centre, radius) = patches[e].bounding_sphere();
+                let n = patches[e].area_vector(s, t).normalize_or_zero();
+                solids.buries(crate::solids::test_point(patches[e].point(s, t), n, centre, radius))
             })
         })
         .collect()
@@ -502,10 +519,10 @@ fn source_irradiance<const K: usize>(sys: &System, rows: [&Row; K]) -> [[f64; 3]
     let add = |irradiance: &mut [f64; 3], row: &Row, k: usize| {
         let m = &row.moments[k * nb..(k + 1) * nb];
         let j = row.sources[k] as usize;
-        let b = &b[j * nb..(j + 1) * nb];
+        let (b, w) = (&b[j * nb..(j + 1) * nb], sys.source_weights[j]);
         for l in 0..nb {
             for c in 0..3 {
-                irradiance[c] += m[l] as f64 * b[l][c];
+                irradiance[c] += w * m[l] as f64 * b[l][c];
             }
         }
     };
@@ -529,20 +546,24 @@ fn finish(sys: &System, i: usize, row: &Row, mut irradiance: [f64; 3]) -> [f64; 
     let nb = sys.basis.len();
     for foot in &row.feet {
         let b = radiosity(sys, foot.element as usize, &foot.row);
+        let w = foot.weight as f64 * sys.source_weights[foot.element as usize];
         for c in 0..3 {
-            irradiance[c] += foot.weight as f64 * b[c];
+            irradiance[c] += w * b[c];
         }
     }
-    let bound = if sys.corner_bound { crate::hemisphere::bound(form_factor_sum(row, nb)) } else { 1.0 };
+    let bound = if sys.corner_bound { crate::hemisphere::bound(form_factor_sum(sys, row)) } else { 1.0 };
     let (rho, e) = (sys.surface_reflectance[i], sys.emission[i * nb]);
     std::array::from_fn(|c| e[c] + rho[c] * bound * irradiance[c])
 }
 
-/// The point's form factors summed over its sources (`m_j^0`, `Gamma_0 = 1`) and feet: at most 1
-/// for a point that sees its hemisphere ([`crate::hemisphere`]).
-fn form_factor_sum(row: &Row, nb: usize) -> f64 {
-    let sources: f64 = row.moments.iter().step_by(nb).map(|&m| m as f64).sum();
-    sources + row.feet.iter().map(|f| f.weight as f64).sum::<f64>()
+/// The point's form factors summed over its sources (`m_j^0`, `Gamma_0 = 1`) and feet, each
+/// with its source weight: at most 1 for a point that sees its hemisphere ([`crate::hemisphere`]).
+fn form_factor_sum(sys: &System, row: &Row) -> f64 {
+    let nb = sys.basis.len();
+    let w = &sys.source_weights;
+    let sources: f64 =
+        row.moments.iter().step_by(nb).zip(&row.sources).map(|(&m, &j)| m as f64 * w[j as usize]).sum();
+    sources + row.feet.iter().map(|f| f.weight as f64 * w[f.element as usize]).sum::<f64>()
 }
 
 /// The link's visibility bits from the corner's cell to each of the source's `cells` cells: bit `s`
@@ -1106,6 +1127,9 @@ impl Gather<'_> {
         let plane = self.planes[j]?;
         let offset = 1e-2 * self.radii[i];
         let d = plane.normal.dot(rx.x - plane.centre);
+        if rx.n.dot(plane.normal) < -FACING {
+            return self.near_facing(rx, j, d);
+        }
         if !(d > 0.0 && d < offset) || rx.n.dot(plane.normal).abs() > 0.9 {
             return None;
         }
@@ -1113,6 +1137,24 @@ impl Gather<'_> {
         let foot = foot - plane.normal.dot(foot - plane.centre) * plane.normal;
         let (s, t) = pj.locate(foot);
         ((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&t)).then_some(Touch { s, t, radius: 3.0 * offset })
+    }
+
+    /// Whether the corner faces source `j` from closer than [`NEAR_FACING`] of `j`'s radius (the
+    /// underside of a model standing on a table, a face folded onto its neighbour): nearly all of
+    /// its form factor to `j` then comes from the disc of radius a few `d` under it, where the
+    /// shadow it casts on `j` is far finer than `j`'s polynomial. That part counts with `B`
+    /// gathered at the foot, the corner's projection on `j` ([`FOOT_BALL`] `d` around the corner).
+    fn near_facing(&self, rx: &Receiver, j: usize, d: f64) -> Option<Touch> {
+        let plane = self.planes[j]?;
+        if !(d > 0.0 && d < NEAR_FACING * self.radii[j]) {
+            return None;
+        }
+        let (s, t) = self.patches[j].locate(rx.x - d * plane.normal);
+        ((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&t)).then_some(Touch {
+            s,
+            t,
+            radius: FOOT_BALL * d,
+        })
     }
 
     /// The Gauss sum over `nodes` of source `j` (inside `bounds`) into `out`.

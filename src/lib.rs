@@ -17,6 +17,7 @@ pub mod geometry;
 pub mod hemisphere;
 pub mod kernel;
 pub mod links;
+pub mod overlap;
 pub mod quadrature;
 pub mod replay;
 pub mod scene;

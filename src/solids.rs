@@ -14,8 +14,8 @@
 //! over `4 pi`, is at least 1/2) receives nothing. A *component* is a set of faces of one object
 //! connected through shared corner points; it is *closed* when every edge is used once in each
 //! direction, and *outward* when its signed volume is positive (an inward room is not solid: its
-//! inside is where the light is). The point is taken a hair in front of its own face, so its own
-//! component does not count it as inside.
+//! inside is where the light is). The point is taken a hair in front of its own face
+//! ([`test_point`]), so its own component does not count it as inside.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -23,16 +23,12 @@ use rayon::prelude::*;
 use crate::geometry::Aabb;
 use crate::system::Element;
 
-/// A point in front of its face by this fraction of the scene's size is tested.
-const LIFT: f64 = 1e-7;
-
 /// Corner points closer than this fraction of the scene's size are one vertex.
 const WELD: f64 = 1e-6;
 
 /// The closed, outward components of the scene as placed at one frame.
 pub struct Solids {
     components: Vec<Component>,
-    lift: f64,
 }
 
 struct Component {
@@ -55,7 +51,7 @@ impl Solids {
             .par_iter()
             .flat_map_iter(|members| closed_components(elements, members, WELD * scale))
             .collect();
-        Self { components, lift: LIFT * scale }
+        Self { components }
     }
 
     /// Whether there are any solids at all.
@@ -63,15 +59,23 @@ impl Solids {
         self.components.is_empty()
     }
 
-    /// Whether the surface point `x` with front normal `n` lies inside some solid.
-    pub fn buries(&self, x: DVec3, n: DVec3) -> bool {
-        let p = x + n * self.lift;
+    /// Whether `p` lies inside some solid. For a point of a surface, see [`test_point`].
+    pub fn buries(&self, p: DVec3) -> bool {
         self.components.iter().any(|c| {
             c.bounds.min.cmple(p).all()
                 && p.cmple(c.bounds.max).all()
                 && winding_number(&c.triangles, p) >= 0.5
         })
     }
+}
+
+/// The point to test for the surface point `x` (front normal `n`) of a face of centre `centre`
+/// and bounding radius `radius`: a thousandth of the way to the centre, then a hundred-thousandth
+/// of the radius in front. A corner sits on its face's edges (a triangle's apex on two of them),
+/// where a point lifted straight off the face can pass behind the neighbour across a concave
+/// edge, inside its own solid; moved in first, the lift stays far below its distance to them.
+pub fn test_point(x: DVec3, n: DVec3, centre: DVec3, radius: f64) -> DVec3 {
+    x + (centre - x) * 1e-3 + n * (1e-5 * radius)
 }
 
 /// The polygon of a face element: its patch's corners without the collapsed one of a triangle.

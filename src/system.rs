@@ -148,6 +148,9 @@ pub struct System {
     pub reflectance: Vec<[f64; 3]>,
     /// The surfaces' own reflectance per element (the corner gather applies its own bound).
     pub surface_reflectance: Vec<[f64; 3]>,
+    /// Each element's weight as a source, below 1 where coplanar faces cover it
+    /// ([`crate::overlap`]); the link store's blocks carry it, the corner gather applies it.
+    pub source_weights: Vec<f64>,
     /// Whether corners are bounded by their hemisphere (off only to measure the raw sums,
     /// [`crate::diagnose::corner_sums`]).
     pub corner_bound: bool,
@@ -186,6 +189,7 @@ impl System {
             progress(if total > 0 { done as f64 / total as f64 } else { 1.0 }, "kernel")
         })
         .ok_or(Error::Cancelled)?;
+        let source_weights = geom.source_weights().to_vec();
         links.set_receiver_areas(&elements.iter().map(|e| e.area).collect::<Vec<_>>());
         let kernel_seconds = start.elapsed().as_secs_f64();
         let nb = basis.len();
@@ -216,6 +220,7 @@ impl System {
             links,
             reflectance,
             surface_reflectance,
+            source_weights,
             corner_bound: true,
             emission,
             solution,

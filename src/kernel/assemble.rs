@@ -21,6 +21,8 @@ pub struct ElementGeometry<'a> {
     rules: Vec<usize>,
     /// Per element, what [`may_face`] and the pair integrator ask of it, computed once.
     info: Vec<ElementInfo>,
+    /// Per element, its weight as a source ([`crate::overlap`]).
+    weights: Vec<f64>,
 }
 
 /// An [`ElementGeometry`] without its patches, kept between animation frames.
@@ -29,6 +31,7 @@ pub struct KeptGeometry {
     samples: Vec<Vec<Samples>>,
     rules: Vec<usize>,
     info: Vec<ElementInfo>,
+    weights: Vec<f64>,
 }
 
 /// What the samples depend on besides the patches.
@@ -86,13 +89,15 @@ impl<'a> ElementGeometry<'a> {
             })
             .collect();
         let info = patches.par_iter().map(ElementInfo::new).collect();
-        Self { patches, samples, rules, info }
+        let weights = crate::overlap::source_weights(patches);
+        Self { patches, samples, rules, info, weights }
     }
 
     /// [`ElementGeometry::new`] for `patches`, taking from `kept` (the geometry of the previous
     /// frame, [`ElementGeometry::into_kept`]) every element not in `moved`: an element's samples
     /// depend on its patch alone. Without `kept`, or when it was made for another context, all
-    /// elements are computed.
+    /// elements are computed. The source weights are the kept ones: the caller rebuilds when a
+    /// move changes them.
     pub fn reusing(
         kept: Option<KeptGeometry>,
         patches: &'a [Patch],
@@ -118,12 +123,18 @@ impl<'a> ElementGeometry<'a> {
         for &e in &redo {
             kept.info[e] = ElementInfo::new(&patches[e]);
         }
-        Self { patches, samples: kept.samples, rules: kept.rules, info: kept.info }
+        Self { patches, samples: kept.samples, rules: kept.rules, info: kept.info, weights: kept.weights }
     }
 
     /// What [`ElementGeometry::reusing`] takes to the next frame (no borrow of the patches).
     pub fn into_kept(self, ctx: &PairContext) -> KeptGeometry {
-        KeptGeometry { key: GeometryKey::of(ctx), samples: self.samples, rules: self.rules, info: self.info }
+        KeptGeometry {
+            key: GeometryKey::of(ctx),
+            samples: self.samples,
+            rules: self.rules,
+            info: self.info,
+            weights: self.weights,
+        }
     }
 
     /// Element `e`'s whole-domain samples with `n` points per axis.
@@ -135,6 +146,23 @@ impl<'a> ElementGeometry<'a> {
     /// `may_face(i, j) && may_face(j, i)` for elements `i` and `j`.
     pub fn face_each_other(&self, i: usize, j: usize) -> bool {
         self.info[i].may_face(&self.patches[j]) && self.info[j].may_face(&self.patches[i])
+    }
+
+    /// Each element's weight as a source ([`crate::overlap`]).
+    pub fn source_weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// Weighs a pair's blocks by their sources ([`crate::overlap`]): `G_ij` by `w_j`, `G_ji` by
+    /// `w_i`. Every block the store takes passes here, whatever computed it.
+    pub fn weigh(&self, i: usize, j: usize, ij: &mut [f64], ji: &mut [f64]) {
+        let (wi, wj) = (self.weights[i], self.weights[j]);
+        if wj != 1.0 {
+            ij.iter_mut().for_each(|x| *x *= wj);
+        }
+        if wi != 1.0 {
+            ji.iter_mut().for_each(|x| *x *= wi);
+        }
     }
 
     /// Element `e`'s bounding sphere (centre, radius).
@@ -247,6 +275,7 @@ pub fn assemble(
                 }
                 for (&(j, _), v) in group.iter().zip(vis.drain(..)) {
                     if integrate_visible_into(ctx, geom, i, j, &v, ij, ji) {
+                        geom.weigh(i, j, ij, ji);
                         row.sources.push(j as u32);
                         row.coeffs.extend(ij.iter().chain(ji.iter()).map(|&x| x as f32));
                         row.visibility.push(v);
