@@ -30,6 +30,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 OURS_ATTR = "Rad_0001"
 CYCLES_ATTR = "Cycles"
+ERROR_ATTR = "Error"
+# The error picture saturates at this relative error (of the object's mean).
+ERROR_FULL_SCALE = 0.2
 # A corner is black when below this fraction of the scene's brightest Cycles corner.
 BLACK_FRACTION = 1e-3
 # The scene file's settings fields (src/scene/json.rs, SettingsFile); the add-on's native
@@ -145,6 +148,16 @@ def write_attribute(ob, name, values):
     rgba = np.ones((len(values), 4), np.float32)
     rgba[:, :3] = values
     attr.data.foreach_set("color", rgba.ravel())
+
+
+def error_colours(ours, cycles, full_scale=ERROR_FULL_SCALE):
+    """Per corner, the signed error (ours - Cycles) / the object's mean Cycles value as a colour:
+    red where ours is brighter, blue where darker, full at `full_scale`; black where they agree."""
+    e = (ours.mean(axis=1) - cycles.mean(axis=1)) / max(float(cycles.mean()), 1e-30) / full_scale
+    rgb = np.zeros((len(e), 3), np.float32)
+    rgb[:, 0] = np.clip(e, 0, 1)
+    rgb[:, 2] = np.clip(-e, 0, 1)
+    return rgb
 
 
 def compare(ours: dict, cycles: dict) -> dict:
@@ -283,9 +296,12 @@ def run(args):
     if not args.no_pictures:
         from . import pictures
 
-        path = pictures.side_by_side(bpy, built.objects, [OURS_ATTR, CYCLES_ATTR], out / f"{suffix}.png",
-                                     emitters=built.emitters)
-        print(f"picture (ours left, Cycles right): {path}")
+        for ob in built.receivers:
+            write_attribute(ob, ERROR_ATTR, error_colours(ours[ob.name], cyc[ob.name]))
+        path = pictures.side_by_side(bpy, built.objects, [OURS_ATTR, CYCLES_ATTR, ERROR_ATTR],
+                                     out / f"{suffix}.png", emitters=built.emitters)
+        print(f"picture (ours, Cycles, error: red ours brighter, blue darker, full at "
+              f"{100 * ERROR_FULL_SCALE:.0f}%): {path}")
     return report
 
 
