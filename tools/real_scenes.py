@@ -120,7 +120,7 @@ def _room(bpy, built, folder, grey, light):
     ob = mesh_object(bpy, built, "Teddy", teddy, grey)
     decimate(bpy, ob, 700)
     place(bpy, ob, scale=0.5, y_up=True, centre=(-1.0, -0.9), base=0.0)
-    camera(bpy, (1.9, -1.9, 2.3), (-0.3, 0.2, 0.5), lens=14)
+    camera(bpy, (1.0, -1.9, 1.2), (-0.15, -0.1, 0.45), lens=20)
 
 
 def _monastery(bpy, built, folder, grey, light):

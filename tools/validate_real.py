@@ -299,7 +299,7 @@ def run(args):
         for ob in built.receivers:
             write_attribute(ob, ERROR_ATTR, error_colours(ours[ob.name], cyc[ob.name]))
         path = pictures.side_by_side(bpy, built.objects, [OURS_ATTR, CYCLES_ATTR, ERROR_ATTR],
-                                     out / f"{suffix}.png", emitters=built.emitters)
+                                     out / f"{suffix}.png", emitters=built.emitters, size=400)
         print(f"picture (ours, Cycles, error: red ours brighter, blue darker, full at "
               f"{100 * ERROR_FULL_SCALE:.0f}%): {path}")
     return report
