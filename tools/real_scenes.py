@@ -137,7 +137,7 @@ def _monastery(bpy, built, folder, grey, light):
     panel(bpy, built, "Ground", (-half, -half, lo[2] - 0.02), (2 * half, 0, 0), (0, 2 * half, 0), 8, 8, grey)
     a = 0.25 * size
     panel(bpy, built, "Light", (-a, -a, hi[2] + 0.5 * size), (0, 2 * a, 0), (2 * a, 0, 0), 1, 1, light)
-    camera(bpy, (0.55 * size, -0.75 * size, 0.45 * size), (0.0, 0.0, 0.0), lens=24)
+    camera(bpy, (0.7 * size, -0.95 * size, 0.6 * size), (0.0, 0.0, 0.0), lens=24)
 
 
 def mesh_object(bpy, built, name, mesh: real_meshes.Mesh, material):
