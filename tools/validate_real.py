@@ -3,7 +3,7 @@ built in Blender, baked by the add-on at its default settings and by Cycles (gro
 per-object relative RMSE per corner, mean ratio (ours / Cycles), the corners Cycles finds black
 that we light, and pictures side by side.
 
-    .venv/bin/python -m tools.validate_real --scene bunny|room|monastery [--samples 4096]
+    .venv/bin/python -m tools.validate_real --scene bunny|room|monastery|all [--samples 4096]
         [--cycles-cache DIR] [--order N] [--out DIR] [--export-json FILE] [--noise]
 
 Ground truth as tools/validate_cycles.py: Diffuse BSDF, one-sided emitter, Cycles DIFFUSE bake
@@ -43,7 +43,7 @@ FILE_SETTINGS = ("basis_order", "quadrature_order", "tolerance", "visibility", "
 
 def parse(argv):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--scene", default="bunny", help="bunny, room or monastery")
+    p.add_argument("--scene", default="bunny", help="bunny, room, monastery, a comma list, or all")
     p.add_argument("--samples", type=int, default=4096, help="Cycles samples of the reference")
     p.add_argument("--seed", type=int, default=1, help="Cycles seed of the reference")
     p.add_argument("--cycles-cache", default=str(REPO / "out" / "validation-real" / "cycles-cache"),
@@ -108,9 +108,10 @@ def scene_digest(data: dict) -> str:
     return hashlib.sha1(body.encode()).hexdigest()[:16]
 
 
-def cycles_values(bpy, built, samples, seed, cache, digest) -> tuple[dict, dict]:
-    """Per receiver, Cycles' per-loop radiance (C, 3) float32, from the cache or baked now; and the
-    bake's metadata (samples, seed, seconds, Blender version, digest)."""
+def cycles_values(bpy, built, samples, seed, cache, digest, bake=True) -> tuple[dict | None, dict | None]:
+    """Per receiver, Cycles' per-loop radiance (C, 3) float32, from the cache or baked now (with
+    `bake`; else (None, None) when not cached); and the bake's metadata (samples, seed, seconds,
+    Blender version, digest)."""
     from . import bakes, blender_scene
 
     path = Path(cache) / f"{built.name}_{samples}spp_seed{seed}_{digest}" if cache else None
@@ -122,6 +123,8 @@ def cycles_values(bpy, built, samples, seed, cache, digest) -> tuple[dict, dict]
             when = f"{meta['seconds']:.0f} s when baked"
             print(f"Cycles: cached {path.with_suffix('.npz')} ({when})", flush=True)
             return values, meta
+    if not bake:
+        return None, None
     receivers = built.receivers
     blender_scene.use_materials(built.objects, built.emitters)
     print(f"Cycles: baking {built.name} at {samples} spp (seed {seed}) ...", flush=True)
@@ -247,6 +250,9 @@ def run(args):
     out.mkdir(parents=True, exist_ok=True)
     bpy = setup_blender()
     bpy.ops.wm.read_factory_settings(use_empty=True)
+    from addon.blender import bake
+
+    bake.drop_held()  # a session held from the previous scene of `--scene all`
     built = real_scenes.build(bpy, args.scene, args.meshes)
     for line in built.notes:
         print(line)
@@ -262,8 +268,10 @@ def run(args):
               f"{args.export_json} -o result.json)")
     cyc, meta = cycles_values(bpy, built, args.samples, args.seed, args.cycles_cache, digest)
     noise_ = None
-    if args.noise:
-        second, _ = cycles_values(bpy, built, args.samples, args.seed + 1, args.cycles_cache, digest)
+    # The second seed: baked with --noise, else read from the cache if an earlier run baked it.
+    second, _ = cycles_values(bpy, built, args.samples, args.seed + 1, args.cycles_cache, digest,
+                              bake=args.noise)
+    if second is not None:
         noise_ = noise(cyc, second)
         print("Cycles noise per corner: " + ", ".join(f"{k} {100 * v:.2f}%" for k, v in noise_.items()))
     if args.reference:
@@ -306,7 +314,13 @@ def run(args):
 
 
 def main(argv=None):
-    run(parse(sys.argv[1:] if argv is None else argv))
+    from .real_scenes import PRESETS
+
+    args = parse(sys.argv[1:] if argv is None else argv)
+    scenes = PRESETS if args.scene == "all" else args.scene.split(",")
+    reports = [run(argparse.Namespace(**{**vars(args), "scene": name})) for name in scenes]
+    if len(scenes) > 1:
+        print("\n\n".join(table(r) for r in reports if r is not None))
 
 
 if __name__ == "__main__":
