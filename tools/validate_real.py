@@ -155,11 +155,12 @@ def write_attribute(ob, name, values):
 
 def error_colours(ours, cycles, full_scale=ERROR_FULL_SCALE):
     """Per corner, the signed error (ours - Cycles) / the object's mean Cycles value as a colour:
-    red where ours is brighter, blue where darker, full at `full_scale`; black where they agree."""
+    red where ours is brighter, blue where darker, full at `full_scale`; black where they agree.
+    Raised to 2.2 so that the picture's sRGB encoding shows brightness in proportion to the error."""
     e = (ours.mean(axis=1) - cycles.mean(axis=1)) / max(float(cycles.mean()), 1e-30) / full_scale
     rgb = np.zeros((len(e), 3), np.float32)
-    rgb[:, 0] = np.clip(e, 0, 1)
-    rgb[:, 2] = np.clip(-e, 0, 1)
+    rgb[:, 0] = np.clip(e, 0, 1) ** 2.2
+    rgb[:, 2] = np.clip(-e, 0, 1) ** 2.2
     return rgb
 
 
