@@ -301,6 +301,7 @@ def run(args):
         report["cycles_noise"] = noise_
     suffix = f"{args.scene}_order{settings.basis_order}_{args.samples}spp"
     (out / f"{suffix}.json").write_text(json.dumps(report, indent=1))
+    np.savez_compressed(out / f"{suffix}_ours.npz", **ours)  # per-loop radiance, to diff runs
     print(table(report), flush=True)
     if not args.no_pictures:
         from . import pictures
