@@ -9,8 +9,8 @@ command -v "$PY" >/dev/null || PY=python3
 if [ ! -x .venv/bin/python ]; then
     "$PY" -m venv .venv
 fi
-if ! .venv/bin/python -c 'import bpy, pytest, matplotlib' >/dev/null 2>&1; then
-    .venv/bin/pip install -q bpy==5.0.1 pytest ruff matplotlib
+if ! .venv/bin/python -c 'import bpy, pytest, matplotlib, trimesh' >/dev/null 2>&1; then
+    .venv/bin/pip install -q bpy==5.0.1 pytest ruff matplotlib trimesh
 fi
 # Shared libraries bpy loads; present on these machines, installed on a bare Debian.
 if ! .venv/bin/python -c 'import bpy' >/dev/null 2>&1 && command -v apt-get >/dev/null; then

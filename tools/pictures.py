@@ -71,7 +71,7 @@ def stitch(bpy, paths, out, gap=4):
     return Path(out)
 
 
-def side_by_side(bpy, objects, attrs, out, emitters=()):
+def side_by_side(bpy, objects, attrs, out, emitters=(), size=256):
     """Renders each attribute and stitches them left to right. Emitter objects keep their own
     material (their light shows in every tile)."""
     out = Path(out)
@@ -81,6 +81,7 @@ def side_by_side(bpy, objects, attrs, out, emitters=()):
         if any(s.material and s.material.name in emitters for s in ob.material_slots)
     }
     tiles = [
-        render_attribute(bpy, objects, a, out.with_name(f"{out.stem}_{a}.png"), skip=skip) for a in attrs
+        render_attribute(bpy, objects, a, out.with_name(f"{out.stem}_{a}.png"), size=size, skip=skip)
+        for a in attrs
     ]
     return stitch(bpy, tiles, out)
