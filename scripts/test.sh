@@ -1,6 +1,11 @@
 #!/usr/bin/env bash
 # Runs every test: Rust (unit, integration, the C program, property tests), lints, and the Python
 # tests under bpy. Sets up what it needs on a fresh machine (a venv with bpy from PyPI).
+# Prints one line per stage with its elapsed seconds, and the total at the end.
+#
+# The random tests run a small fixed set by default; the long runs are
+#   ANIMATION_RANDOM_CASES=1000 cargo test --release --test animation_random   (about 5 minutes)
+#   PROPTEST_CASES=300000 cargo test --release --test ffi_props -- --nocapture  (about 5 minutes)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -17,17 +22,28 @@ limited() {
     return "$status"
 }
 
-echo "== cargo fmt / clippy"
-cargo fmt --all -- --check
-cargo clippy --release --all-targets -- -D warnings
+START=$SECONDS
+# stage NAME COMMAND...: runs COMMAND, then prints how long it took (and whether it failed).
+stage() {
+    local name=$1
+    shift
+    local t0=$SECONDS status=0
+    echo "== $name"
+    "$@" || status=$?
+    echo "-- $name: $((SECONDS - t0)) s$([ "$status" -eq 0 ] || echo ", FAILED (exit $status)")"
+    return "$status"
+}
 
-echo "== cargo test (release: the C test links target/release)"
-cargo build --release --lib   # the C test links the cdylib
-limited 1500 cargo test --release
+stage "cargo fmt" cargo fmt --all -- --check
+stage "cargo clippy (check build of every target)" cargo clippy --release --all-targets -- -D warnings
+# The C test links the cdylib; `cargo test` builds it too, this makes target/release/ hold it.
+stage "cargo build --release (library and CLI)" cargo build --release
+stage "cargo test --release --no-run (compile the test binaries)" limited 1500 cargo test --release --no-run
+stage "cargo test --release (run)" limited 1500 cargo test --release
 
 if [ -d tests/python ] && ls tests/python/test_*.py >/dev/null 2>&1; then
-    echo "== Python tests under bpy"
-    bash scripts/setup-python.sh
-    .venv/bin/ruff check addon tests/python
-    limited 2400 .venv/bin/python -m pytest -q tests/python
+    stage "Python venv with bpy" bash scripts/setup-python.sh
+    stage "ruff" .venv/bin/ruff check addon tests/python tools
+    stage "pytest under bpy" limited 2400 .venv/bin/python -m pytest -q tests/python
 fi
+echo "== all tests passed in $((SECONDS - START)) s"
