@@ -45,5 +45,14 @@ if [ -d tests/python ] && ls tests/python/test_*.py >/dev/null 2>&1; then
     stage "Python venv with bpy" bash scripts/setup-python.sh
     stage "ruff" .venv/bin/ruff check addon tests/python tools
     stage "pytest under bpy" limited 2400 .venv/bin/python -m pytest -q tests/python
+    # Blender 4.5 LTS, when a venv with its bpy module is there (not made here: 1 GB more):
+    #   python3.11 -m venv .venv45 && .venv45/bin/pip install "bpy==4.5.*" pytest
+    BPY45=${BPY45_PYTHON:-.venv45/bin/python}
+    if [ -x "$BPY45" ]; then
+        stage "pytest under bpy 4.5 (install and headless)" limited 1200 "$BPY45" -m pytest -q \
+            tests/python/test_headless_and_packaging.py
+    else
+        echo "-- bpy 4.5: skipped (no $BPY45; set BPY45_PYTHON to a Python with bpy 4.5)"
+    fi
 fi
 echo "== all tests passed in $((SECONDS - START)) s"
