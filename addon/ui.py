@@ -21,12 +21,15 @@ class RENDER_PT_radiosity(bpy.types.Panel):
         row.scale_y = 1.4
         row.operator("radiosity.bake", icon="RENDER_ANIMATION")
         row.operator("radiosity.clear", text="", icon="TRASH")
+        # Grouped by what an artist trades: how fine the light is, what it shows, how it is run.
         col = layout.column()
         col.prop(p, "basis_order")
         col.prop(p, "quality")
         col.prop(p, "tolerance")
+        col = layout.column(heading="Light")
         col.prop(p, "visibility")
         col.prop(p, "corner_gather")
+        col = layout.column()
         col.prop(p, "method")
         col.prop(p, "threads")
         col.prop(p, "collection")
