@@ -11,6 +11,7 @@ pub mod animation;
 pub mod basis;
 pub mod error;
 pub mod ffi;
+pub mod finite;
 pub mod gather;
 pub mod geometry;
 pub mod kernel;

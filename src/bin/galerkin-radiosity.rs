@@ -6,13 +6,13 @@
 //! ```
 //! Exits 0 on success, 1 on any error with a one-line message on stderr, 2 on a usage error.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
 use std::time::Instant;
 
-use galerkin_radiosity::scene::Settings;
 use galerkin_radiosity::scene::json::{FrameResult, ResultFile, read_scene, scene_to_json};
+use galerkin_radiosity::scene::{MAX_THREADS, Settings, check_animation, check_frames};
 use galerkin_radiosity::scenes;
 use galerkin_radiosity::session::{Method, Session};
 
@@ -98,9 +98,46 @@ fn bake(args: &[String]) -> Result<(), CliError> {
     let [input] = args.as_slice() else {
         return Err(CliError::Usage(format!("bake takes one scene file, got {args:?}")));
     };
+    let partial = writable_output(&out)?;
+    let result = bake_into(input, &out, &partial, frames, threads, (full, exact, quiet, no_gather));
+    let _ = std::fs::remove_file(&partial);
+    result
+}
+
+/// The file a bake writes before renaming it to `out` (so a failed bake leaves `out` as it was),
+/// created now: a missing folder or one that cannot be written to is an error before any work.
+fn writable_output(out: &str) -> Result<PathBuf, CliError> {
+    let path = Path::new(out);
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if !folder.is_dir() {
+        return Err(CliError::Failed(format!("{out}: the folder {} does not exist", folder.display())));
+    }
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(".partial");
+    let partial = folder.join(name);
+    std::fs::File::create(&partial)
+        .map_err(|e| CliError::Failed(format!("{out}: cannot write there: {e}")))?;
+    Ok(partial)
+}
+
+fn bake_into(
+    input: &str,
+    out: &str,
+    partial: &Path,
+    frames: Option<String>,
+    threads: Option<String>,
+    (full, exact, quiet, no_gather): (bool, bool, bool, bool),
+) -> Result<(), CliError> {
     let mut scene = read_scene(&PathBuf::from(input))?;
     if let Some(t) = threads {
-        scene.settings.threads = parse(&t, "--threads")?;
+        let n: usize = parse(&t, "--threads")?;
+        if n > MAX_THREADS {
+            return Err(CliError::Usage(format!("--threads {n} is above {MAX_THREADS}")));
+        }
+        scene.settings.threads = n;
     }
     if no_gather {
         scene.settings.corner_gather = false;
@@ -111,9 +148,7 @@ fn bake(args: &[String]) -> Result<(), CliError> {
             let (a, b) =
                 r.split_once(':').ok_or_else(|| CliError::Usage(format!("--frames wants A:B, got {r:?}")))?;
             let (a, b): (i64, i64) = (parse(a, "--frames")?, parse(b, "--frames")?);
-            if a > b {
-                return Err(CliError::Usage(format!("--frames {a}:{b}: the first frame is after the last")));
-            }
+            check_frames((a, b)).map_err(|m| CliError::Usage(format!("--{m}")))?;
             (a, b)
         }
     };
@@ -132,6 +167,8 @@ fn bake(args: &[String]) -> Result<(), CliError> {
     } else {
         Method::Incremental
     };
+    // Every frame's placement, before the first is baked (the session checks each again).
+    check_animation(&scene, (first, last))?;
     let mut session = Session::new(scene, method)?;
     let start = Instant::now();
     let mut frames_out = Vec::new();
@@ -174,7 +211,8 @@ fn bake(args: &[String]) -> Result<(), CliError> {
     };
     let text =
         serde_json::to_string(&result).map_err(|e| CliError::Failed(format!("writing result: {e}")))?;
-    std::fs::write(&out, text).map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
+    std::fs::write(partial, text).map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
+    std::fs::rename(partial, out).map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
     if !quiet {
         eprintln!("wrote {out}: {total} frame(s) in {:.2} s", start.elapsed().as_secs_f64());
     }

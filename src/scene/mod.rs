@@ -9,6 +9,9 @@ mod placement;
 mod validate;
 
 pub use placement::{Key, KeyTransform};
+pub use validate::{
+    MAX_COORDINATE, MAX_EMISSION, MAX_FRAMES, MAX_THREADS, check_animation, check_frames, check_placed,
+};
 
 use glam::{DMat4, DVec3};
 
