@@ -9,6 +9,7 @@
 
 pub mod animation;
 pub mod basis;
+pub mod budget;
 pub mod error;
 pub mod ffi;
 pub mod finite;

@@ -145,7 +145,10 @@ pub struct Session {
 }
 
 impl Session {
+    /// Refused at once when the scene's estimated memory is over its budget
+    /// ([`crate::budget::check`], one frame's results kept).
     pub fn new(scene: Scene, method: Method) -> Result<Self> {
+        crate::budget::check(&scene, 1)?;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(scene.settings.threads)
             .build()

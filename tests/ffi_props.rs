@@ -34,6 +34,7 @@ struct RawSettings {
     threads: u32,
     method: u32,
     corner_gather: u32,
+    memory_budget_mb: u64,
 }
 
 const _: () = assert!(size_of::<RawSettings>() == size_of::<GrSettings>());
@@ -126,6 +127,7 @@ fn settings() -> impl Strategy<Value = RawSettings> {
             threads: th,
             method: m,
             corner_gather: g,
+            memory_budget_mb: 0,
         }
     })
 }
@@ -147,7 +149,7 @@ enum Fault {
 
 fn fault() -> impl Strategy<Value = Fault> {
     let setting = prop_oneof![
-        (0usize..8, prop_oneof![Just(0u64), 3u64..20, Just(u64::from(u32::MAX))]),
+        (0usize..9, prop_oneof![Just(0u64), 3u64..20, Just(u64::from(u32::MAX))]),
         Just(2usize).prop_flat_map(|k| {
             (
                 Just(k),
@@ -329,6 +331,7 @@ fn run(c: &Case) -> Result<(), TestCaseError> {
                 4 => settings.visibility_samples = v32,
                 5 => settings.threads = v32,
                 6 => settings.corner_gather = v32,
+                8 => settings.memory_budget_mb = v,
                 _ => settings.method = v32,
             }
         }

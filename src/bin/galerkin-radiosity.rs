@@ -1,7 +1,7 @@
 //! `galerkin-radiosity`: bake a scene file, or write the demo scene.
 //!
 //! ```text
-//! galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--no-corner-gather] [--quiet]
+//! galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--memory-budget MB] [--no-corner-gather] [--quiet]
 //! galerkin-radiosity demo-scene -o SCENE.json [--frames N] [--subdiv N] [--order N]
 //! ```
 //! Exits 0 on success, 1 on any error with a one-line message on stderr, 2 on a usage error.
@@ -17,7 +17,7 @@ use galerkin_radiosity::scenes;
 use galerkin_radiosity::session::{Method, Session};
 
 const USAGE: &str = "usage:
-  galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--no-corner-gather] [--quiet]
+  galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--memory-budget MB] [--no-corner-gather] [--quiet]
   galerkin-radiosity demo-scene -o SCENE.json [--kind cornell|cornell-light|room|billiard] [--frames N] [--subdiv N] [--order N]";
 
 fn main() -> ExitCode {
@@ -88,6 +88,8 @@ fn bake(args: &[String]) -> Result<(), CliError> {
         .ok_or_else(|| CliError::Usage("bake needs -o OUT.json".into()))?;
     let frames = take_value(&mut args, &["--frames"])?;
     let threads = take_value(&mut args, &["--threads"])?;
+    let budget: Option<u64> =
+        take_value(&mut args, &["--memory-budget"])?.map(|v| parse(&v, "--memory-budget")).transpose()?;
     let full = take_flag(&mut args, "--full");
     let exact = take_flag(&mut args, "--exact");
     let quiet = take_flag(&mut args, "--quiet");
@@ -99,7 +101,7 @@ fn bake(args: &[String]) -> Result<(), CliError> {
         return Err(CliError::Usage(format!("bake takes one scene file, got {args:?}")));
     };
     let partial = writable_output(&out)?;
-    let result = bake_into(input, &out, &partial, frames, threads, (full, exact, quiet, no_gather));
+    let result = bake_into(input, &out, &partial, (frames, threads, budget), (full, exact, quiet, no_gather));
     let _ = std::fs::remove_file(&partial);
     result
 }
@@ -127,8 +129,7 @@ fn bake_into(
     input: &str,
     out: &str,
     partial: &Path,
-    frames: Option<String>,
-    threads: Option<String>,
+    (frames, threads, budget): (Option<String>, Option<String>, Option<u64>),
     (full, exact, quiet, no_gather): (bool, bool, bool, bool),
 ) -> Result<(), CliError> {
     let mut scene = read_scene(&PathBuf::from(input))?;
@@ -141,6 +142,9 @@ fn bake_into(
     }
     if no_gather {
         scene.settings.corner_gather = false;
+    }
+    if let Some(mb) = budget {
+        scene.settings.memory_budget_mb = mb;
     }
     let (first, last) = match frames {
         None => scene.frames,
@@ -169,6 +173,8 @@ fn bake_into(
     };
     // Every frame's placement, before the first is baked (the session checks each again).
     check_animation(&scene, (first, last))?;
+    // Every frame's results are kept until the file is written.
+    galerkin_radiosity::budget::check(&scene, (last - first + 1) as u64)?;
     let mut session = Session::new(scene, method)?;
     let start = Instant::now();
     let mut frames_out = Vec::new();

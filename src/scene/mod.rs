@@ -37,6 +37,9 @@ pub struct Settings {
     /// Face corners report `B` gathered at the corner from the solution ([`crate::gather`]),
     /// with its own shadow rays, instead of the face polynomial's value there.
     pub corner_gather: bool,
+    /// The memory a bake may plan to use, in MiB ([`crate::budget`]); 0: 80% of the memory
+    /// available when the session starts.
+    pub memory_budget_mb: u64,
 }
 
 impl Default for Settings {
@@ -50,6 +53,7 @@ impl Default for Settings {
             threads: 0,
             adaptive_quadrature: true,
             corner_gather: true,
+            memory_budget_mb: 0,
         }
     }
 }
