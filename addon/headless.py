@@ -7,14 +7,26 @@ With the bpy module (pip install bpy):
 
 Prints progress lines; on failure prints one line ``galerkin-radiosity: error: ...`` on stderr
 and exits 1 (2 for a usage error). Options not given keep the file's Radiosity settings.
+
+SIGINT (Ctrl-C) or SIGTERM stops the bake within one progress poll of the library (<= 50 ms
+inside a frame), keeps every complete frame, saves them to ``--save`` and exits 130 or 143. With
+``--save``, the file is also saved every ``--checkpoint N`` solved frames (default 10), so a killed
+bake loses at most that many. ``--resume`` opens the ``--save`` file, when it exists, instead of the
+source file, and goes on from its last complete frame (the re-bake keeps the solved frames).
 """
 
 import argparse
 import importlib
+import os
+import signal
 import sys
+import threading
 from pathlib import Path
 
 PREFIX = "galerkin-radiosity"
+
+# Solved frames between two saves of ``--save`` during a bake.
+DEFAULT_CHECKPOINT = 10
 
 
 def parse(argv):
@@ -37,7 +49,54 @@ def parse(argv):
                    help="corners from the face polynomials (faster, softer contact shadows)")
     p.add_argument("--clear", action="store_true", help="clear the bake instead of baking")
     p.add_argument("--save", help="save the result to this .blend (default: nothing is saved)")
-    return p.parse_args(argv)
+    p.add_argument("--checkpoint", type=int, default=DEFAULT_CHECKPOINT, metavar="N",
+                   help=f"with --save, save every N solved frames (default {DEFAULT_CHECKPOINT})")
+    p.add_argument("--resume", action="store_true",
+                   help="open the --save file if it exists and continue from its last complete frame")
+    args = p.parse_args(argv)
+    if args.checkpoint < 1:
+        p.error(f"--checkpoint {args.checkpoint}: must be at least 1")
+    if args.resume and not args.save:
+        p.error("--resume needs --save (the file to continue)")
+    return args
+
+
+class Interrupt:
+    """SIGINT and SIGTERM cancel the running bake at once, whatever thread is in the library.
+
+    Python runs signal handlers on the main thread between bytecodes, and that thread sits in the
+    native solve for the whole frame: the handler alone would wait for it (90+ s on a big frame).
+    The C-level handler also writes the signal number to the wakeup fd; a watcher thread reads it
+    and cancels the job (``BakeJob.cancel`` only sets an event and the session's atomic flag).
+    """
+
+    def __init__(self):
+        self.signum = None
+        self.job = None
+        self._old = {}
+
+    def install(self):
+        r, w = os.pipe()
+        os.set_blocking(w, False)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._old[sig] = signal.signal(sig, self._note)
+        self._old_fd = signal.set_wakeup_fd(w)
+        threading.Thread(target=self._watch, args=(r,), daemon=True).start()
+
+    def uninstall(self):
+        signal.set_wakeup_fd(self._old_fd)
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+
+    def _note(self, signum, _frame):
+        self.signum = signum
+
+    def _watch(self, r):
+        while data := os.read(r, 1):
+            self.signum = data[0]
+            job = self.job
+            if job is not None:
+                job.cancel()
 
 
 def script_args(argv):
@@ -74,7 +133,10 @@ def main(argv=None):
     args = parse(script_args(sys.argv if argv is None else argv))
     import bpy
 
-    if args.blend:
+    if args.resume and Path(args.save).exists():
+        bpy.ops.wm.open_mainfile(filepath=str(Path(args.save).resolve()))
+        print(f"Radiosity: resuming {args.save}")
+    elif args.blend:
         bpy.ops.wm.open_mainfile(filepath=str(Path(args.blend).resolve()))
     pkg, registered = load_package()
     try:
@@ -121,8 +183,59 @@ def _main(args, bpy, pkg):
             n = bake.clear_bake(scene)
             print(f"Radiosity: cleared the bake from {n} object(s)")
         else:
+            interrupt = Interrupt()
+            interrupt.install()
+            try:
+                code = _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt)
+            finally:
+                interrupt.uninstall()
+            if code is not None:
+                return code
+            if interrupt.signum is not None:
+                name = signal.Signals(interrupt.signum).name
+                where = f"; run again with --resume --save {args.save} to continue" if args.save else ""
+                print(f"Radiosity: interrupted by {name}, complete frames kept{where}")
+                return 128 + interrupt.signum
+    if args.save:
+        _save(bpy, args.save)
+    return 0
+
+
+def _save(bpy, path):
+    bpy.ops.wm.save_as_mainfile(filepath=str(Path(path).resolve()), check_existing=False)
+    print(f"Radiosity: saved {path}")
+
+
+def _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt):
+    """Bakes the range as re-bakes of a growing range, ``--checkpoint`` solved frames at a time,
+    saving ``--save`` after each (without ``--save``, in one go). Each re-bake keeps the frames
+    solved before (the record's digests are unchanged) and goes on in the held session, so the
+    chunks cost what one bake costs, plus sampling the kept frames again. Returns an exit code
+    on failure, else None."""
+    p = scene.radiosity
+    settings = bake.settings_from_scene(scene)
+    frames = settings.baked_frames()
+    size = args.checkpoint if args.save else len(frames)
+    original = (p.use_scene_range, p.frame_start, p.frame_end)
+
+    def restore():
+        p.use_scene_range, p.frame_start, p.frame_end = original
+
+    ends = list(range(size, len(frames) + size, size))
+    # A bake to resume: from the chunk holding its last complete frame (a shorter first chunk
+    # would trim the kept frames beyond it).
+    record = bake.read_record(scene)
+    if record is not None and record.complete:
+        ends = [k for k in ends if frames[min(k, len(frames)) - 1] >= record.complete[1]] or ends[-1:]
+    try:
+        for k in ends:
+            if interrupt.signum is not None:
+                break
+            p.use_scene_range = False
+            p.frame_start, p.frame_end = settings.frame_start, frames[min(k, len(frames)) - 1]
             try:
                 job = bake.BakeJob(ctx, bake.settings_from_scene(scene), p.collection, verbose=True)
+                interrupt.job = job
                 job.run()
             except bake.BakeError as e:
                 return fail(str(e))
@@ -131,13 +244,18 @@ def _main(args, bpy, pkg):
                 if library_error or isinstance(e, (ImportError, OSError)):
                     return fail(str(e).replace("\n", " "))
                 raise
+            finally:
+                interrupt.job = None
             for line in job.warnings:
                 print(f"Radiosity: warning: {line}")
             print(job.summary)
-    if args.save:
-        bpy.ops.wm.save_as_mainfile(filepath=str(Path(args.save).resolve()), check_existing=False)
-        print(f"Radiosity: saved {args.save}")
-    return 0
+            # A checkpoint (the last chunk's file is saved by the caller).
+            if args.save and (k < len(frames) or interrupt.signum is not None):
+                restore()
+                _save(bpy, args.save)
+    finally:
+        restore()
+    return None
 
 
 def fail(message):

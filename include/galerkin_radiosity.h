@@ -59,7 +59,9 @@ enum GrStatus
    * The scene failed validation (non-finite vertex or matrix, face with other than 3 or 4
    * vertices, vertex index or material out of range, reflectance outside [0,1), bad
    * settings); the message names the object, face or field. Also returned by a solve that
-   * diverges (faces that cross or overlap while visibility is off or coarse).
+   * diverges (faces that cross or overlap while visibility is off or coarse), by a frame placed
+   * with no area or out of range, and by a scene whose estimated memory is over
+   * `memory_budget_mb` (the message begins "over the memory budget").
    */
   GR_STATUS_INVALID_SCENE = 3,
   /**
@@ -161,6 +163,13 @@ typedef struct GrSettings {
    * frame); 0: the face polynomial at the corner. Other values are invalid. Default 1.
    */
   uint32_t corner_gather;
+  /**
+   * The memory a session may plan to use, in MiB: a scene whose estimate is over it is
+   * refused by `gr_session_new` with `GR_STATUS_INVALID_SCENE` ("over the memory budget"),
+   * at once. 0: 80% of the memory available (`MemAvailable`) when the session is made.
+   * Default 0.
+   */
+  uint64_t memory_budget_mb;
 } GrSettings;
 
 /**

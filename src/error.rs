@@ -12,6 +12,9 @@ pub enum Error {
     InvalidArgument(String),
     /// The host asked to stop (progress callback or cancel flag).
     Cancelled,
+    /// The bake's estimated memory is over the budget ([`crate::budget`]); the message gives
+    /// both and what to change.
+    OverBudget(String),
     /// A bug: a panic caught at the boundary, with its message.
     Internal(String),
 }
@@ -23,6 +26,7 @@ impl fmt::Display for Error {
             Error::InvalidScene(m) => write!(f, "invalid scene: {m}"),
             Error::InvalidArgument(m) => write!(f, "invalid argument: {m}"),
             Error::Cancelled => write!(f, "cancelled"),
+            Error::OverBudget(m) => write!(f, "over the memory budget: {m}"),
             Error::Internal(m) => write!(f, "internal error: {m}"),
         }
     }

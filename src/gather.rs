@@ -56,6 +56,55 @@ use crate::system::{Progress, System, corner_params};
 use crate::visibility::shaft::Shaft;
 use crate::visibility::{MovedOccluders, Occluders, Visibility, cell_of};
 
+/// How often the gather asks the host whether to go on (and reports progress): every corner and
+/// every step of a moment's subdivision looks at the flag, one of them calls the host when this
+/// much time has passed, so a cancel is seen within about this long (the solve's is one batch).
+const POLL_INTERVAL: std::time::Duration = std::time::Duration::from_millis(10);
+
+/// The gather's cancel and progress: the host's callback, called at most every
+/// [`POLL_INTERVAL`] from whichever thread looks first, and what it said.
+struct Stop<'a> {
+    progress: Progress<'a>,
+    start: std::time::Instant,
+    /// Microseconds after `start` of the last call of `progress`.
+    last_poll: std::sync::atomic::AtomicU64,
+    cancelled: std::sync::atomic::AtomicBool,
+    /// Points gathered so far, of `total`.
+    done: std::sync::atomic::AtomicUsize,
+    total: usize,
+}
+
+impl Stop<'_> {
+    /// Whether the host asked to stop; asks it again when [`POLL_INTERVAL`] has passed.
+    fn stopped(&self) -> bool {
+        use std::sync::atomic::Ordering::Relaxed;
+        if self.cancelled.load(Relaxed) {
+            return true;
+        }
+        // The clock is read on one call in 32 per thread: a step of `moments` costs more than
+        // a flag load but can be cheaper than a clock read.
+        thread_local!(static CALLS: std::cell::Cell<u32> = const { std::cell::Cell::new(0) });
+        if CALLS.with(|c| {
+            c.set(c.get().wrapping_add(1));
+            c.get() % 32 != 0
+        }) {
+            return false;
+        }
+        let now = self.start.elapsed().as_micros() as u64;
+        let last = self.last_poll.load(Relaxed);
+        if now.saturating_sub(last) < POLL_INTERVAL.as_micros() as u64
+            || self.last_poll.compare_exchange(last, now, Relaxed, Relaxed).is_err()
+        {
+            return false;
+        }
+        let fraction = self.done.load(Relaxed) as f64 / self.total.max(1) as f64;
+        if !(self.progress)(fraction.min(1.0), "corner gather") {
+            self.cancelled.store(true, Relaxed);
+        }
+        self.cancelled.load(Relaxed)
+    }
+}
+
 /// Corners are gathered this far inside their face (in its parameter domain): exactly on an edge,
 /// a perpendicular neighbour is seen edge-on and drops out, while a vertex bake and the eye see
 /// the limit from inside.
@@ -311,11 +360,24 @@ impl CornerGather {
             .map(|p| {
                 MovedOccluders::new(movers.iter().map(|&e| (&p.patches[e as usize], &patches[e as usize])))
             });
+        let stop = Stop {
+            progress,
+            start: std::time::Instant::now(),
+            last_poll: 0.into(),
+            cancelled: false.into(),
+            done: 0.into(),
+            total: points.len(),
+        };
+        // Asked once before any corner (later polls wait for POLL_INTERVAL).
+        if !progress(0.0, "corner gather") {
+            return Err(Error::Cancelled);
+        }
         let scale = patches.iter().fold(Aabb::EMPTY, |b, p| b.union(p.bounds())).diagonal().length();
         let planes: Vec<Option<FrontPlane>> = patches.iter().map(Patch::front_plane).collect();
         let radii: Vec<f64> = patches.iter().map(|p| p.bounding_sphere().1).collect();
         let gather = Gather {
             sys,
+            stop: &stop,
             planes: &planes,
             radii: &radii,
             emitters: &emitters,
@@ -346,8 +408,6 @@ impl CornerGather {
                 })
                 .collect(),
         };
-        let total = points.len();
-        let done = std::sync::atomic::AtomicUsize::new(0);
         let kept_rows: Vec<Option<Row>> = match previous {
             Some(p) => p.rows.into_iter().map(Some).collect(),
             None => vec![None; points.len()],
@@ -358,8 +418,8 @@ impl CornerGather {
             .par_chunks(4)
             .zip(kept_rows.into_par_iter().chunks(4))
             .flat_map_iter(|(points, kept)| {
-                let d = done.fetch_add(points.len(), std::sync::atomic::Ordering::Relaxed);
-                if d % 256 < points.len() && !progress(d as f64 / total.max(1) as f64, "corner gather") {
+                stop.done.fetch_add(points.len(), std::sync::atomic::Ordering::Relaxed);
+                if stop.stopped() {
                     return vec![Err(Error::Cancelled)];
                 }
                 let rows: Vec<(Row, usize)> = points
@@ -393,6 +453,10 @@ impl CornerGather {
                 rows.into_iter().zip(values).map(|((row, n), v)| Ok((row, n, v))).collect()
             })
             .collect::<Result<_>>()?;
+        // A cancel seen inside a row cut it short without an error.
+        if stop.cancelled.load(std::sync::atomic::Ordering::Relaxed) {
+            return Err(Error::Cancelled);
+        }
         let mut values: Vec<[f64; 3]> = gathered.iter().map(|g| g.2).collect();
         // A point inside another closed surface receives nothing (crate::solids); which points
         // are is decided again only when something moved.
@@ -595,6 +659,9 @@ fn mask_row(vis: &Visibility, cells: usize, corner: usize, corner_is_a: bool) ->
 /// moved since the kept gather.
 struct Gather<'a> {
     sys: &'a System,
+    /// Polled by every corner and every step of [`Gather::moments`]: once it says stop, rows
+    /// are cut short and `run` returns `Cancelled`.
+    stop: &'a Stop<'a>,
     /// Elements with emission, and the flag per element.
     emitters: &'a [usize],
     is_emitter: &'a [bool],
@@ -1075,6 +1142,9 @@ impl Gather<'_> {
         out: &mut [f64],
         ball: Option<(f64, &mut f64)>,
     ) {
+        if self.stop.stopped() {
+            return;
+        }
         let patch = &self.patches[j];
         let sub = patch.sub_patch(rect);
         let (centre, radius) = sub.bounding_sphere();

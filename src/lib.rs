@@ -9,9 +9,11 @@
 
 pub mod animation;
 pub mod basis;
+pub mod budget;
 pub mod diagnose;
 pub mod error;
 pub mod ffi;
+pub mod finite;
 pub mod gather;
 pub mod geometry;
 pub mod hemisphere;

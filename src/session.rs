@@ -11,9 +11,10 @@ use glam::DMat4;
 
 use crate::animation::{self, AnimationState, Outcome};
 use crate::error::{Error, Result};
+use crate::finite::{check_results, clamp_rounding};
 use crate::gather::GatherStats;
-use crate::scene::Scene;
 use crate::scene::json::ObjectResult;
+use crate::scene::{MAX_EMISSION, Scene, check_placed};
 use crate::solver;
 use crate::system::{Progress, System};
 
@@ -144,7 +145,10 @@ pub struct Session {
 }
 
 impl Session {
+    /// Refused at once when the scene's estimated memory is over its budget
+    /// ([`crate::budget::check`], one frame's results kept).
     pub fn new(scene: Scene, method: Method) -> Result<Self> {
+        crate::budget::check(&scene, 1)?;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(scene.settings.threads)
             .build()
@@ -202,9 +206,9 @@ impl Session {
                 self.scene.materials.len()
             )));
         }
-        if emission.iter().any(|e| !e.is_finite() || *e < 0.0) {
+        if emission.iter().any(|e| !e.is_finite() || *e < 0.0 || *e > MAX_EMISSION) {
             return Err(Error::InvalidArgument(format!(
-                "material {m}: emission {emission:?} must be finite and >= 0"
+                "material {m}: emission {emission:?} must be finite, >= 0 and at most {MAX_EMISSION:e}"
             )));
         }
         self.emission[m] = Some(emission);
@@ -249,6 +253,7 @@ impl Session {
             // not, and shooting through them would mix the two frames. Solved afresh.
             let (system, seconds, g) =
                 self.rebuild(&placed, frame, placed.settings.corner_gather, progress)?;
+            check_results(&system.face_results(&placed, frame), &placed, frame)?;
             let r = Refinement {
                 rebuilt: Some(system.stats.kernel_seconds),
                 solve_seconds: system.stats.solve_seconds,
@@ -272,6 +277,11 @@ impl Session {
             }
             Ok(Refinement { solve_seconds, shots: shot.shots, rebuilt: None, gather })
         })?;
+        if let Err(e) = check_results(&sys.face_results(&placed, frame), &placed, frame) {
+            // The frame's own solution went bad: nothing readable is left to keep.
+            (self.system, self.animation, self.frame) = (None, None, None);
+            return Err(e);
+        }
         self.unrefined = false;
         Ok(Some(refinement))
     }
@@ -297,6 +307,7 @@ impl Session {
         }
         let start = Instant::now();
         let mut placed = self.scene_at(frame);
+        check_placed(&placed, frame)?;
         if self.preview {
             placed.settings.tolerance = preview_tolerance(placed.settings.tolerance);
         }
@@ -317,6 +328,13 @@ impl Session {
                     return Ok((outcome, timed_gather(sys, &placed, frame, progress)?));
                 }
                 Ok((outcome, (0.0, GatherStats::default())))
+            });
+            // A frame whose values are not all finite is not kept (`crate::finite`).
+            let outcome = outcome.and_then(|(o, g)| {
+                if let Outcome::Updated(_) = o {
+                    check_results(&sys.face_results(&placed, frame), &placed, frame)?;
+                }
+                Ok((o, g))
             });
             match outcome {
                 Ok((Outcome::Updated(u), (gather_seconds, g))) => {
@@ -359,6 +377,7 @@ impl Session {
             }
         }
         let (system, gather_seconds, g) = self.rebuild(&placed, frame, gather, progress)?;
+        check_results(&system.face_results(&placed, frame), &placed, frame)?;
         let stats = FrameStats {
             frame,
             seconds: start.elapsed().as_secs_f64(),
@@ -417,15 +436,13 @@ impl Session {
     ///
     /// Point values of the polynomial are clamped at 0: a low-order polynomial across a shadow
     /// edge or a contact (a block standing on a floor patch) undershoots, and negative light is
-    /// never what a host should display. Face means are exact integrals and are not clamped.
+    /// never what a host should display. Face means are exact integrals: a frame with one below
+    /// rounding (`crate::finite::ROUNDING` of the peak) was refused when solved, and what is
+    /// left of rounding is clamped at 0 here. Every value is finite (checked when solved).
     pub fn face_results(&self) -> Result<Vec<ObjectResult>> {
         let frame = self.frame.unwrap_or(0.0);
         let mut results = self.solved()?.face_results(&self.scene_at(frame), frame);
-        for r in &mut results {
-            for c in &mut r.corner_radiosity {
-                *c = c.map(|x| x.max(0.0));
-            }
-        }
+        clamp_rounding(&mut results);
         Ok(results)
     }
 

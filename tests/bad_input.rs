@@ -101,3 +101,59 @@ fn zero_area_faces_are_skipped_with_a_warning() {
     assert_eq!(code, 0);
     assert!(err.contains("1 zero-area face(s) skipped (first: object \"Floor\" face 1)"), "{err}");
 }
+
+/// Runs the CLI with `args`: exit code and stderr.
+fn run(args: &[&str]) -> (i32, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_galerkin-radiosity")).args(args).output().unwrap();
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+/// Issue 23, item 4: spans and thread counts past their limits are usage errors (exit 2) or scene
+/// errors (exit 1) at once, not a bake that runs forever or an internal error; an output into a
+/// missing folder is refused before the bake, and a failed bake leaves an existing output as it
+/// was.
+#[test]
+fn unbounded_work_and_bad_outputs_are_refused_before_baking() {
+    let dir = std::env::temp_dir().join(format!("gr-limits-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = dir.join("scene.json");
+    std::fs::write(&input, scene_with(QUAD, MAT)).unwrap();
+    let (input, out) = (input.to_str().unwrap().to_owned(), dir.join("out.json"));
+    let out = out.to_str().unwrap();
+    let cases: Vec<(Vec<&str>, i32, &str)> = vec![
+        (vec!["--frames", "1:9223372036854775807"], 2, "more than the 100000 one bake may span"),
+        (vec!["--frames", "-9223372036854775808:9223372036854775807"], 2, "100000"),
+        (vec!["--frames", "5:1"], 2, "the first frame is after the last"),
+        (vec!["--threads", "99999"], 2, "--threads 99999 is above 1024"),
+    ];
+    for (extra, code, want) in cases {
+        let mut args = vec!["bake", &input, "-o", out, "--quiet"];
+        args.extend(&extra);
+        let (got, err) = run(&args);
+        assert_eq!(got, code, "{extra:?}: {err}");
+        assert!(err.contains(want), "{extra:?}: expected {want:?} in: {err}");
+        assert!(!err.contains("internal"), "{err}");
+    }
+    // A scene file spanning 2^31 frames.
+    let long = dir.join("long.json");
+    std::fs::write(&long, scene_with(QUAD, MAT).replace("[1, 1]", "[1, 2147483648]")).unwrap();
+    let (code, err) = run(&["bake", long.to_str().unwrap(), "-o", out, "--quiet"]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("frames [1, 2147483648]: 2147483648 frames, more than the 100000"), "{err}");
+    // A missing folder.
+    let missing = dir.join("no-such-folder").join("out.json");
+    let (code, err) = run(&["bake", &input, "-o", missing.to_str().unwrap(), "--quiet"]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("no-such-folder does not exist"), "{err}");
+    // A failed bake keeps what was there, and leaves no partial file.
+    std::fs::write(out, "keep me").unwrap();
+    std::fs::write(dir.join("bad.json"), scene_with(QUAD, &MAT.replace("[1, 1, 1]", "[1, -1, 1]"))).unwrap();
+    let (code, err) = run(&["bake", dir.join("bad.json").to_str().unwrap(), "-o", out, "--quiet"]);
+    assert_eq!(code, 1, "{err}");
+    assert_eq!(std::fs::read_to_string(out).unwrap(), "keep me");
+    assert!(!dir.join("out.json.partial").exists());
+    // And a good one replaces it.
+    let (code, err) = run(&["bake", &input, "-o", out, "--quiet"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(std::fs::read_to_string(out).unwrap().starts_with('{'));
+}

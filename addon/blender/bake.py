@@ -590,7 +590,8 @@ def settings_from_scene(scene) -> BakeSettings:
 def clear_bake(scene, objects=None) -> int:
     """Removes the bake from `objects` (default: every object the record or a switch names)."""
     record = read_record(scene)
-    if objects is None:
+    whole = objects is None
+    if whole:
         names = set(record.objects if record else [])
         names |= {o.name for o in scene.objects if switch.find(o) is not None}
         objects = [bpy.data.objects[n] for n in sorted(names) if n in bpy.data.objects]
@@ -601,5 +602,25 @@ def clear_bake(scene, objects=None) -> int:
     if RECORD_PROPERTY in scene:
         del scene[RECORD_PROPERTY]
     drop_held(scene)
+    if whole:
+        _remove_leftovers()
     return n
+
+
+def _remove_leftovers() -> None:
+    """What a whole Clear leaves otherwise: copies named after an object since renamed (their
+    source is gone or carries no bake), and the preview material once no switch uses it."""
+    from .preview import NAME as PREVIEW
+
+    baked = {o.name for o in bpy.data.objects if switch.find(o) is not None}
+    prefix = attributes.COPY_PREFIX
+    for obj in [o for o in bpy.data.objects if o.name.startswith(prefix)]:
+        if obj.name[len(prefix):] not in baked:
+            bpy.data.objects.remove(obj)
+    for mesh in [m for m in bpy.data.meshes if m.name.startswith(prefix)]:
+        if mesh.users == 0 and mesh.name[len(prefix):] not in baked:
+            bpy.data.meshes.remove(mesh)
+    mat = bpy.data.materials.get(PREVIEW)
+    if mat is not None and mat.get("radiosity_preview") == 1 and not baked:
+        bpy.data.materials.remove(mat)
 

@@ -28,6 +28,7 @@ from ctypes import (
     c_int32,
     c_size_t,
     c_uint32,
+    c_uint64,
     c_void_p,
 )
 from pathlib import Path
@@ -79,6 +80,7 @@ class _Settings(Structure):
         ("threads", c_uint32),
         ("method", c_uint32),
         ("corner_gather", c_uint32),
+        ("memory_budget_mb", c_uint64),
     ]
 
 
@@ -269,6 +271,10 @@ def _settings(lib: ctypes.CDLL, settings: dict) -> _Settings:
             setattr(s, key, _u32(value, f"settings.{key}"))  # True/False or 1/0
         elif key in ("basis_order", "quadrature_order", "visibility_samples", "threads"):
             setattr(s, key, _u32(value, f"settings.{key}"))
+        elif key == "memory_budget_mb":
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2**64:
+                raise _invalid(f"settings.memory_budget_mb {value!r} is not a whole number of MiB >= 0")
+            s.memory_budget_mb = value
         else:
             raise _invalid(f"unknown setting {key!r}")
     return s
@@ -278,7 +284,8 @@ class Session:
     """A baking session: the scene, its thread pool and the last solved frame.
 
     ``settings``: optional keys basis_order, quadrature_order, tolerance, visibility,
-    visibility_samples, threads, method ('incremental' | 'exact' | 'full'), corner_gather.
+    visibility_samples, threads, method ('incremental' | 'exact' | 'full'), corner_gather,
+    memory_budget_mb (0: 80% of the available memory; a scene estimated over it is refused).
     ``reflectance``, ``emission``: (M, 3) per material. ``objects``: dicts with ``vertices``
     (N, 3), ``face_sizes`` (F,) of 3 or 4, ``face_indices`` (sum of face_sizes,) local to the
     object, ``face_materials`` (F,), and optionally ``matrix`` (4, 4) row-major world-from-object

@@ -1,23 +1,23 @@
 //! `galerkin-radiosity`: bake a scene file, or write the demo scene.
 //!
 //! ```text
-//! galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--no-corner-gather] [--quiet]
+//! galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--memory-budget MB] [--no-corner-gather] [--quiet]
 //! galerkin-radiosity demo-scene -o SCENE.json [--frames N] [--subdiv N] [--order N]
 //! ```
 //! Exits 0 on success, 1 on any error with a one-line message on stderr, 2 on a usage error.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
 use std::time::Instant;
 
-use galerkin_radiosity::scene::Settings;
 use galerkin_radiosity::scene::json::{FrameResult, ResultFile, read_scene, scene_to_json};
+use galerkin_radiosity::scene::{MAX_THREADS, Settings, check_animation, check_frames};
 use galerkin_radiosity::scenes;
 use galerkin_radiosity::session::{Method, Session};
 
 const USAGE: &str = "usage:
-  galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--no-corner-gather] [--quiet]
+  galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--memory-budget MB] [--no-corner-gather] [--quiet]
   galerkin-radiosity demo-scene -o SCENE.json [--kind cornell|cornell-light|room|billiard] [--frames N] [--subdiv N] [--order N]";
 
 fn main() -> ExitCode {
@@ -88,6 +88,8 @@ fn bake(args: &[String]) -> Result<(), CliError> {
         .ok_or_else(|| CliError::Usage("bake needs -o OUT.json".into()))?;
     let frames = take_value(&mut args, &["--frames"])?;
     let threads = take_value(&mut args, &["--threads"])?;
+    let budget: Option<u64> =
+        take_value(&mut args, &["--memory-budget"])?.map(|v| parse(&v, "--memory-budget")).transpose()?;
     let full = take_flag(&mut args, "--full");
     let exact = take_flag(&mut args, "--exact");
     let quiet = take_flag(&mut args, "--quiet");
@@ -98,12 +100,51 @@ fn bake(args: &[String]) -> Result<(), CliError> {
     let [input] = args.as_slice() else {
         return Err(CliError::Usage(format!("bake takes one scene file, got {args:?}")));
     };
+    let partial = writable_output(&out)?;
+    let result = bake_into(input, &out, &partial, (frames, threads, budget), (full, exact, quiet, no_gather));
+    let _ = std::fs::remove_file(&partial);
+    result
+}
+
+/// The file a bake writes before renaming it to `out` (so a failed bake leaves `out` as it was),
+/// created now: a missing folder or one that cannot be written to is an error before any work.
+fn writable_output(out: &str) -> Result<PathBuf, CliError> {
+    let path = Path::new(out);
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if !folder.is_dir() {
+        return Err(CliError::Failed(format!("{out}: the folder {} does not exist", folder.display())));
+    }
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(".partial");
+    let partial = folder.join(name);
+    std::fs::File::create(&partial)
+        .map_err(|e| CliError::Failed(format!("{out}: cannot write there: {e}")))?;
+    Ok(partial)
+}
+
+fn bake_into(
+    input: &str,
+    out: &str,
+    partial: &Path,
+    (frames, threads, budget): (Option<String>, Option<String>, Option<u64>),
+    (full, exact, quiet, no_gather): (bool, bool, bool, bool),
+) -> Result<(), CliError> {
     let mut scene = read_scene(&PathBuf::from(input))?;
     if let Some(t) = threads {
-        scene.settings.threads = parse(&t, "--threads")?;
+        let n: usize = parse(&t, "--threads")?;
+        if n > MAX_THREADS {
+            return Err(CliError::Usage(format!("--threads {n} is above {MAX_THREADS}")));
+        }
+        scene.settings.threads = n;
     }
     if no_gather {
         scene.settings.corner_gather = false;
+    }
+    if let Some(mb) = budget {
+        scene.settings.memory_budget_mb = mb;
     }
     let (first, last) = match frames {
         None => scene.frames,
@@ -111,9 +152,7 @@ fn bake(args: &[String]) -> Result<(), CliError> {
             let (a, b) =
                 r.split_once(':').ok_or_else(|| CliError::Usage(format!("--frames wants A:B, got {r:?}")))?;
             let (a, b): (i64, i64) = (parse(a, "--frames")?, parse(b, "--frames")?);
-            if a > b {
-                return Err(CliError::Usage(format!("--frames {a}:{b}: the first frame is after the last")));
-            }
+            check_frames((a, b)).map_err(|m| CliError::Usage(format!("--{m}")))?;
             (a, b)
         }
     };
@@ -132,6 +171,10 @@ fn bake(args: &[String]) -> Result<(), CliError> {
     } else {
         Method::Incremental
     };
+    // Every frame's placement, before the first is baked (the session checks each again).
+    check_animation(&scene, (first, last))?;
+    // Every frame's results are kept until the file is written.
+    galerkin_radiosity::budget::check(&scene, (last - first + 1) as u64)?;
     let mut session = Session::new(scene, method)?;
     let start = Instant::now();
     let mut frames_out = Vec::new();
@@ -174,7 +217,8 @@ fn bake(args: &[String]) -> Result<(), CliError> {
     };
     let text =
         serde_json::to_string(&result).map_err(|e| CliError::Failed(format!("writing result: {e}")))?;
-    std::fs::write(&out, text).map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
+    std::fs::write(partial, text).map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
+    std::fs::rename(partial, out).map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
     if !quiet {
         eprintln!("wrote {out}: {total} frame(s) in {:.2} s", start.elapsed().as_secs_f64());
     }

@@ -21,7 +21,9 @@ pub enum GrStatus {
     /// The scene failed validation (non-finite vertex or matrix, face with other than 3 or 4
     /// vertices, vertex index or material out of range, reflectance outside [0,1), bad
     /// settings); the message names the object, face or field. Also returned by a solve that
-    /// diverges (faces that cross or overlap while visibility is off or coarse).
+    /// diverges (faces that cross or overlap while visibility is off or coarse), by a frame placed
+    /// with no area or out of range, and by a scene whose estimated memory is over
+    /// `memory_budget_mb` (the message begins "over the memory budget").
     InvalidScene = 3,
     /// The solve stopped because the progress callback returned 0 or `gr_session_cancel` was
     /// called; the last completed frame stays readable.
@@ -64,7 +66,7 @@ impl From<crate::Error> for Failure {
         use crate::Error;
         let status = match &e {
             Error::Input(_) | Error::InvalidArgument(_) => GrStatus::InvalidArgument,
-            Error::InvalidScene(_) => GrStatus::InvalidScene,
+            Error::InvalidScene(_) | Error::OverBudget(_) => GrStatus::InvalidScene,
             Error::Cancelled => GrStatus::Cancelled,
             Error::Internal(_) => GrStatus::Internal,
         };

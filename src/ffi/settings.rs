@@ -43,6 +43,11 @@ pub struct GrSettings {
     /// contact shadows, corners hidden under objects go dark; costs about one kernel build per
     /// frame); 0: the face polynomial at the corner. Other values are invalid. Default 1.
     pub corner_gather: u32,
+    /// The memory a session may plan to use, in MiB: a scene whose estimate is over it is
+    /// refused by `gr_session_new` with `GR_STATUS_INVALID_SCENE` ("over the memory budget"),
+    /// at once. 0: 80% of the memory available (`MemAvailable`) when the session is made.
+    /// Default 0.
+    pub memory_budget_mb: u64,
 }
 
 impl GrSettings {
@@ -58,6 +63,7 @@ impl GrSettings {
             threads: d.threads as u32,
             method: GrMethod::Incremental,
             corner_gather: u32::from(d.corner_gather),
+            memory_budget_mb: d.memory_budget_mb,
         }
     }
 }
@@ -82,7 +88,17 @@ pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Me
     }
     // SAFETY: p is non-null, aligned and readable. `method` is read as the u32 it is in C, never
     // as a `GrMethod`, so an unknown value is not undefined behaviour.
-    let (basis_order, quadrature_order, tolerance, visibility, visibility_samples, threads, method, gather) = unsafe {
+    let (
+        basis_order,
+        quadrature_order,
+        tolerance,
+        visibility,
+        visibility_samples,
+        threads,
+        method,
+        gather,
+        budget,
+    ) = unsafe {
         (
             (&raw const (*p).basis_order).read(),
             (&raw const (*p).quadrature_order).read(),
@@ -92,6 +108,7 @@ pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Me
             (&raw const (*p).threads).read(),
             (&raw const (*p).method).cast::<u32>().read(),
             (&raw const (*p).corner_gather).read(),
+            (&raw const (*p).memory_budget_mb).read(),
         )
     };
     let method = match method {
@@ -124,6 +141,7 @@ pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Me
         visibility_samples: visibility_samples as usize,
         threads: threads as usize,
         corner_gather,
+        memory_budget_mb: budget,
         // Settings the C struct does not carry keep the library's defaults.
         ..Settings::default()
     };

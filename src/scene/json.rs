@@ -27,6 +27,7 @@ struct SettingsFile {
     threads: Option<usize>,
     adaptive_quadrature: Option<bool>,
     corner_gather: Option<bool>,
+    memory_budget_mb: Option<u64>,
 }
 
 #[derive(Deserialize)]
@@ -101,6 +102,7 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
         threads: s.threads.unwrap_or(d.threads),
         adaptive_quadrature: s.adaptive_quadrature.unwrap_or(d.adaptive_quadrature),
         corner_gather: s.corner_gather.unwrap_or(d.corner_gather),
+        memory_budget_mb: s.memory_budget_mb.unwrap_or(d.memory_budget_mb),
     };
     let mut materials = Vec::new();
     let mut emission_keys = Vec::new();
@@ -252,6 +254,7 @@ pub fn scene_to_json(scene: &Scene) -> String {
         "settings": {
             "basis_order": s.basis_order, "quadrature_order": s.quadrature_order, "tolerance": s.tolerance,
             "visibility": s.visibility, "visibility_samples": s.visibility_samples, "threads": s.threads, "adaptive_quadrature": s.adaptive_quadrature, "corner_gather": s.corner_gather,
+            "memory_budget_mb": s.memory_budget_mb,
         },
         "frames": [scene.frames.0, scene.frames.1],
         "materials": materials,

@@ -9,6 +9,9 @@ mod placement;
 mod validate;
 
 pub use placement::{Key, KeyTransform};
+pub use validate::{
+    MAX_COORDINATE, MAX_EMISSION, MAX_FRAMES, MAX_THREADS, check_animation, check_frames, check_placed,
+};
 
 use glam::{DMat4, DVec3};
 
@@ -34,6 +37,9 @@ pub struct Settings {
     /// Face corners report `B` gathered at the corner from the solution ([`crate::gather`]),
     /// with its own shadow rays, instead of the face polynomial's value there.
     pub corner_gather: bool,
+    /// The memory a bake may plan to use, in MiB ([`crate::budget`]); 0: 80% of the memory
+    /// available when the session starts.
+    pub memory_budget_mb: u64,
 }
 
 impl Default for Settings {
@@ -47,6 +53,7 @@ impl Default for Settings {
             threads: 0,
             adaptive_quadrature: true,
             corner_gather: true,
+            memory_budget_mb: 0,
         }
     }
 }

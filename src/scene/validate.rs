@@ -8,6 +8,26 @@ use crate::error::{Result, invalid_scene};
 /// degenerate: skipped with a warning rather than rejected (modelling tools leave them behind).
 const DEGENERATE_AREA_FRACTION: f64 = 1e-12;
 
+/// The largest emission per channel (W/m^2). Coefficients are stored in f32 (at most 3.4e38),
+/// and a surface of reflectance `rho` reaches `E / (1 - rho)`: eight orders of magnitude of
+/// headroom for that and the solver's sums.
+pub const MAX_EMISSION: f64 = 1e30;
+
+/// The largest world coordinate (scene units) a placed vertex may have. Squares of coordinates
+/// (areas, distances) must stay far inside f64, and nothing real is 1e12 units from its origin.
+pub const MAX_COORDINATE: f64 = 1e12;
+
+/// A face must be at least this fraction of its distance from the origin across: f64 keeps
+/// about 16 digits, so a smaller face's corners would round together (a 1 m face placed 1e17
+/// from the origin has all its corners at one point).
+const MIN_RELATIVE_SIZE: f64 = 1e-9;
+
+/// The most worker threads a bake may ask for (0: one per core).
+pub const MAX_THREADS: usize = 1024;
+
+/// The most frames a scene or a bake may span (every frame's results are kept until written).
+pub const MAX_FRAMES: i64 = 100_000;
+
 pub(super) fn validate(scene: &mut Scene) -> Result<()> {
     let s = &scene.settings;
     if s.basis_order > MAX_ORDER {
@@ -32,16 +52,10 @@ pub(super) fn validate(scene: &mut Scene) -> Result<()> {
     if !(1..=4).contains(&s.visibility_samples) {
         return Err(invalid_scene!("settings.visibility_samples {} is outside 1..=4", s.visibility_samples));
     }
-    if s.threads > 1024 {
-        return Err(invalid_scene!("settings.threads {} is above 1024", s.threads));
+    if s.threads > MAX_THREADS {
+        return Err(invalid_scene!("settings.threads {} is above {MAX_THREADS}", s.threads));
     }
-    if scene.frames.0 > scene.frames.1 {
-        return Err(invalid_scene!(
-            "frames [{}, {}]: the first frame is after the last",
-            scene.frames.0,
-            scene.frames.1
-        ));
-    }
+    check_frames(scene.frames).map_err(crate::Error::InvalidScene)?;
     if scene.emission_keys.len() != scene.materials.len() {
         return Err(invalid_scene!(
             "{} emission key lists for {} materials",
@@ -128,6 +142,90 @@ pub(super) fn validate(scene: &mut Scene) -> Result<()> {
     Ok(())
 }
 
+/// A span of frames, first to last inclusive: in order, at most [`MAX_FRAMES`] long. The message
+/// is the caller's to wrap (a scene error, a usage error).
+pub fn check_frames((first, last): (i64, i64)) -> std::result::Result<(), String> {
+    if first > last {
+        return Err(format!("frames [{first}, {last}]: the first frame is after the last"));
+    }
+    let span = i128::from(last) - i128::from(first) + 1;
+    if span > i128::from(MAX_FRAMES) {
+        return Err(format!(
+            "frames [{first}, {last}]: {span} frames, more than the {MAX_FRAMES} one bake may span; \
+             bake it in parts"
+        ));
+    }
+    Ok(())
+}
+
+/// Checks the scene as placed at `frame` (keys and host overrides applied: what is built), in
+/// world space: every vertex finite and within [`MAX_COORDINATE`], every face that has an area
+/// in object space keeping one in world space (an object scaled to 0, or keyed to 0 at a frame,
+/// or a singular matrix, would give elements of zero area and NaN radiosity), and every face
+/// large enough for f64 to resolve where it is placed.
+pub fn check_placed(scene: &Scene, frame: f64) -> Result<()> {
+    (0..scene.objects.len()).try_for_each(|o| check_object(scene, o, frame))
+}
+
+/// [`check_placed`] of the animated objects at every frame of `first..=last` (the others are
+/// placed the same at every frame): what a bake can check before it starts.
+pub fn check_animation(scene: &Scene, (first, last): (i64, i64)) -> Result<()> {
+    for (o, _) in scene.objects.iter().enumerate().filter(|(_, obj)| obj.is_animated()) {
+        for frame in first..=last {
+            check_object(scene, o, frame as f64)?;
+        }
+    }
+    Ok(())
+}
+
+fn check_object(scene: &Scene, o: usize, frame: f64) -> Result<()> {
+    let obj = &scene.objects[o];
+    let place = format!("object \"{}\" at frame {frame}", obj.name);
+    let m = obj.world_from_object(frame);
+    if !m.is_finite() {
+        return Err(invalid_scene!("{place}: its matrix is not finite"));
+    }
+    let world: Vec<glam::DVec3> = obj.vertices.iter().map(|v| m.transform_point3(*v)).collect();
+    let (mut lo, mut hi) = (glam::DVec3::splat(f64::MAX), glam::DVec3::splat(f64::MIN));
+    for (v, p) in world.iter().enumerate() {
+        if !(p.is_finite() && p.abs().max_element() <= MAX_COORDINATE) {
+            return Err(invalid_scene!(
+                "{place}: vertex {v} is placed at ({:.3e}, {:.3e}, {:.3e}), beyond {MAX_COORDINATE:e} \
+                 from the origin (check the object's translation and scale)",
+                p.x,
+                p.y,
+                p.z
+            ));
+        }
+        (lo, hi) = (lo.min(*p), hi.max(*p));
+    }
+    let diag2 = (hi - lo).length_squared();
+    let start = scene.degenerate_faces.partition_point(|&d| d < (o, 0));
+    let mut degenerate = scene.degenerate_faces[start..].iter().peekable();
+    for (f, face) in obj.faces.iter().enumerate() {
+        if degenerate.next_if(|&&d| d == (o, f)).is_some() {
+            continue;
+        }
+        let corners: Vec<_> = face.iter().map(|&v| world[v as usize]).collect();
+        let area = crate::geometry::Patch::from_corners(&corners).area();
+        let far = corners.iter().map(|c| c.abs().max_element()).fold(0.0, f64::max);
+        if area.is_nan() || area <= DEGENERATE_AREA_FRACTION * diag2 {
+            return Err(invalid_scene!(
+                "{place}: face {f} has no area in world space (the object is scaled to 0 or its \
+                 matrix is singular)"
+            ));
+        }
+        if area.sqrt() < MIN_RELATIVE_SIZE * far {
+            return Err(invalid_scene!(
+                "{place}: face {f} ({:.3e} across) is too small to resolve at {far:.3e} from the \
+                 origin; move the scene nearer the origin",
+                area.sqrt()
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn check_reflectance(place: &str, rho: [f64; 3]) -> Result<()> {
     for (c, &r) in rho.iter().enumerate() {
         if !(r.is_finite() && (0.0..1.0).contains(&r)) {
@@ -141,6 +239,12 @@ fn check_emission(place: &str, e: [f64; 3]) -> Result<()> {
     for (c, &x) in e.iter().enumerate() {
         if !(x.is_finite() && x >= 0.0) {
             return Err(invalid_scene!("{place}: emission[{c}] = {x} must be finite and >= 0"));
+        }
+        if x > MAX_EMISSION {
+            return Err(invalid_scene!(
+                "{place}: emission[{c}] = {x:e} is above {MAX_EMISSION:e}, more than the solver's \
+                 f32 coefficients can hold; scale the scene's emission down"
+            ));
         }
     }
     Ok(())

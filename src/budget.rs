@@ -1,0 +1,151 @@
+//! The memory a bake will need, estimated before anything is allocated, and the budget it is
+//! checked against (issue 23, item 1): a scene too large for the machine is refused at once with
+//! one line, instead of aborting in the allocator minutes later (which, through the C ABI, takes
+//! the host application and its unsaved work with it).
+//!
+//! The estimate is an upper bound of the big arrays, from counts known before the build:
+//! - links: every pair of elements (`n (n - 1) / 2`; the store holds only facing, unblocked
+//!   pairs, 56% of them in the Cornell box), each `2 nb^2` f32 coefficients with the store's
+//!   growth room, its pair record, adjacency and a visibility mask, twice over: the assembled rows
+//!   are all held before they are stored, and a frame rebuilt from scratch is built beside the
+//!   last frame's store;
+//! - the corner gather: every corner point with a moment of `nb` f32 for every element;
+//! - elements and the solver's coefficients (small next to the links);
+//! - per-frame results kept until they are written (the CLI): every face mean and corner as f32
+//!   and as JSON text.
+//!
+//! Series terms of the incremental update (a few KB per expanded pair, only where they pay) are
+//! not counted.
+
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+
+/// Bytes per MiB, the unit of the budget setting.
+const MIB: u64 = 1 << 20;
+
+/// The share of the machine's available memory a bake may plan to use by default.
+pub const DEFAULT_SHARE: f64 = 0.8;
+
+/// Bytes of JSON text per RGB value of the result file (three f32 in shortest form, commas,
+/// brackets), a measured upper bound for radiosity values.
+const JSON_BYTES_PER_VALUE: u64 = 48;
+
+/// What a bake of a scene will need, by part, in bytes.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Estimate {
+    pub links: u64,
+    pub gather: u64,
+    pub elements: u64,
+    pub results: u64,
+}
+
+impl Estimate {
+    pub fn total(&self) -> u64 {
+        self.links.saturating_add(self.gather).saturating_add(self.elements).saturating_add(self.results)
+    }
+}
+
+/// The estimate for `scene` baked over `frames` frames whose results are all kept (1 for a host
+/// that reads each frame as it is solved).
+pub fn estimate(scene: &Scene, frames: u64) -> Estimate {
+    let s = &scene.settings;
+    let nb = ((s.basis_order + 1) * (s.basis_order + 1)) as u64;
+    let n = (scene.face_count() - scene.degenerate_faces.len()) as u64;
+    let pairs = n.saturating_mul(n.saturating_sub(1)) / 2;
+    // Coefficients with 1/16 growth room, the pair record (two ids and a visibility), its id in
+    // both adjacency lists and the column's receiver list, and a partial mask (4 u64 boxed).
+    let coefficients = 2 * nb * nb * 4 * 17 / 16;
+    let per_pair = coefficients + 24 + 2 * 8 + 8 + 48;
+    let links = pairs.saturating_mul(per_pair).saturating_mul(2);
+    let corners: u64 = scene.objects.iter().flat_map(|o| &o.faces).map(|f| f.len() as u64).sum();
+    let gather = if s.corner_gather {
+        // Per (corner, source): the source id, its mode and nb f32 moments.
+        corners.saturating_mul(n).saturating_mul(4 + 4 + 4 * nb)
+    } else {
+        0
+    };
+    // Elements (patch, moments, geometry samples), and the solution, unshot and emission
+    // coefficients (three copies of RGB f64 per coefficient, and the saved copies of an update).
+    let elements = n.saturating_mul(1024 + nb * 8 * 4 + 6 * nb * 3 * 8);
+    let values = (scene.face_count() as u64).saturating_add(corners);
+    let results = frames.saturating_mul(values).saturating_mul(12 + JSON_BYTES_PER_VALUE);
+    Estimate { links, gather, elements, results }
+}
+
+/// The budget in bytes: `memory_budget_mb` when set (non-zero), else [`DEFAULT_SHARE`] of the
+/// memory the system reports available (`MemAvailable` in `/proc/meminfo`); `None` when neither
+/// is known (no check).
+pub fn budget_bytes(memory_budget_mb: u64) -> Option<u64> {
+    if memory_budget_mb > 0 {
+        return Some(memory_budget_mb.saturating_mul(MIB));
+    }
+    available_bytes().map(|a| (a as f64 * DEFAULT_SHARE) as u64)
+}
+
+/// `MemAvailable` of `/proc/meminfo`, in bytes (Linux; `None` elsewhere).
+fn available_bytes() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib.saturating_mul(1024))
+}
+
+/// Refuses `scene` baked over `frames` kept frames when its estimate exceeds the budget, with
+/// one line giving both and what to change.
+pub fn check(scene: &Scene, frames: u64) -> Result<()> {
+    let Some(budget) = budget_bytes(scene.settings.memory_budget_mb) else { return Ok(()) };
+    let e = estimate(scene, frames);
+    if e.total() <= budget {
+        return Ok(());
+    }
+    let mb = |b: u64| b.div_ceil(MIB);
+    let source = if scene.settings.memory_budget_mb > 0 {
+        "settings.memory_budget_mb".to_owned()
+    } else {
+        format!("{:.0}% of the memory available", DEFAULT_SHARE * 100.0)
+    };
+    Err(Error::OverBudget(format!(
+        "this bake needs up to {} MB (links {} MB, corner gather {} MB, elements {} MB, results {} MB) \
+         but the budget is {} MB ({source}); use fewer faces or a lower settings.basis_order, \
+         turn corner_gather off, bake fewer frames at once, or raise memory_budget_mb",
+        mb(e.total()),
+        mb(e.links),
+        mb(e.gather),
+        mb(e.elements),
+        mb(e.results),
+        mb(budget),
+    )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Settings;
+    use crate::scenes;
+
+    #[test]
+    fn the_estimate_bounds_the_cornell_box_links_and_scales_with_the_pairs() {
+        let scene = scenes::cornell_box(4, Settings::default());
+        let e = estimate(&scene, 1);
+        // The link store of the built frame is below the (doubled) estimate.
+        let sys = crate::system::System::build(&scene, 0.0, &crate::system::no_progress).unwrap();
+        assert!(sys.links.memory_bytes() as u64 * 2 <= e.links, "{} vs {e:?}", sys.links.memory_bytes());
+        // Four times the faces, sixteen times the pairs.
+        let big = estimate(&scenes::cornell_box(8, Settings::default()), 1);
+        let (n, m) =
+            (scene.face_count() as f64, scenes::cornell_box(8, Settings::default()).face_count() as f64);
+        let ratio = big.links as f64 / e.links as f64;
+        assert!((ratio - m * (m - 1.0) / (n * (n - 1.0))).abs() < 1e-9 * ratio, "{ratio}");
+    }
+
+    #[test]
+    fn a_budget_set_in_megabytes_is_used_as_is() {
+        assert_eq!(budget_bytes(3), Some(3 * MIB));
+        let mut scene = scenes::cornell_box(4, Settings::default());
+        scene.settings.memory_budget_mb = 1;
+        let Err(Error::OverBudget(m)) = check(&scene, 1) else { panic!("not refused") };
+        assert!(m.contains("but the budget is 1 MB (settings.memory_budget_mb)"), "{m}");
+        scene.settings.memory_budget_mb = 1 << 20;
+        check(&scene, 1).unwrap();
+    }
+}

@@ -1,0 +1,117 @@
+//! Issue 23, item 1: a bake whose estimated memory is over the budget is refused at once, with
+//! one line giving the estimate, the budget and what to change, through the CLI and the C ABI
+//! (it used to abort in the allocator after 35-158 s, taking a host application with it).
+
+use std::process::Command;
+use std::ptr::null_mut;
+
+use galerkin_radiosity::budget;
+use galerkin_radiosity::ffi::*;
+use galerkin_radiosity::scene::Settings;
+use galerkin_radiosity::scenes;
+
+/// Near the issue's case (60,001 faces at order 2): a Cornell box of 100 x 100 patches per wall,
+/// over 50,000 faces, whose links alone would take tens of terabytes.
+fn huge() -> galerkin_radiosity::scene::Scene {
+    scenes::cornell_box(100, Settings::default())
+}
+
+#[test]
+fn the_cli_refuses_a_scene_over_the_default_budget() {
+    let dir = std::env::temp_dir().join(format!("gr-budget-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = dir.join("huge.json");
+    let scene = huge();
+    assert!(scene.face_count() >= 50_000);
+    std::fs::write(&input, galerkin_radiosity::scene::json::scene_to_json(&scene)).unwrap();
+    let out = dir.join("out.json");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["bake", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--quiet"];
+        args.extend(extra);
+        let o = Command::new(env!("CARGO_BIN_EXE_galerkin-radiosity")).args(&args).output().unwrap();
+        (o.status.code().unwrap_or(-1), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    // Default budget (80% of MemAvailable): no machine has the terabytes the links would need.
+    let (code, err) = run(&[]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("over the memory budget: this bake needs up to"), "{err}");
+    assert!(err.contains("% of the memory available"), "{err}");
+    assert!(err.contains("raise memory_budget_mb"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(!out.exists());
+    // An explicit budget is named as such.
+    let (code, err) = run(&["--memory-budget", "64"]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("but the budget is 64 MB (settings.memory_budget_mb)"), "{err}");
+    let (code, err) = run(&["--memory-budget", "lots"]);
+    assert_eq!(code, 2, "{err}");
+}
+
+#[test]
+fn the_c_abi_refuses_it_in_gr_session_new() {
+    let scene = huge();
+    let (mut vertex_counts, mut vertices, mut face_counts) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut face_vertex_counts, mut indices, mut face_materials) = (Vec::new(), Vec::new(), Vec::new());
+    for o in &scene.objects {
+        vertex_counts.push(o.vertices.len() as u32);
+        vertices.extend(o.vertices.iter().flat_map(|v| v.to_array().map(|x| x as f32)));
+        face_counts.push(o.faces.len() as u32);
+        for face in &o.faces {
+            face_vertex_counts.push(face.len() as u32);
+            indices.extend(face);
+        }
+        face_materials.extend(&o.face_materials);
+    }
+    let reflectance: Vec<f32> =
+        scene.materials.iter().flat_map(|m| m.reflectance.map(|x| x as f32)).collect();
+    let emission: Vec<f32> = scene.materials.iter().flat_map(|m| m.emission.map(|x| x as f32)).collect();
+    let mut settings = GrSettings::default();
+    assert_eq!(unsafe { gr_settings_default(&mut settings) }, GrStatus::Ok);
+    assert_eq!(settings.memory_budget_mb, 0);
+    settings.memory_budget_mb = 1024;
+    let mut out = null_mut();
+    let status = unsafe {
+        gr_session_new(
+            &settings,
+            scene.materials.len() as u32,
+            reflectance.as_ptr(),
+            emission.as_ptr(),
+            scene.objects.len() as u32,
+            vertex_counts.as_ptr(),
+            vertices.as_ptr(),
+            face_counts.as_ptr(),
+            face_vertex_counts.as_ptr(),
+            indices.as_ptr(),
+            face_materials.as_ptr(),
+            std::ptr::null(),
+            vertices.len(),
+            indices.len(),
+            &mut out,
+        )
+    };
+    assert_eq!(status, GrStatus::InvalidScene);
+    assert!(out.is_null());
+    let mut buf = vec![0u8; 1024];
+    let n = unsafe { gr_last_error(buf.as_mut_ptr().cast(), buf.len()) };
+    let msg = String::from_utf8_lossy(&buf[..n.min(1023)]).into_owned();
+    assert!(msg.contains("over the memory budget") && msg.contains("but the budget is 1024 MB"), "{msg}");
+}
+
+/// The estimate is an upper bound on what a real frame allocates (the links of a built Cornell
+/// box are below half of it), and a bake inside its budget runs.
+#[test]
+fn a_scene_inside_its_budget_bakes() {
+    let mut scene = scenes::cornell_box(3, Settings::default());
+    let e = budget::estimate(&scene, 1);
+    scene.settings.memory_budget_mb = e.total().div_ceil(1 << 20);
+    budget::check(&scene, 1).unwrap();
+    let mut session = galerkin_radiosity::session::Session::new(
+        scene.clone(),
+        galerkin_radiosity::session::Method::Incremental,
+    )
+    .unwrap();
+    let stats = session.solve_frame(0.0, &galerkin_radiosity::system::no_progress).unwrap();
+    assert!(stats.pairs as u64 <= (stats.elements as u64 * (stats.elements as u64 - 1)) / 2);
+    // Keeping 10^5 frames' results does not fit in that budget.
+    assert!(budget::check(&scene, 100_000).is_err());
+}
