@@ -15,6 +15,7 @@ use crate::links::LinkStore;
 use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
 use crate::scene::json::ObjectResult;
+use crate::scene::placement::{self, front_order};
 use crate::solver::{self, Coefficients, ShootStats};
 use crate::visibility::Occluders;
 
@@ -39,6 +40,9 @@ pub struct Element {
     pub area: f64,
     /// `integral Gamma_k A ds dt` over the element: the mean radiosity is `sum_k b^k m_k / area`.
     pub moments: Vec<f64>,
+    /// Placed with reversed winding (a mirroring matrix, [`crate::scene::placement::front_order`]):
+    /// the face's `(s,t)` is the patch's `(1 - s, t)`.
+    pub mirrored: bool,
 }
 
 /// World-space elements of a scene at a frame: one per non-degenerate face.
@@ -56,13 +60,15 @@ pub fn build_elements_reusing(scene: &Scene, frame: f64, basis: Basis, previous:
     let mut previous = previous.iter().peekable();
     for (o, obj) in scene.objects.iter().enumerate() {
         let m = obj.world_from_object(frame);
+        let mirrored = placement::mirrors(&m);
         let world: Vec<DVec3> = obj.vertices.iter().map(|v| m.transform_point3(*v)).collect();
         for (f, face) in obj.faces.iter().enumerate() {
             if degenerate.peek() == Some(&&(o, f)) {
                 degenerate.next();
                 continue;
             }
-            let corners: Vec<DVec3> = face.iter().map(|&v| world[v as usize]).collect();
+            let corners: Vec<DVec3> =
+                front_order(face, mirrored).iter().map(|&v| world[v as usize]).collect();
             let patch = Patch::from_corners(&corners);
             // Previous elements of faces before this one (degenerate there, not here) are passed.
             while previous.next_if(|e| (e.object, e.face) < (o as u32, f as u32)).is_some() {}
@@ -74,15 +80,9 @@ pub fn build_elements_reusing(scene: &Scene, frame: f64, basis: Basis, previous:
                 elements.push(e.clone());
                 continue;
             }
-            elements.push(element(
-                o as u32,
-                f as u32,
-                Rect::UNIT,
-                patch,
-                obj.face_materials[f],
-                basis,
-                &rule,
-            ));
+            let mut e = element(o as u32, f as u32, Rect::UNIT, patch, obj.face_materials[f], basis, &rule);
+            e.mirrored = mirrored;
+            elements.push(e);
         }
     }
     elements
@@ -111,7 +111,7 @@ fn element(
             }
         }
     }
-    Element { object, face, domain, patch, material, area, moments }
+    Element { object, face, domain, patch, material, area, moments, mirrored: false }
 }
 
 /// Timings and counts of one build and solve.
@@ -308,6 +308,7 @@ impl System {
                             continue;
                         }
                         for (s, t) in corner_params(face.len()) {
+                            let s = if self.elements[e].mirrored { 1.0 - s } else { s };
                             let v =
                                 if face.len() == 3 && t == 1.0 { self.apex(e) } else { self.eval(e, s, t) };
                             res.corner_radiosity.push(to_f32(v));
@@ -356,15 +357,21 @@ fn to_f32(v: [f64; 3]) -> [f32; 3] {
 }
 
 impl System {
-    /// The element covering `(s,t)` of face `f` of object `o`, and the local coordinates in it.
+    /// The element covering `(s,t)` of face `f` of object `o` (`s,t` in face corner order, as
+    /// [`corner_params`]), and the local coordinates in it.
     pub fn element_of_face(&self, o: usize, f: usize, s: f64, t: f64) -> Option<(usize, f64, f64)> {
         let start = self.elements.partition_point(|e| (e.object as usize, e.face as usize) < (o, f));
         self.elements[start..]
             .iter()
             .take_while(|e| e.object as usize == o && e.face as usize == f)
-            .position(|e| e.domain.s0 <= s && s <= e.domain.s1 && e.domain.t0 <= t && t <= e.domain.t1)
+            .position(|e| {
+                let s = if e.mirrored { 1.0 - s } else { s };
+                e.domain.s0 <= s && s <= e.domain.s1 && e.domain.t0 <= t && t <= e.domain.t1
+            })
             .map(|k| {
-                let d = &self.elements[start + k].domain;
+                let el = &self.elements[start + k];
+                let s = if el.mirrored { 1.0 - s } else { s };
+                let d = &el.domain;
                 (start + k, (s - d.s0) / (d.s1 - d.s0), (t - d.t0) / (d.t1 - d.t0))
             })
     }

@@ -5,7 +5,7 @@
 //! made (JSON, the C ABI), so every entry point shares one set of checks.
 
 pub mod json;
-mod placement;
+pub mod placement;
 mod validate;
 
 pub use placement::{Key, KeyTransform};
@@ -65,7 +65,8 @@ pub struct Material {
 pub struct Object {
     pub name: String,
     pub vertices: Vec<DVec3>,
-    /// Vertex indices per face, 3 or 4, counter-clockwise seen from the lit (front) side.
+    /// Vertex indices per face, 3 or 4, counter-clockwise seen from the lit (front) side in
+    /// object space; a mirroring placement keeps that side ([`placement::front_order`]).
     pub faces: Vec<Vec<u32>>,
     /// Material index per face.
     pub face_materials: Vec<u32>,
@@ -79,6 +80,12 @@ impl Object {
     /// World-from-object matrix at `frame`: keys interpolated linearly, held outside them.
     pub fn world_from_object(&self, frame: f64) -> DMat4 {
         placement::world_from_object(self.matrix, &self.animation, frame)
+    }
+
+    /// True when the placement at `frame` mirrors space (its faces are placed with reversed
+    /// winding to keep their front side).
+    pub fn mirrored_at(&self, frame: f64) -> bool {
+        placement::mirrors(&self.world_from_object(frame))
     }
 
     /// True when the object's placement changes over some frame range.
