@@ -120,7 +120,7 @@ mod tests {
         let quad = [DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::Y];
         let tri = [DVec3::ZERO, DVec3::X, DVec3::Y];
         for m in
-            [DMat4::from_scale(DVec3::new(-1.0, 1.0, 1.0)), DMat4::from_scale(DVec3::new(2.0, -3.0, -0.5))]
+            [DMat4::from_scale(DVec3::new(-1.0, 1.0, 1.0)), DMat4::from_scale(DVec3::new(2.0, -3.0, 0.5))]
         {
             assert!(mirrors(&m));
             for face in [&quad[..], &tri[..]] {
