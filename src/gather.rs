@@ -372,6 +372,7 @@ impl CornerGather {
                         values[k] = radiosity(sys, e, &rows[k].0);
                     }
                 }
+                sys.add_direct_light(points.iter().map(|p| p.at), &mut values);
                 rows.into_iter().zip(values).map(|((row, n), v)| Ok((row, n, v))).collect()
             })
             .collect::<Result<_>>()?;

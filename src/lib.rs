@@ -14,6 +14,7 @@ pub mod ffi;
 pub mod gather;
 pub mod geometry;
 pub mod kernel;
+pub mod lights;
 pub mod links;
 pub mod quadrature;
 pub mod replay;

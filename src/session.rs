@@ -69,6 +69,8 @@ pub struct FrameStats {
     /// The frame is a preview ([`Session::set_preview`]): solved to [`preview_tolerance`],
     /// corners from the face polynomials, until [`Session::refine`].
     pub preview: bool,
+    /// One line each, for the host to show (emitters that light nothing, on rebuilt frames).
+    pub warnings: Vec<String>,
 }
 
 /// The tolerance a preview frame is solved to: ten times the scene's, but no looser than 1e-3
@@ -373,6 +375,7 @@ impl Session {
             gather_recomputed: g.recomputed,
             full_rebuild: true,
             preview: self.preview,
+            warnings: system.stats.warnings.clone(),
             ..Default::default()
         };
         self.keep_rebuilt(system, frame);

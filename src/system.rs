@@ -11,6 +11,7 @@ use crate::gather::{CornerGather, GatherStats};
 use crate::geometry::{Patch, Rect};
 use crate::kernel::PairContext;
 use crate::kernel::assemble::{ElementGeometry, assemble};
+use crate::lights::direct::DirectLight;
 use crate::links::LinkStore;
 use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
@@ -126,6 +127,8 @@ pub struct SystemStats {
     pub kernel_seconds: f64,
     pub solve_seconds: f64,
     pub shots: usize,
+    /// One line per emitting object that lights nothing ([`System::dark_emitters`]).
+    pub warnings: Vec<String>,
 }
 
 /// The Galerkin system of one frame.
@@ -136,6 +139,11 @@ pub struct System {
     pub reflectance: Vec<[f64; 3]>,
     /// Emission coefficients `e_i^k` (eq. 5): constant exitance projects onto `k = 0` only.
     pub emission: Vec<[f64; 3]>,
+    /// The lights' share of the sources, `rho E_d` projected (all `k`; empty without lights):
+    /// the solve starts from `emission + direct` ([`System::sources`]).
+    pub direct: Vec<[f64; 3]>,
+    /// The lights as placed for `direct`, for point queries (the corner gather).
+    pub lights: Option<std::sync::Arc<DirectLight>>,
     pub solution: Coefficients,
     /// `B` gathered at every face corner for the current solution ([`crate::gather`]), per object
     /// in face order; `None` when corners come from the face polynomials.
@@ -173,10 +181,7 @@ impl System {
         let kernel_seconds = start.elapsed().as_secs_f64();
         let nb = basis.len();
         let reflectance = elements.iter().map(|e| scene.materials[e.material as usize].reflectance).collect();
-        let mut emission = vec![[0.0; 3]; elements.len() * nb];
-        for (i, e) in elements.iter().enumerate() {
-            emission[i * nb] = scene.emission_at(e.material as usize, frame);
-        }
+        let (emission, direct, lights) = frame_sources(scene, frame, &elements, basis);
         let stats = SystemStats {
             elements: elements.len(),
             pairs: links.len(),
@@ -191,18 +196,80 @@ impl System {
             ..Default::default()
         };
         let solution = Coefficients::zeros(elements.len(), nb);
-        Ok(System {
+        let mut sys = System {
             basis,
             elements,
             links,
             reflectance,
             emission,
+            direct,
+            lights,
             solution,
             corners: None,
             gather: None,
             occluders,
             stats,
-        })
+        };
+        sys.stats.warnings = sys.dark_emitters(scene);
+        Ok(sys)
+    }
+
+    /// The solve's sources: emission plus the lights' `rho E_d`.
+    pub fn sources(&self) -> Vec<[f64; 3]> {
+        let mut out = self.emission.clone();
+        for (o, d) in out.iter_mut().zip(&self.direct) {
+            for c in 0..3 {
+                o[c] += d[c];
+            }
+        }
+        out
+    }
+
+    /// One line per object whose emitting faces deliver nothing to any other face (an emissive
+    /// plane left facing the sky): no link leaves any of them.
+    pub fn dark_emitters(&self, scene: &Scene) -> Vec<String> {
+        let nb = self.basis.len();
+        let transfers = self.links.transfers();
+        let mut emits = vec![false; scene.objects.len()];
+        let mut lights = vec![false; scene.objects.len()];
+        for (i, e) in self.elements.iter().enumerate() {
+            if self.emission[i * nb].iter().any(|&x| x > 0.0) {
+                emits[e.object as usize] = true;
+                lights[e.object as usize] |= transfers.get(i * nb).is_some_and(|&t| t > 0.0);
+            }
+        }
+        scene
+            .objects
+            .iter()
+            .enumerate()
+            .filter(|&(o, _)| emits[o] && !lights[o])
+            .map(|(_, obj)| {
+                format!(
+                    "emitter \"{}\" lights nothing: its emitting faces face away from all geometry",
+                    obj.name
+                )
+            })
+            .collect()
+    }
+
+    /// Adds `rho E_d(x)` of the lights to `values` at face points `at` (element, local `s`, `t`),
+    /// each with its own shadow rays: the corner gather's direct light.
+    pub fn add_direct_light(
+        &self,
+        at: impl Iterator<Item = Option<(usize, f64, f64)>>,
+        values: &mut [[f64; 3]],
+    ) {
+        let Some(lights) = &self.lights else { return };
+        for (v, at) in values.iter_mut().zip(at) {
+            if let Some((e, s, t)) = at {
+                let p = &self.elements[e].patch;
+                let n = p.area_vector(s, t).normalize_or_zero();
+                let irr = lights.irradiance(p.point(s, t), n, e as u32);
+                for c in 0..3 {
+                    v[c] += self.reflectance[e][c] * irr[c];
+                }
+            }
+        }
     }
 
     /// Element areas, in element order.
@@ -213,17 +280,18 @@ impl System {
     /// Total emitted power-norm, the reference for the tolerance.
     pub fn emitted_power(&self) -> f64 {
         let nb = self.basis.len();
+        let sources = self.sources();
         self.elements
             .iter()
             .enumerate()
-            .map(|(i, e)| solver::power(&self.emission[i * nb..(i + 1) * nb], e.area))
+            .map(|(i, e)| solver::power(&sources[i * nb..(i + 1) * nb], e.area))
             .sum()
     }
 
     /// Solves from scratch by progressive refinement down to `tolerance` x emitted power.
     pub fn solve(&mut self, tolerance: f64, cancel: &dyn Fn() -> bool) -> Result<ShootStats> {
         let start = Instant::now();
-        self.solution = Coefficients::from_emission(&self.emission, self.basis.len());
+        self.solution = Coefficients::from_emission(&self.sources(), self.basis.len());
         let stop = tolerance * self.emitted_power();
         let stats = solver::shoot(&self.links, &self.reflectance, &mut self.solution, stop, cancel)?;
         self.stats.solve_seconds = start.elapsed().as_secs_f64();
@@ -341,6 +409,32 @@ impl System {
         }
         out
     }
+}
+
+/// Emission coefficients, the lights' `rho E_d` coefficients and the lights as placed.
+pub type FrameSources = (Vec<[f64; 3]>, Vec<[f64; 3]>, Option<std::sync::Arc<DirectLight>>);
+
+/// A frame's sources for `elements` of `scene` at `frame`: the materials' emission (`k = 0`),
+/// the lights' `rho E_d` (every `k`; empty without lights) and the lights as placed.
+pub fn frame_sources(
+    scene: &Scene,
+    frame: f64,
+    elements: &[Element],
+    basis: Basis,
+) -> FrameSources {
+    let nb = basis.len();
+    let mut emission = vec![[0.0; 3]; elements.len() * nb];
+    for (i, e) in elements.iter().enumerate() {
+        emission[i * nb] = scene.emission_at(e.material as usize, frame);
+    }
+    let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
+    let Some(lights) = DirectLight::new(&scene.lights, frame, &patches) else {
+        return (emission, Vec::new(), None);
+    };
+    let rho: Vec<[f64; 3]> =
+        elements.iter().map(|e| scene.materials[e.material as usize].reflectance).collect();
+    let direct = lights.project(&patches, &rho, basis);
+    (emission, direct, Some(std::sync::Arc::new(lights)))
 }
 
 /// Parameter coordinates of a face's corners, in face order.

@@ -12,6 +12,8 @@ pub use placement::{Key, KeyTransform};
 
 use glam::{DMat4, DVec3};
 
+use crate::lights::Light;
+
 /// Solver settings. Defaults are documented in the README.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Settings {
@@ -113,6 +115,8 @@ pub struct Scene {
     pub objects: Vec<Object>,
     /// Faces skipped because their area is zero: (object, face).
     pub degenerate_faces: Vec<(usize, usize)>,
+    /// Blender Light objects ([`crate::lights`]); set with [`Scene::with_lights`].
+    pub lights: Vec<Light>,
 }
 
 impl Scene {
@@ -125,10 +129,27 @@ impl Scene {
         emission_keys: Vec<Vec<EmissionKey>>,
         objects: Vec<Object>,
     ) -> crate::Result<Self> {
-        let mut scene =
-            Scene { settings, frames, materials, emission_keys, objects, degenerate_faces: Vec::new() };
+        let mut scene = Scene {
+            settings,
+            frames,
+            materials,
+            emission_keys,
+            objects,
+            degenerate_faces: Vec::new(),
+            lights: Vec::new(),
+        };
         validate::validate(&mut scene)?;
         Ok(scene)
+    }
+
+    /// The scene lit by `lights` too (validated; their keys sorted by frame).
+    pub fn with_lights(mut self, mut lights: Vec<Light>) -> crate::Result<Self> {
+        for l in &mut lights {
+            l.animation.sort_by(|a, b| a.frame.total_cmp(&b.frame));
+        }
+        crate::lights::validate(&lights)?;
+        self.lights = lights;
+        Ok(self)
     }
 
     /// Emission of material `m` at `frame`.

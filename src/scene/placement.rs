@@ -32,7 +32,11 @@ impl Key {
 }
 
 /// Finds the keys around `frame` and the blend weight of the second.
-fn bracket<T>(keys: &[T], frame: f64, key_frame: impl Fn(&T) -> f64) -> Option<(usize, usize, f64)> {
+pub(crate) fn bracket<T>(
+    keys: &[T],
+    frame: f64,
+    key_frame: impl Fn(&T) -> f64,
+) -> Option<(usize, usize, f64)> {
     let first = keys.first()?;
     let last = keys.last()?;
     if frame <= key_frame(first) {
