@@ -133,6 +133,8 @@ pub struct Session {
     placement: Vec<Option<DMat4>>,
     /// Host overrides of emission, per material.
     emission: Vec<Option<[f64; 3]>>,
+    /// Host override of the lights ([`Session::set_lights`]).
+    lights: Option<Vec<crate::lights::Light>>,
     system: Option<System>,
     /// What the incremental update keeps between frames (series, shape epochs).
     animation: Option<AnimationState>,
@@ -159,6 +161,7 @@ impl Session {
             pool,
             placement,
             emission,
+            lights: None,
             system: None,
             animation: None,
             stale: false,
@@ -278,9 +281,20 @@ impl Session {
         Ok(Some(refinement))
     }
 
+    /// Replaces the scene's lights from the next solved frame on (a host sampling its own
+    /// animation sets them each frame); validated as a scene's are.
+    pub fn set_lights(&mut self, lights: Vec<crate::lights::Light>) -> Result<()> {
+        crate::lights::validate(&lights)?;
+        self.lights = Some(lights);
+        Ok(())
+    }
+
     /// The scene as placed at `frame`: keys, then host overrides.
     fn scene_at(&self, frame: f64) -> Scene {
         let mut scene = self.scene.clone();
+        if let Some(lights) = &self.lights {
+            scene.lights = lights.clone();
+        }
         for (o, obj) in scene.objects.iter_mut().enumerate() {
             obj.matrix = self.placement[o].unwrap_or_else(|| obj.world_from_object(frame));
             obj.animation.clear();
