@@ -103,3 +103,31 @@ def test_an_emitter_facing_the_sky_is_reported(blender):
     job = bake_module.BakeJob(bpy.context, bake_module.settings_from_scene(sc))
     job.run()
     assert any('emitter "Sky Panel" lights nothing' in w for w in job.warnings), job.warnings
+
+
+def test_set_lights_through_the_binding_checks_each_light():
+    """``Session.set_lights`` through the C ABI: a lit floor brightens, bad lights fail with one
+    line naming the light and change nothing."""
+    import pytest
+
+    from addon.native import binding as b
+
+    verts, faces = grid_quad((-1, -1, 0), (2, 0, 0), (0, 2, 0), 2)
+    obj = {"vertices": np.asarray(verts, np.float32), "face_sizes": np.full(len(faces), 4, np.uint32),
+           "face_indices": np.asarray(faces, np.uint32).reshape(-1), "face_materials": np.zeros(4, np.uint32),
+           "matrix": np.eye(4)}
+    lamp = np.eye(4)
+    lamp[2, 3] = 1.0
+    with b.Session({"method": "full"}, [[0.5] * 3, [0.0] * 3], [[0.0] * 3, [1.0] * 3], [obj]) as s:
+        s.set_lights([{"type": "POINT", "matrix": lamp, "power": 100.0}])
+        s.solve_frame(1)
+        centre = s.corner_radiosity(0)[2]  # face 0's corner 2 is the floor's centre
+        assert centre[0] == pytest.approx(0.5 * 100 / (4 * np.pi), rel=5e-3)
+        for bad, says in [({"type": "CANDLE", "matrix": lamp}, "type 'CANDLE'"),
+                          ({"type": "POINT", "matrix": lamp, "power": -1.0}, "power -1 must be"),
+                          ({"type": "SPOT", "matrix": lamp, "spot_blend": 3.0}, "spot_blend 3 is outside")]:
+            with pytest.raises(b.RadiosityError, match=says) as e:
+                s.set_lights([bad])
+            assert "\n" not in str(e.value)
+        s.solve_frame(1)
+        assert s.corner_radiosity(0)[2][0] == pytest.approx(centre[0], rel=1e-6)
