@@ -416,12 +416,7 @@ pub type FrameSources = (Vec<[f64; 3]>, Vec<[f64; 3]>, Option<std::sync::Arc<Dir
 
 /// A frame's sources for `elements` of `scene` at `frame`: the materials' emission (`k = 0`),
 /// the lights' `rho E_d` (every `k`; empty without lights) and the lights as placed.
-pub fn frame_sources(
-    scene: &Scene,
-    frame: f64,
-    elements: &[Element],
-    basis: Basis,
-) -> FrameSources {
+pub fn frame_sources(scene: &Scene, frame: f64, elements: &[Element], basis: Basis) -> FrameSources {
     let nb = basis.len();
     let mut emission = vec![[0.0; 3]; elements.len() * nb];
     for (i, e) in elements.iter().enumerate() {
