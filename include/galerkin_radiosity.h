@@ -123,6 +123,55 @@ typedef uint32_t GrMethod;
 typedef struct GrSession GrSession;
 
 /**
+ * One light as it is at the coming frame. Fill with `gr_light_default` first: `struct_size`
+ * carries the size of the struct the caller was compiled with, so fields appended later keep
+ * their defaults for older callers.
+ */
+typedef struct GrLight {
+  /**
+   * `sizeof(GrLight)` as the caller knows it.
+   */
+  uint32_t struct_size;
+  /**
+   * A `GrLightKind` value.
+   */
+  uint32_t kind;
+  /**
+   * A `GrLightShape` value (area lights).
+   */
+  uint32_t shape;
+  /**
+   * World-from-light, row-major (as Blender's `matrix_world`); the light looks down local -Z.
+   */
+  double matrix[16];
+  /**
+   * RGB multiplier of `power`.
+   */
+  double color[3];
+  /**
+   * Watts (point, spot, area) or W/m^2 (sun strength).
+   */
+  double power;
+  /**
+   * Point and spot radius (m).
+   */
+  double radius;
+  /**
+   * Full cone angle of a spot (radians) and its blend in [0,1].
+   */
+  double spot_size;
+  double spot_blend;
+  /**
+   * Sun angular diameter (radians).
+   */
+  double angle;
+  /**
+   * Area light size along local X and Y (m).
+   */
+  double area_size[2];
+} GrLight;
+
+/**
  * Solver settings. Fill with `gr_settings_default`, then change what you need.
  */
 typedef struct GrSettings {
@@ -213,6 +262,25 @@ const char *gr_version_string(void);
  * `buf` is NULL or points to `len` writable bytes.
  */
 size_t gr_last_error(char *buf, size_t len);
+
+/**
+ * Writes Blender's defaults for a point light of 1000 W at the origin to `out`.
+ *
+ * # Safety
+ * `out` is NULL or points to a writable `GrLight`.
+ */
+GrStatus gr_light_default(struct GrLight *out);
+
+/**
+ * Replaces the session's lights with `count` lights from the next solved frame on (`count` 0
+ * removes them). Each is checked (`struct_size`, kind, shape, finite non-negative power and
+ * colour, spot size in (0, pi], blend in [0,1], area size > 0); on error nothing changes.
+ *
+ * # Safety
+ * `s` is NULL or a live session; `lights` is NULL (with `count` 0) or points to `count`
+ * readable `GrLight`s.
+ */
+GrStatus gr_session_set_lights(struct GrSession *s, const struct GrLight *lights, size_t count);
 
 /**
  * Creates a session from a scene given as flat arrays and writes it to `*out`.

@@ -854,12 +854,15 @@ pub fn advance(
     stats.segments_tested = crate::visibility::segments_tested() - segments_before;
     stats.kernel_seconds = start.elapsed().as_secs_f64();
 
-    // Emission changes enter as Delta e (eq. 9).
-    let mut emission = vec![[0.0; 3]; n * nb];
-    for (i, e) in new_elements.iter().enumerate() {
-        emission[i * nb] = next.emission_at(e.material as usize, frame);
+    // Emission changes, the lights' direct light among them, enter as Delta e (eq. 9).
+    let (emission, direct, lights) = crate::system::frame_sources(next, frame, &new_elements, basis);
+    let old_sources = sys.sources();
+    (sys.direct, sys.lights) = (direct, lights);
+    for (k, d) in delta_b.iter_mut().enumerate() {
+        let new =
+            std::array::from_fn::<f64, 3, _>(|c| emission[k][c] + sys.direct.get(k).map_or(0.0, |x| x[c]));
         for c in 0..3 {
-            delta_b[i * nb][c] += emission[i * nb][c] - sys.emission[i * nb][c];
+            d[c] += new[c] - old_sources[k][c];
         }
     }
     for (k, d) in delta_b.iter().enumerate() {

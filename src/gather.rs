@@ -226,6 +226,8 @@ struct Foot {
     element: u32,
     weight: f32,
     row: Row,
+    /// The foot point's local `(s,t)` on `element` (for the lights' direct light there).
+    at: (f64, f64),
 }
 
 /// How a moment's visibility was decided; a different decision recomputes the moment.
@@ -450,6 +452,7 @@ impl CornerGather {
                         values[k] = radiosity(sys, e, &rows[k].0);
                     }
                 }
+                sys.add_direct_light(points.iter().map(|p| p.at), &mut values);
                 rows.into_iter().zip(values).map(|((row, n), v)| Ok((row, n, v))).collect()
             })
             .collect::<Result<_>>()?;
@@ -609,7 +612,9 @@ fn source_irradiance<const K: usize>(sys: &System, rows: [&Row; K]) -> [[f64; 3]
 fn finish(sys: &System, i: usize, row: &Row, mut irradiance: [f64; 3]) -> [f64; 3] {
     let nb = sys.basis.len();
     for foot in &row.feet {
-        let b = radiosity(sys, foot.element as usize, &foot.row);
+        let mut b = [radiosity(sys, foot.element as usize, &foot.row)];
+        sys.add_direct_light(std::iter::once(Some((foot.element as usize, foot.at.0, foot.at.1))), &mut b);
+        let [b] = b;
         let w = foot.weight as f64 * sys.source_weights[foot.element as usize];
         for c in 0..3 {
             irradiance[c] += w * b[c];
@@ -1071,7 +1076,7 @@ impl Gather<'_> {
         if let (Some(t), true) = (touch, weight > 0.0) {
             let (row, n) = self.row(j as usize, t.s, t.t, old_foot.map(|f| f.row), false);
             computed += n;
-            feet.push(Foot { element: j, weight: weight as f32, row });
+            feet.push(Foot { element: j, weight: weight as f32, row, at: (t.s, t.t) });
         }
         computed
     }
@@ -1081,7 +1086,7 @@ impl Gather<'_> {
     fn keep_foot(&self, j: u32, touch: Option<Touch>, old_foot: Option<Foot>, feet: &mut Vec<Foot>) -> usize {
         let (Some(t), Some(foot)) = (touch, old_foot) else { return 0 };
         let (row, computed) = self.row(j as usize, t.s, t.t, Some(foot.row), false);
-        feet.push(Foot { row, ..foot });
+        feet.push(Foot { row, at: (t.s, t.t), ..foot });
         computed
     }
 

@@ -18,6 +18,7 @@ pub mod gather;
 pub mod geometry;
 pub mod hemisphere;
 pub mod kernel;
+pub mod lights;
 pub mod links;
 pub mod overlap;
 pub mod quadrature;

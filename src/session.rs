@@ -70,6 +70,8 @@ pub struct FrameStats {
     /// The frame is a preview ([`Session::set_preview`]): solved to [`preview_tolerance`],
     /// corners from the face polynomials, until [`Session::refine`].
     pub preview: bool,
+    /// One line each, for the host to show (emitters that light nothing, on rebuilt frames).
+    pub warnings: Vec<String>,
 }
 
 /// The tolerance a preview frame is solved to: ten times the scene's, but no looser than 1e-3
@@ -132,6 +134,8 @@ pub struct Session {
     placement: Vec<Option<DMat4>>,
     /// Host overrides of emission, per material.
     emission: Vec<Option<[f64; 3]>>,
+    /// Host override of the lights ([`Session::set_lights`]).
+    lights: Option<Vec<crate::lights::Light>>,
     system: Option<System>,
     /// What the incremental update keeps between frames (series, shape epochs).
     animation: Option<AnimationState>,
@@ -161,6 +165,7 @@ impl Session {
             pool,
             placement,
             emission,
+            lights: None,
             system: None,
             animation: None,
             stale: false,
@@ -286,9 +291,20 @@ impl Session {
         Ok(Some(refinement))
     }
 
+    /// Replaces the scene's lights from the next solved frame on (a host sampling its own
+    /// animation sets them each frame); validated as a scene's are.
+    pub fn set_lights(&mut self, lights: Vec<crate::lights::Light>) -> Result<()> {
+        crate::lights::validate(&lights)?;
+        self.lights = Some(lights);
+        Ok(())
+    }
+
     /// The scene as placed at `frame`: keys, then host overrides.
     fn scene_at(&self, frame: f64) -> Scene {
         let mut scene = self.scene.clone();
+        if let Some(lights) = &self.lights {
+            scene.lights = lights.clone();
+        }
         for (o, obj) in scene.objects.iter_mut().enumerate() {
             obj.matrix = self.placement[o].unwrap_or_else(|| obj.world_from_object(frame));
             obj.animation.clear();
@@ -392,6 +408,7 @@ impl Session {
             gather_recomputed: g.recomputed,
             full_rebuild: true,
             preview: self.preview,
+            warnings: system.stats.warnings.clone(),
             ..Default::default()
         };
         self.keep_rebuilt(system, frame);

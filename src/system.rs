@@ -11,10 +11,12 @@ use crate::gather::{CornerGather, GatherStats};
 use crate::geometry::{Patch, Rect};
 use crate::kernel::PairContext;
 use crate::kernel::assemble::{ElementGeometry, assemble};
+use crate::lights::direct::DirectLight;
 use crate::links::LinkStore;
 use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
 use crate::scene::json::ObjectResult;
+use crate::scene::placement::{self, front_order};
 use crate::solver::{self, Coefficients, ShootStats};
 use crate::visibility::Occluders;
 
@@ -39,6 +41,9 @@ pub struct Element {
     pub area: f64,
     /// `integral Gamma_k A ds dt` over the element: the mean radiosity is `sum_k b^k m_k / area`.
     pub moments: Vec<f64>,
+    /// Placed with reversed winding (a mirroring matrix, [`crate::scene::placement::front_order`]):
+    /// the face's `(s,t)` is the patch's `(1 - s, t)`.
+    pub mirrored: bool,
 }
 
 /// World-space elements of a scene at a frame: one per non-degenerate face.
@@ -56,13 +61,15 @@ pub fn build_elements_reusing(scene: &Scene, frame: f64, basis: Basis, previous:
     let mut previous = previous.iter().peekable();
     for (o, obj) in scene.objects.iter().enumerate() {
         let m = obj.world_from_object(frame);
+        let mirrored = placement::mirrors(&m);
         let world: Vec<DVec3> = obj.vertices.iter().map(|v| m.transform_point3(*v)).collect();
         for (f, face) in obj.faces.iter().enumerate() {
             if degenerate.peek() == Some(&&(o, f)) {
                 degenerate.next();
                 continue;
             }
-            let corners: Vec<DVec3> = face.iter().map(|&v| world[v as usize]).collect();
+            let corners: Vec<DVec3> =
+                front_order(face, mirrored).iter().map(|&v| world[v as usize]).collect();
             let patch = Patch::from_corners(&corners);
             // Previous elements of faces before this one (degenerate there, not here) are passed.
             while previous.next_if(|e| (e.object, e.face) < (o as u32, f as u32)).is_some() {}
@@ -74,15 +81,9 @@ pub fn build_elements_reusing(scene: &Scene, frame: f64, basis: Basis, previous:
                 elements.push(e.clone());
                 continue;
             }
-            elements.push(element(
-                o as u32,
-                f as u32,
-                Rect::UNIT,
-                patch,
-                obj.face_materials[f],
-                basis,
-                &rule,
-            ));
+            let mut e = element(o as u32, f as u32, Rect::UNIT, patch, obj.face_materials[f], basis, &rule);
+            e.mirrored = mirrored;
+            elements.push(e);
         }
     }
     elements
@@ -111,7 +112,7 @@ fn element(
             }
         }
     }
-    Element { object, face, domain, patch, material, area, moments }
+    Element { object, face, domain, patch, material, area, moments, mirrored: false }
 }
 
 /// [`crate::hemisphere::bounded_reflectance`] of every element.
@@ -136,6 +137,8 @@ pub struct SystemStats {
     pub kernel_seconds: f64,
     pub solve_seconds: f64,
     pub shots: usize,
+    /// One line per emitting object that lights nothing ([`System::dark_emitters`]).
+    pub warnings: Vec<String>,
 }
 
 /// The Galerkin system of one frame.
@@ -156,6 +159,11 @@ pub struct System {
     pub corner_bound: bool,
     /// Emission coefficients `e_i^k` (eq. 5): constant exitance projects onto `k = 0` only.
     pub emission: Vec<[f64; 3]>,
+    /// The lights' share of the sources, `rho E_d` projected (all `k`; empty without lights):
+    /// the solve starts from `emission + direct` ([`System::sources`]).
+    pub direct: Vec<[f64; 3]>,
+    /// The lights as placed for `direct`, for point queries (the corner gather).
+    pub lights: Option<std::sync::Arc<DirectLight>>,
     pub solution: Coefficients,
     /// `B` gathered at every face corner for the current solution ([`crate::gather`]), per object
     /// in face order; `None` when corners come from the face polynomials.
@@ -196,10 +204,7 @@ impl System {
         let surface_reflectance: Vec<[f64; 3]> =
             elements.iter().map(|e| scene.materials[e.material as usize].reflectance).collect();
         let reflectance = bounded_reflectances(&links, &surface_reflectance);
-        let mut emission = vec![[0.0; 3]; elements.len() * nb];
-        for (i, e) in elements.iter().enumerate() {
-            emission[i * nb] = scene.emission_at(e.material as usize, frame);
-        }
+        let (emission, direct, lights) = frame_sources(scene, frame, &elements, basis);
         let stats = SystemStats {
             elements: elements.len(),
             pairs: links.len(),
@@ -214,7 +219,7 @@ impl System {
             ..Default::default()
         };
         let solution = Coefficients::zeros(elements.len(), nb);
-        Ok(System {
+        let mut sys = System {
             basis,
             elements,
             links,
@@ -223,12 +228,74 @@ impl System {
             source_weights,
             corner_bound: true,
             emission,
+            direct,
+            lights,
             solution,
             corners: None,
             gather: None,
             occluders,
             stats,
-        })
+        };
+        sys.stats.warnings = sys.dark_emitters(scene);
+        Ok(sys)
+    }
+
+    /// The solve's sources: emission plus the lights' `rho E_d`.
+    pub fn sources(&self) -> Vec<[f64; 3]> {
+        let mut out = self.emission.clone();
+        for (o, d) in out.iter_mut().zip(&self.direct) {
+            for c in 0..3 {
+                o[c] += d[c];
+            }
+        }
+        out
+    }
+
+    /// One line per object whose emitting faces deliver nothing to any other face (an emissive
+    /// plane left facing the sky): no link leaves any of them.
+    pub fn dark_emitters(&self, scene: &Scene) -> Vec<String> {
+        let nb = self.basis.len();
+        let transfers = self.links.transfers();
+        let mut emits = vec![false; scene.objects.len()];
+        let mut lights = vec![false; scene.objects.len()];
+        for (i, e) in self.elements.iter().enumerate() {
+            if self.emission[i * nb].iter().any(|&x| x > 0.0) {
+                emits[e.object as usize] = true;
+                lights[e.object as usize] |= transfers.get(i * nb).is_some_and(|&t| t > 0.0);
+            }
+        }
+        scene
+            .objects
+            .iter()
+            .enumerate()
+            .filter(|&(o, _)| emits[o] && !lights[o])
+            .map(|(_, obj)| {
+                format!(
+                    "emitter \"{}\" lights nothing: its emitting faces face away from all geometry",
+                    obj.name
+                )
+            })
+            .collect()
+    }
+
+    /// Adds `rho E_d(x)` of the lights to `values` at face points `at` (element, local `s`, `t`),
+    /// each with its own shadow rays: the corner gather's direct light.
+    pub fn add_direct_light(
+        &self,
+        at: impl Iterator<Item = Option<(usize, f64, f64)>>,
+        values: &mut [[f64; 3]],
+    ) {
+        let Some(lights) = &self.lights else { return };
+        for (v, at) in values.iter_mut().zip(at) {
+            if let Some((e, s, t)) = at {
+                let p = &self.elements[e].patch;
+                let n = p.area_vector(s, t).normalize_or_zero();
+                let irr = lights.irradiance(p.point(s, t), n, e as u32);
+                for c in 0..3 {
+                    v[c] += self.surface_reflectance[e][c] * irr[c];
+                }
+            }
+        }
     }
 
     /// Element areas, in element order.
@@ -239,17 +306,18 @@ impl System {
     /// Total emitted power-norm, the reference for the tolerance.
     pub fn emitted_power(&self) -> f64 {
         let nb = self.basis.len();
+        let sources = self.sources();
         self.elements
             .iter()
             .enumerate()
-            .map(|(i, e)| solver::power(&self.emission[i * nb..(i + 1) * nb], e.area))
+            .map(|(i, e)| solver::power(&sources[i * nb..(i + 1) * nb], e.area))
             .sum()
     }
 
     /// Solves from scratch by progressive refinement down to `tolerance` x emitted power.
     pub fn solve(&mut self, tolerance: f64, cancel: &dyn Fn() -> bool) -> Result<ShootStats> {
         let start = Instant::now();
-        self.solution = Coefficients::from_emission(&self.emission, self.basis.len());
+        self.solution = Coefficients::from_emission(&self.sources(), self.basis.len());
         let stop = tolerance * self.emitted_power();
         let stats = solver::shoot(&self.links, &self.reflectance, &mut self.solution, stop, cancel)?;
         self.stats.solve_seconds = start.elapsed().as_secs_f64();
@@ -334,6 +402,7 @@ impl System {
                             continue;
                         }
                         for (s, t) in corner_params(face.len()) {
+                            let s = if self.elements[e].mirrored { 1.0 - s } else { s };
                             let v =
                                 if face.len() == 3 && t == 1.0 { self.apex(e) } else { self.eval(e, s, t) };
                             res.corner_radiosity.push(to_f32(v));
@@ -368,6 +437,27 @@ impl System {
     }
 }
 
+/// Emission coefficients, the lights' `rho E_d` coefficients and the lights as placed.
+pub type FrameSources = (Vec<[f64; 3]>, Vec<[f64; 3]>, Option<std::sync::Arc<DirectLight>>);
+
+/// A frame's sources for `elements` of `scene` at `frame`: the materials' emission (`k = 0`),
+/// the lights' `rho E_d` (every `k`; empty without lights) and the lights as placed.
+pub fn frame_sources(scene: &Scene, frame: f64, elements: &[Element], basis: Basis) -> FrameSources {
+    let nb = basis.len();
+    let mut emission = vec![[0.0; 3]; elements.len() * nb];
+    for (i, e) in elements.iter().enumerate() {
+        emission[i * nb] = scene.emission_at(e.material as usize, frame);
+    }
+    let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
+    let Some(lights) = DirectLight::new(&scene.lights, frame, &patches) else {
+        return (emission, Vec::new(), None);
+    };
+    let rho: Vec<[f64; 3]> =
+        elements.iter().map(|e| scene.materials[e.material as usize].reflectance).collect();
+    let direct = lights.project(&patches, &rho, basis);
+    (emission, direct, Some(std::sync::Arc::new(lights)))
+}
+
 /// Parameter coordinates of a face's corners, in face order.
 pub fn corner_params(n: usize) -> Vec<(f64, f64)> {
     if n == 3 {
@@ -382,15 +472,21 @@ fn to_f32(v: [f64; 3]) -> [f32; 3] {
 }
 
 impl System {
-    /// The element covering `(s,t)` of face `f` of object `o`, and the local coordinates in it.
+    /// The element covering `(s,t)` of face `f` of object `o` (`s,t` in face corner order, as
+    /// [`corner_params`]), and the local coordinates in it.
     pub fn element_of_face(&self, o: usize, f: usize, s: f64, t: f64) -> Option<(usize, f64, f64)> {
         let start = self.elements.partition_point(|e| (e.object as usize, e.face as usize) < (o, f));
         self.elements[start..]
             .iter()
             .take_while(|e| e.object as usize == o && e.face as usize == f)
-            .position(|e| e.domain.s0 <= s && s <= e.domain.s1 && e.domain.t0 <= t && t <= e.domain.t1)
+            .position(|e| {
+                let s = if e.mirrored { 1.0 - s } else { s };
+                e.domain.s0 <= s && s <= e.domain.s1 && e.domain.t0 <= t && t <= e.domain.t1
+            })
             .map(|k| {
-                let d = &self.elements[start + k].domain;
+                let el = &self.elements[start + k];
+                let s = if el.mirrored { 1.0 - s } else { s };
+                let d = &el.domain;
                 (start + k, (s - d.s0) / (d.s1 - d.s0), (t - d.t0) / (d.t1 - d.t0))
             })
     }

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..core import frames as core_frames
 from ..core.grids import Grid, subdivide
+from ..core.marshal import with_object_names
 from ..core.materials import radiance_from_radiosity
 from ..core.record import BakeRecord, FrameState, first_changed
 from ..core.settings import BakeSettings, SettingsError
@@ -101,6 +102,8 @@ def new_session(settings: BakeSettings, exp, state: FrameState, scene_key: str) 
     rho, emission = exp.materials.arrays()
     try:
         session = b.Session(settings.native(), rho, emission, [o.data.native() for o in exp.objects])
+        if exp.lights:
+            session.set_lights(exp.lights)
     except b.RadiosityError as e:
         raise BakeError(str(e)) from e
     return Held(session, scene_key, state, None, exp)
@@ -116,6 +119,7 @@ def apply_sample(h: Held, smp, state: FrameState) -> int:
     if state.emission != h.state.emission:
         for m, rgb in enumerate(smp.emission):
             h.session.set_material_emission(m, tuple(float(x) for x in rgb))
+        h.session.set_lights(smp.lights)
         changed += 1
     h.state = FrameState(list(state.matrices), list(h.state.geometry), state.emission)
     return changed
@@ -229,7 +233,7 @@ class BakeJob:
         s = self.settings
         self.scene.frame_set(self.frames[0])
         dg = self.context.evaluated_depsgraph_get()
-        self.rest = rest = export(dg, sel.objects)
+        self.rest = rest = export(dg, sel.objects, sel.light_objects)
         faces = sum(len(o.data.split.face_sizes) for o in rest.objects)
         if faces == 0:
             raise BakeError(f"nothing to bake: the mesh objects in {where} have no faces ("
@@ -251,10 +255,10 @@ class BakeJob:
             claimed.add(mesh.name)
         self.session_key = session_key(s, rest)
         self.scene_key = rest.scene_key(s.solve_signature(), extra=f"L{level}:" + ",".join(modes))
-        if not self._has_emitter(dg):
-            raise BakeError(f"no emitters: no material in {where} emits light in frames "
-                            f"{self.frames[0]}-{self.frames[-1]} (give a Principled BSDF an Emission "
-                            "Strength > 0, or use an Emission shader; Light objects are not used)")
+        if not rest.light_objects and not self._has_emitter(dg):
+            raise BakeError(f"no emitters: no Light object and no material in {where} emits light in "
+                            f"frames {self.frames[0]}-{self.frames[-1]} (add a light, give a Principled "
+                            "BSDF an Emission Strength > 0, or use an Emission shader)")
         # Storage targets.
         self.targets = []
         copies = [o for o, m in zip(rest.objects, modes, strict=True) if m == "copy"]
@@ -379,7 +383,7 @@ class BakeJob:
         h = self.held
         if state.geometry != h.state.geometry:
             # Deformed: rebuild the session on this frame's meshes and solve from scratch.
-            exp = export(dg, [o.obj for o in self.rest.objects])
+            exp = export(dg, [o.obj for o in self.rest.objects], self.rest.light_objects)
             topology = [o.data.topology_key() for o in exp.objects]
             if topology != [o.data.topology_key() for o in self.rest.objects]:
                 raise BakeError(f"the meshes' faces changed at frame {f}; "
@@ -413,6 +417,8 @@ class BakeJob:
         f = self.current[0]
         t = time.perf_counter()
         self.stats = self.held.session.solve_frame(float(f), progress=self._progress)
+        lines = [with_object_names(w, self.names) for w in self.stats.get("warnings", [])]
+        self.warnings += [w for w in lines if w not in self.warnings]
         self.held.frame = float(f)
         self.frame_seconds = time.perf_counter() - t
         self.seconds_solving += self.frame_seconds

@@ -4,6 +4,10 @@ Objects: every mesh object of the chosen collection (default: the scene's) that 
 the view layer, renderable (not ``hide_render``) and not excluded in its Radiosity object
 settings, sorted by name so the library order is stable. Other kinds of object are reported.
 
+Light objects (Point, Spot, Sun, Area) of the same selection are sources: their evaluated state
+(``matrix_world``, colour, power or strength, radius, spot size and blend, angle, area shape and
+size) is sampled per frame and handed to the session with ``set_lights``.
+
 Geometry is the evaluated mesh (modifiers, shape keys, drivers applied) via
 ``evaluated_get(depsgraph).to_mesh()``, in object space; the placement is the evaluated
 ``matrix_world`` (keyframes, constraints, drivers and parenting all count), sampled per frame.
@@ -33,14 +37,14 @@ def is_switch_modifier(mod) -> bool:
 class Selection:
     objects: list = field(default_factory=list)          # bpy objects, library order
     lights: list[str] = field(default_factory=list)
+    light_objects: list = field(default_factory=list)    # bpy Light objects, by name
     non_mesh: list[str] = field(default_factory=list)    # "name (TYPE)"
     excluded: list[str] = field(default_factory=list)
 
     def notes(self) -> list[str]:
         out = []
-        if self.lights:
-            out.append("Light objects are ignored (the solver needs emissive meshes): "
-                       + ", ".join(self.lights))
+        if self.lights and not self.objects:
+            out.append("Light objects are ignored without meshes to light: " + ", ".join(self.lights))
         if self.non_mesh:
             out.append("Not meshes, skipped (convert them to meshes to bake them): "
                        + ", ".join(self.non_mesh))
@@ -61,6 +65,7 @@ def collect(scene, view_layer, collection=None) -> Selection:
             sel.objects.append(obj)
         elif obj.type == "LIGHT":
             sel.lights.append(obj.name)
+            sel.light_objects.append(obj)
         elif obj.type not in SILENT_TYPES:
             sel.non_mesh.append(f"{obj.name} ({obj.type})")
     return sel
@@ -98,6 +103,35 @@ def read_mesh(mesh):
     return co.reshape(-1, 3), sizes, loops, mats, smooth
 
 
+def light_state(obj, depsgraph) -> dict:
+    """A Light object as ``binding.Session.set_lights`` takes it, evaluated at the current frame
+    (keyframes and drivers on the object and on its light data count)."""
+    ev = obj.evaluated_get(depsgraph)
+    d = ev.data
+    out = {"type": d.type, "matrix": np.array(ev.matrix_world, np.float64),
+           "color": tuple(float(c) for c in d.color), "power": float(d.energy)}
+    if d.type in ("POINT", "SPOT"):
+        out["radius"] = float(d.shadow_soft_size)
+    if d.type == "SPOT":
+        out["spot_size"], out["spot_blend"] = float(d.spot_size), float(d.spot_blend)
+    if d.type == "SUN":
+        out["angle"] = float(d.angle)
+    if d.type == "AREA":
+        out["shape"] = d.shape
+        out["size"] = (float(d.size), float(d.size_y if d.shape in ("RECTANGLE", "ELLIPSE") else d.size))
+    return out
+
+
+def lights_key(lights: list[dict]) -> str:
+    """A digest of the lights' states (part of a frame's emission state)."""
+    if not lights:
+        return ""
+    parts = [np.asarray(light["matrix"], np.float64).reshape(-1) for light in lights]
+    parts += [np.asarray([v for k, v in sorted(light.items()) if isinstance(v, float)]) for light in lights]
+    names = "|".join(f"{light['type']}:{light.get('shape', '')}" for light in lights)
+    return digest(np.frombuffer(names.encode(), np.uint8), *parts, decimals=6)
+
+
 @dataclass
 class ExportedObject:
     obj: object                 # the original bpy object
@@ -113,6 +147,8 @@ class Export:
     objects: list[ExportedObject]
     materials: core_materials.MaterialTable
     material_sources: list      # (bpy material or None, multiplier) per library material
+    light_objects: list = field(default_factory=list)   # bpy Light objects
+    lights: list = field(default_factory=list)          # their states at the export's frame
 
     def scene_key(self, settings_signature: dict, extra: str = "") -> str:
         rho, _ = self.materials.arrays()
@@ -137,8 +173,8 @@ class Export:
                 + ", ".join(f"{name} ({n})" for name, n in bad))
 
 
-def export(depsgraph, objects) -> Export:
-    """The library scene at the depsgraph's current frame."""
+def export(depsgraph, objects, light_objects=()) -> Export:
+    """The library scene at the depsgraph's current frame, lit by `light_objects` too."""
     table = core_materials.MaterialTable()
     sources = []
     out = []
@@ -170,7 +206,8 @@ def export(depsgraph, objects) -> Export:
             orig.polygons.foreach_get("loop_total", osizes)
             same = bool((osizes == sizes).all())
         out.append(ExportedObject(obj, data, slots, smooth, same, may_deform(obj)))
-    return Export(out, table, sources)
+    light_objects = list(light_objects)
+    return Export(out, table, sources, light_objects, [light_state(o, depsgraph) for o in light_objects])
 
 
 def frame_emission(export: Export) -> np.ndarray:
@@ -188,6 +225,7 @@ class Sample:
     matrices: list[np.ndarray]
     vertices: list[np.ndarray | None]   # None: the object does not deform
     emission: np.ndarray
+    lights: list = field(default_factory=list)   # light states (``light_state``)
 
     def state(self, rest: Export) -> FrameState:
         geometry = [
@@ -195,7 +233,7 @@ class Sample:
             for v, o in zip(self.vertices, rest.objects, strict=True)
         ]
         mats = [digest(m, decimals=6) for m in self.matrices]
-        return FrameState(mats, geometry, emission_key(self.emission))
+        return FrameState(mats, geometry, emission_key(self.emission) + lights_key(self.lights))
 
 
 def sample(depsgraph, rest: Export, objects=None) -> Sample:
@@ -219,7 +257,8 @@ def sample(depsgraph, rest: Export, objects=None) -> Sample:
             vertices.append(co.reshape(-1, 3))
         else:
             vertices.append(None)
-    return Sample(matrices, vertices, frame_emission(rest))
+    lights = [light_state(o, depsgraph) for o in rest.light_objects]
+    return Sample(matrices, vertices, frame_emission(rest), lights)
 
 
 class TopologyChanged(Exception):

@@ -88,3 +88,15 @@ class ObjectData:
 
 def emission_key(emission: np.ndarray) -> str:
     return digest(np.asarray(emission, np.float64), decimals=6)
+
+
+def with_object_names(line: str, names: list[str]) -> str:
+    """A library message with its ``"object N"`` (how the C ABI names objects) replaced by the
+    Blender names, in library order."""
+    import re
+
+    def name(m):
+        i = int(m.group(1))
+        return f'"{names[i]}"' if i < len(names) else m.group(0)
+
+    return re.sub(r'"object (\d+)"', name, line)

@@ -84,6 +84,28 @@ class _Settings(Structure):
     ]
 
 
+class _Light(Structure):
+    """``GrLight`` (src/ffi/lights.rs): one light as it is at the coming frame."""
+
+    _fields_ = [
+        ("struct_size", c_uint32),
+        ("kind", c_uint32),
+        ("shape", c_uint32),
+        ("matrix", c_double * 16),
+        ("color", c_double * 3),
+        ("power", c_double),
+        ("radius", c_double),
+        ("spot_size", c_double),
+        ("spot_blend", c_double),
+        ("angle", c_double),
+        ("area_size", c_double * 2),
+    ]
+
+
+#: ``GrLightKind`` and ``GrLightShape`` values by Blender's names.
+LIGHT_KINDS = {"POINT": 0, "SPOT": 1, "SUN": 2, "AREA": 3}
+LIGHT_SHAPES = {"SQUARE": 0, "RECTANGLE": 1, "DISK": 2, "ELLIPSE": 3}
+
 _PROGRESS = CFUNCTYPE(c_int32, c_double, c_char_p, c_void_p)
 _F32 = POINTER(c_float)
 _U32 = POINTER(c_uint32)
@@ -125,6 +147,8 @@ def _declare(lib: ctypes.CDLL) -> None:
         ),
         "gr_session_set_object_matrix": ([_SESSION, c_uint32, _F32], c_uint32),
         "gr_session_set_material_emission": ([_SESSION, c_uint32, _F32], c_uint32),
+        "gr_light_default": ([POINTER(_Light)], c_uint32),
+        "gr_session_set_lights": ([_SESSION, POINTER(_Light), c_size_t], c_uint32),
         "gr_session_solve_frame": ([_SESSION, c_double, _PROGRESS, c_void_p], c_uint32),
         "gr_session_set_preview": ([_SESSION, c_uint32], c_uint32),
         "gr_session_refine": ([_SESSION, _PROGRESS, c_void_p, _U32], c_uint32),
@@ -407,6 +431,34 @@ class Session:
         """Material ``index``'s emission (RGB, W/m^2) from the next frame on."""
         e = _floats(rgb, (3,), "rgb")
         self._call("gr_session_set_material_emission", _u32(index, "material"), _ptr(e, _F32))
+
+    def set_lights(self, lights) -> None:
+        """Replaces the lights from the next frame on. ``lights``: dicts with ``type`` (POINT, SPOT,
+        SUN, AREA), ``matrix`` (4x4 row-major world-from-light), and optionally ``color`` (RGB),
+        ``power`` (W; sun: strength W/m^2), ``radius``, ``spot_size``, ``spot_blend`` (radians,
+        [0,1]), ``angle``, ``shape`` (SQUARE, RECTANGLE, DISK, ELLIPSE), ``size`` ((x, y) m)."""
+        arr = (_Light * max(len(lights), 1))()
+        for i, d in enumerate(lights):
+            g = arr[i]
+            _check(self._lib, self._lib.gr_light_default(ctypes.byref(g)))
+            kind = str(d.get("type", "")).upper()
+            if kind not in LIGHT_KINDS:
+                raise _invalid(f"lights[{i}]: type {d.get('type')!r} is not one of {sorted(LIGHT_KINDS)}")
+            g.kind = LIGHT_KINDS[kind]
+            shape = str(d.get("shape", "SQUARE")).upper()
+            if shape not in LIGHT_SHAPES:
+                raise _invalid(f"lights[{i}]: shape {d.get('shape')!r} is not one of {sorted(LIGHT_SHAPES)}")
+            g.shape = LIGHT_SHAPES[shape]
+            _matrix(d["matrix"], f"lights[{i}].matrix")  # checks the shape
+            g.matrix[:] = [float(x) for x in np.asarray(d["matrix"], np.float64).reshape(-1)]
+            if "color" in d:
+                g.color[:] = [float(x) for x in _floats(d["color"], (3,), f"lights[{i}].color")]
+            for key in ("power", "radius", "spot_size", "spot_blend", "angle"):
+                if key in d:
+                    setattr(g, key, float(d[key]))
+            if "size" in d:
+                g.area_size[:] = [float(x) for x in _floats(d["size"], (2,), f"lights[{i}].size")]
+        self._call("gr_session_set_lights", arr, len(lights))
 
     # -- solving --------------------------------------------------------------------------------
 

@@ -7,8 +7,10 @@
 //! - [`panic`]: the boundary.
 //! - [`settings`]: `GrSettings`, `GrMethod`.
 //! - [`session`]: `GrSession` and its functions.
+//! - [`lights`]: `GrLight` and `gr_session_set_lights` (Blender Light objects).
 
 pub mod error;
+pub mod lights;
 pub mod panic;
 pub mod session;
 pub mod settings;
@@ -16,6 +18,7 @@ pub mod settings;
 use std::ffi::{CStr, c_char};
 
 pub use error::{GrStatus, gr_last_error};
+pub use lights::{GrLight, GrLightKind, GrLightShape, gr_light_default, gr_session_set_lights};
 pub use panic::run_in_boundary;
 pub use session::{
     GrProgressFn, GrSession, gr_session_cancel, gr_session_corner_count, gr_session_corner_radiosity,

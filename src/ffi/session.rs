@@ -29,8 +29,8 @@ pub struct GrSession {
     corners: Vec<u32>,
 }
 
-struct State {
-    session: Session,
+pub(super) struct State {
+    pub(super) session: Session,
     /// Statistics of the last completed frame.
     stats: Option<FrameStats>,
     /// Face and corner radiosity of the last completed frame, made on first read.
@@ -64,7 +64,7 @@ impl GrSession {
         }
     }
 
-    fn write(&self) -> Result<RwLockWriteGuard<'_, State>, Failure> {
+    pub(super) fn write(&self) -> Result<RwLockWriteGuard<'_, State>, Failure> {
         match self.state.try_write() {
             Ok(g) => Ok(g),
             Err(TryLockError::Poisoned(p)) => Ok(p.into_inner()),
@@ -98,7 +98,7 @@ impl State {
 ///
 /// # Safety
 /// `s` is NULL or a live pointer from `gr_session_new`.
-unsafe fn session<'a>(s: *const GrSession) -> Result<&'a GrSession, Failure> {
+pub(super) unsafe fn session<'a>(s: *const GrSession) -> Result<&'a GrSession, Failure> {
     if s.is_null() {
         return Err(Failure::null("session"));
     }
@@ -127,7 +127,7 @@ fn check_array<T>(p: *const T, len: usize, what: &str) -> Result<(), Failure> {
 ///
 /// # Safety
 /// When `len > 0`, `p` points to `len` readable values that are not written during `'a`.
-unsafe fn array<'a, T>(p: *const T, len: usize, what: &str) -> Result<&'a [T], Failure> {
+pub(super) unsafe fn array<'a, T>(p: *const T, len: usize, what: &str) -> Result<&'a [T], Failure> {
     check_array(p, len, what)?;
     if len == 0 {
         return Ok(&[]);

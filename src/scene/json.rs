@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{EmissionKey, Key, KeyTransform, Material, Object, Scene, Settings};
 use crate::error::{Error, Result, invalid_scene};
+use crate::lights::{AreaShape, Light, LightKey, LightKind};
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -14,6 +15,119 @@ struct SceneFile {
     frames: Option<[i64; 2]>,
     materials: Vec<MaterialFile>,
     objects: Vec<ObjectFile>,
+    #[serde(default)]
+    lights: Vec<LightFile>,
+}
+
+/// A Blender Light object (README of the add-on, "Lights"; [`crate::lights`]).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LightFile {
+    name: Option<String>,
+    #[serde(rename = "type")]
+    kind: String,
+    /// World-from-light, row-major; or `position` (and `direction`, default straight down).
+    matrix: Option<[f64; 16]>,
+    position: Option<[f64; 3]>,
+    direction: Option<[f64; 3]>,
+    /// Watts (point, spot, area).
+    power: Option<f64>,
+    /// W/m^2 (sun).
+    strength: Option<f64>,
+    color: Option<[f64; 3]>,
+    radius: Option<f64>,
+    spot_size: Option<f64>,
+    spot_blend: Option<f64>,
+    angle: Option<f64>,
+    shape: Option<String>,
+    size: Option<[f64; 2]>,
+    #[serde(default)]
+    animation: Vec<LightKeyFile>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LightKeyFile {
+    frame: f64,
+    matrix: Option<[f64; 16]>,
+    position: Option<[f64; 3]>,
+    direction: Option<[f64; 3]>,
+    power: Option<f64>,
+    strength: Option<f64>,
+    color: Option<[f64; 3]>,
+    spot_size: Option<f64>,
+    spot_blend: Option<f64>,
+}
+
+/// A light's world-from-light matrix from the file's `matrix`, or `position` and `direction`
+/// (local -Z along it).
+fn light_matrix(
+    place: &str,
+    matrix: Option<[f64; 16]>,
+    position: Option<[f64; 3]>,
+    direction: Option<[f64; 3]>,
+) -> Result<Option<DMat4>> {
+    if let Some(m) = matrix {
+        if position.is_some() || direction.is_some() {
+            return Err(invalid_scene!(
+                "{place}: give \"matrix\" or \"position\" and \"direction\", not both"
+            ));
+        }
+        return Ok(Some(matrix_from_row_major(&m)));
+    }
+    if position.is_none() && direction.is_none() {
+        return Ok(None);
+    }
+    let d = DVec3::from_array(direction.unwrap_or([0.0, 0.0, -1.0]));
+    if !(d.is_finite() && d.length() > 0.0) {
+        return Err(invalid_scene!("{place}: direction {d:?} must be finite and non-zero"));
+    }
+    let z = -d.normalize();
+    let helper = if z.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
+    let x = helper.cross(z).normalize();
+    let y = z.cross(x);
+    let t = DVec3::from_array(position.unwrap_or([0.0; 3]));
+    Ok(Some(DMat4::from_cols(x.extend(0.0), y.extend(0.0), z.extend(0.0), t.extend(1.0))))
+}
+
+fn parse_light(l: usize, f: LightFile) -> Result<Light> {
+    let name = f.name.unwrap_or_else(|| format!("light {l}"));
+    let place = format!("light \"{name}\"");
+    let kind = LightKind::parse(&f.kind)
+        .ok_or_else(|| invalid_scene!("{place}: type \"{}\" is not point, spot, sun or area", f.kind))?;
+    let power = match (kind, f.power, f.strength) {
+        (LightKind::Sun, None, Some(s)) | (LightKind::Sun, Some(s), None) => s,
+        (LightKind::Sun, _, _) => return Err(invalid_scene!("{place}: a sun needs \"strength\" (W/m^2)")),
+        (_, Some(p), None) => p,
+        _ => return Err(invalid_scene!("{place}: a {} light needs \"power\" (W)", kind.name())),
+    };
+    let matrix = light_matrix(&place, f.matrix, f.position, f.direction)?.unwrap_or(DMat4::IDENTITY);
+    let mut light = Light::new(&name, kind, matrix, power);
+    if let Some(c) = f.color {
+        light.base.color = c;
+    }
+    light.base.spot_size = f.spot_size.unwrap_or(light.base.spot_size);
+    light.base.spot_blend = f.spot_blend.unwrap_or(light.base.spot_blend);
+    light.radius = f.radius.unwrap_or(light.radius);
+    light.angle = f.angle.unwrap_or(light.angle);
+    if let Some(shape) = f.shape {
+        light.shape = AreaShape::parse(&shape).ok_or_else(|| {
+            invalid_scene!("{place}: shape \"{shape}\" is not square, rectangle, disk or ellipse")
+        })?;
+    }
+    light.size = f.size.unwrap_or(light.size);
+    for (k, key) in f.animation.into_iter().enumerate() {
+        let kp = format!("{place} animation key {k}");
+        light.animation.push(LightKey {
+            frame: key.frame,
+            matrix: light_matrix(&kp, key.matrix, key.position, key.direction)?,
+            color: key.color,
+            power: key.power.or(key.strength),
+            spot_size: key.spot_size,
+            spot_blend: key.spot_blend,
+        });
+    }
+    Ok(light)
 }
 
 #[derive(Deserialize)]
@@ -179,7 +293,9 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
         Some([a, b]) => (a, b),
         None => (1, 1),
     };
-    Scene::new(settings, frames, materials, emission_keys, objects)
+    let lights =
+        file.lights.into_iter().enumerate().map(|(l, f)| parse_light(l, f)).collect::<Result<_>>()?;
+    Scene::new(settings, frames, materials, emission_keys, objects)?.with_lights(lights)
 }
 
 /// Reads and parses a scene file.
@@ -249,6 +365,43 @@ pub fn scene_to_json(scene: &Scene) -> String {
             })
         })
         .collect();
+    let lights: Vec<_> = scene
+        .lights
+        .iter()
+        .map(|l| {
+            let animation: Vec<_> = l
+                .animation
+                .iter()
+                .map(|k| {
+                    let mut key = json!({"frame": k.frame});
+                    if let Some(m) = &k.matrix {
+                        key["matrix"] = json!(row_major(m));
+                    }
+                    if let Some(c) = k.color {
+                        key["color"] = json!(c);
+                    }
+                    if let Some(p) = k.power {
+                        key["power"] = json!(p);
+                    }
+                    if let Some(v) = k.spot_size {
+                        key["spot_size"] = json!(v);
+                    }
+                    if let Some(v) = k.spot_blend {
+                        key["spot_blend"] = json!(v);
+                    }
+                    key
+                })
+                .collect();
+            let b = &l.base;
+            let mut light = json!({
+                "name": l.name, "type": l.kind.name(), "matrix": row_major(&b.matrix), "color": b.color,
+                "radius": l.radius, "spot_size": b.spot_size, "spot_blend": b.spot_blend, "angle": l.angle,
+                "shape": l.shape.name(), "size": l.size, "animation": animation,
+            });
+            light[if l.kind == LightKind::Sun { "strength" } else { "power" }] = json!(b.power);
+            light
+        })
+        .collect();
     let file = json!({
         "version": 1,
         "settings": {
@@ -259,6 +412,7 @@ pub fn scene_to_json(scene: &Scene) -> String {
         "frames": [scene.frames.0, scene.frames.1],
         "materials": materials,
         "objects": objects,
+        "lights": lights,
     });
     serde_json::to_string_pretty(&file).expect("a scene serializes")
 }

@@ -5,7 +5,7 @@
 //! made (JSON, the C ABI), so every entry point shares one set of checks.
 
 pub mod json;
-mod placement;
+pub mod placement;
 mod validate;
 
 pub use placement::{Key, KeyTransform};
@@ -14,6 +14,8 @@ pub use validate::{
 };
 
 use glam::{DMat4, DVec3};
+
+use crate::lights::Light;
 
 /// Solver settings. Defaults are documented in the README.
 #[derive(Clone, Debug, PartialEq)]
@@ -72,7 +74,8 @@ pub struct Material {
 pub struct Object {
     pub name: String,
     pub vertices: Vec<DVec3>,
-    /// Vertex indices per face, 3 or 4, counter-clockwise seen from the lit (front) side.
+    /// Vertex indices per face, 3 or 4, counter-clockwise seen from the lit (front) side in
+    /// object space; a mirroring placement keeps that side ([`placement::front_order`]).
     pub faces: Vec<Vec<u32>>,
     /// Material index per face.
     pub face_materials: Vec<u32>,
@@ -86,6 +89,12 @@ impl Object {
     /// World-from-object matrix at `frame`: keys interpolated linearly, held outside them.
     pub fn world_from_object(&self, frame: f64) -> DMat4 {
         placement::world_from_object(self.matrix, &self.animation, frame)
+    }
+
+    /// True when the placement at `frame` mirrors space (its faces are placed with reversed
+    /// winding to keep their front side).
+    pub fn mirrored_at(&self, frame: f64) -> bool {
+        placement::mirrors(&self.world_from_object(frame))
     }
 
     /// True when the object's placement changes over some frame range.
@@ -113,6 +122,8 @@ pub struct Scene {
     pub objects: Vec<Object>,
     /// Faces skipped because their area is zero: (object, face).
     pub degenerate_faces: Vec<(usize, usize)>,
+    /// Blender Light objects ([`crate::lights`]); set with [`Scene::with_lights`].
+    pub lights: Vec<Light>,
 }
 
 impl Scene {
@@ -125,10 +136,27 @@ impl Scene {
         emission_keys: Vec<Vec<EmissionKey>>,
         objects: Vec<Object>,
     ) -> crate::Result<Self> {
-        let mut scene =
-            Scene { settings, frames, materials, emission_keys, objects, degenerate_faces: Vec::new() };
+        let mut scene = Scene {
+            settings,
+            frames,
+            materials,
+            emission_keys,
+            objects,
+            degenerate_faces: Vec::new(),
+            lights: Vec::new(),
+        };
         validate::validate(&mut scene)?;
         Ok(scene)
+    }
+
+    /// The scene lit by `lights` too (validated; their keys sorted by frame).
+    pub fn with_lights(mut self, mut lights: Vec<Light>) -> crate::Result<Self> {
+        for l in &mut lights {
+            l.animation.sort_by(|a, b| a.frame.total_cmp(&b.frame));
+        }
+        crate::lights::validate(&lights)?;
+        self.lights = lights;
+        Ok(self)
     }
 
     /// Emission of material `m` at `frame`.

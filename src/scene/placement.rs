@@ -32,7 +32,11 @@ impl Key {
 }
 
 /// Finds the keys around `frame` and the blend weight of the second.
-fn bracket<T>(keys: &[T], frame: f64, key_frame: impl Fn(&T) -> f64) -> Option<(usize, usize, f64)> {
+pub(crate) fn bracket<T>(
+    keys: &[T],
+    frame: f64,
+    key_frame: impl Fn(&T) -> f64,
+) -> Option<(usize, usize, f64)> {
     let first = keys.first()?;
     let last = keys.last()?;
     if frame <= key_frame(first) {
@@ -62,6 +66,29 @@ pub(super) fn world_from_object(base: DMat4, keys: &[Key], frame: f64) -> DMat4 
     }
 }
 
+/// True when `m` mirrors space (negative determinant): a face wound counter-clockwise about its
+/// front normal in object space is wound clockwise in the world, so its front would turn inward.
+/// Blender keeps the front side under a mirror (its normals are transformed by the inverse
+/// transpose, which flips them back); so does the placement, through [`front_order`].
+pub fn mirrors(m: &DMat4) -> bool {
+    m.determinant() < 0.0
+}
+
+/// A face's corners in the order that keeps its object-space front under a mirroring placement:
+/// corners 0 and 1 (and 2 and 3 of a quad) swapped. For a bilinear patch this is the
+/// reparametrisation `s -> 1 - s` (the triangle's collapsed edge `t = 1` stays where it is), so
+/// a face corner at `(s,t)` sits at `(1 - s, t)` of the placed patch.
+pub fn front_order<T: Copy>(corners: &[T], mirrored: bool) -> Vec<T> {
+    let mut out = corners.to_vec();
+    if mirrored && out.len() >= 3 {
+        out.swap(0, 1);
+        if out.len() == 4 {
+            out.swap(2, 3);
+        }
+    }
+    out
+}
+
 pub(super) fn emission_at(base: [f64; 3], keys: &[EmissionKey], frame: f64) -> [f64; 3] {
     match bracket(keys, frame, |k| k.frame) {
         None => base,
@@ -89,5 +116,29 @@ mod tests {
         assert_eq!(at(50.0), DVec3::new(10.0, 0.0, 0.0));
         // The base scale is kept under translation keys.
         assert_eq!(world_from_object(base, &keys, 6.0).x_axis.x, 2.0);
+    }
+
+    #[test]
+    fn a_mirrored_placement_keeps_the_object_space_front() {
+        use crate::geometry::Patch;
+        let quad = [DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::Y];
+        let tri = [DVec3::ZERO, DVec3::X, DVec3::Y];
+        for m in
+            [DMat4::from_scale(DVec3::new(-1.0, 1.0, 1.0)), DMat4::from_scale(DVec3::new(2.0, -3.0, 0.5))]
+        {
+            assert!(mirrors(&m));
+            for face in [&quad[..], &tri[..]] {
+                let world: Vec<DVec3> = face.iter().map(|v| m.transform_point3(*v)).collect();
+                let placed = Patch::from_corners(&front_order(&world, true));
+                // The front is the object-space +z taken through the inverse transpose.
+                let front = m.inverse().transpose().transform_vector3(DVec3::Z);
+                assert!(placed.area_vector(0.3, 0.4).dot(front) > 0.0);
+                // A face corner at (s,t) is the placed patch's (1 - s, t).
+                assert!((placed.point(1.0, 0.0) - world[0]).length() < 1e-12);
+                assert!((placed.point(0.0, 0.0) - world[1]).length() < 1e-12);
+            }
+        }
+        assert!(!mirrors(&DMat4::from_scale(DVec3::new(-1.0, -1.0, 1.0))));
+        assert_eq!(front_order(&[0, 1, 2, 3], false), vec![0, 1, 2, 3]);
     }
 }

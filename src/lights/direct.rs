@@ -1,0 +1,242 @@
+//! Direct irradiance from lights on the receivers, with shadow rays, and its projection onto the
+//! receivers' Legendre bases (module docs of [`crate::lights`] give the conventions).
+
+use std::f64::consts::PI;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use super::{AreaShape, Light, LightKind, LightState, direction};
+use crate::basis::Basis;
+use crate::geometry::{Aabb, Patch};
+use crate::kernel::point::point_to_polygon;
+use crate::quadrature::GaussLegendre;
+use crate::visibility::bvh::{Bvh, Triangle};
+
+/// Gauss points per axis of an element for the projection of `rho E_d`: the irradiance of a
+/// light is smooth where nothing casts a shadow, so a rule beyond the basis' degree is exact to
+/// a fraction of a percent there; a shadow edge inside the element is averaged by it.
+const PROJECTION_POINTS: usize = 6;
+
+/// Shadow-ray sample points per axis of an area light.
+const AREA_SAMPLES: usize = 4;
+
+/// Sides of the polygon standing for a disk or ellipse (of the same area).
+const ROUND_SIDES: usize = 32;
+
+/// One light as placed at a frame, ready for point queries.
+#[derive(Clone, Debug)]
+struct Placed {
+    kind: LightKind,
+    position: DVec3,
+    /// Unit direction the light faces (local -Z).
+    axis: DVec3,
+    /// Point and Spot: intensity W/sr; Sun: irradiance normal to the rays; Area: exitance.
+    scale: [f64; 3],
+    cos_half: f64,
+    smooth: f64,
+    /// Area: the outline (front = `axis`) and shadow sample points with their areas.
+    polygon: Vec<DVec3>,
+    samples: Vec<DVec3>,
+}
+
+impl Placed {
+    fn new(light: &Light, s: &LightState) -> Self {
+        let position = s.matrix.w_axis.truncate();
+        let axis = direction(&s.matrix);
+        let colour = |k: f64| std::array::from_fn(|c| s.color[c] * s.power * k);
+        let cos_half = (0.5 * s.spot_size).cos();
+        let (mut polygon, mut samples) = (Vec::new(), Vec::new());
+        let scale = match light.kind {
+            LightKind::Point | LightKind::Spot => colour(1.0 / (4.0 * PI)),
+            LightKind::Sun => colour(1.0),
+            LightKind::Area => {
+                let (a, b) = match light.shape {
+                    AreaShape::Square | AreaShape::Disk => (light.size[0], light.size[0]),
+                    AreaShape::Rectangle | AreaShape::Ellipse => (light.size[0], light.size[1]),
+                };
+                let round = matches!(light.shape, AreaShape::Disk | AreaShape::Ellipse);
+                // Local outline wound clockwise about +Z, so that its front is -Z.
+                let local: Vec<(f64, f64)> = if round {
+                    let n = ROUND_SIDES as f64;
+                    let r = (2.0 * PI / (n * (2.0 * PI / n).sin())).sqrt(); // same area as the ellipse
+                    (0..ROUND_SIDES)
+                        .map(|k| {
+                            let th = -2.0 * PI * k as f64 / n;
+                            (0.5 * a * r * th.cos(), 0.5 * b * r * th.sin())
+                        })
+                        .collect()
+                } else {
+                    vec![(-0.5 * a, -0.5 * b), (-0.5 * a, 0.5 * b), (0.5 * a, 0.5 * b), (0.5 * a, -0.5 * b)]
+                };
+                let world = |x: f64, y: f64| s.matrix.transform_point3(DVec3::new(x, y, 0.0));
+                polygon = local.iter().map(|&(x, y)| world(x, y)).collect();
+                let m = AREA_SAMPLES as f64;
+                for i in 0..AREA_SAMPLES {
+                    for j in 0..AREA_SAMPLES {
+                        let (u, v) = ((i as f64 + 0.5) / m - 0.5, (j as f64 + 0.5) / m - 0.5);
+                        if !round || u * u + v * v <= 0.25 {
+                            samples.push(world(u * a, v * b));
+                        }
+                    }
+                }
+                colour(1.0 / light.area())
+            }
+        };
+        let smooth = (1.0 - cos_half) * s.spot_blend;
+        Placed { kind: light.kind, position, axis, scale, cos_half, smooth, polygon, samples }
+    }
+}
+
+/// Cycles' `smoothstepf`: 0 below 0, 1 above 1, `(3 - 2f) f^2` between.
+fn smoothstep(f: f64) -> f64 {
+    if f <= 0.0 {
+        0.0
+    } else if f >= 1.0 {
+        1.0
+    } else {
+        (3.0 - 2.0 * f) * f * f
+    }
+}
+
+/// Every element as shadow casters (the scene's hull too: a sun shines in from outside).
+struct Shadows {
+    bvh: Bvh,
+}
+
+impl Shadows {
+    fn new(patches: &[Patch]) -> Self {
+        let tris = patches
+            .iter()
+            .enumerate()
+            .flat_map(|(e, p)| p.triangles().into_iter().map(move |v| Triangle { v, element: e as u32 }))
+            .collect();
+        Shadows { bvh: Bvh::build(tris) }
+    }
+
+    /// Whether the segment from `x` (on element `e`) to `y` is unobstructed.
+    fn visible(&self, x: DVec3, y: DVec3, e: u32) -> bool {
+        !self.bvh.occluded(x, y - x, 1e-9, 1.0 - 1e-9, e, e)
+    }
+}
+
+/// The scene's lights placed at one frame with the elements as shadow casters.
+pub struct DirectLight {
+    lights: Vec<Placed>,
+    shadows: Shadows,
+    /// Beyond the scene: how far a ray towards the sun is followed.
+    far: f64,
+}
+
+impl DirectLight {
+    /// `None` without lights.
+    pub fn new(lights: &[Light], frame: f64, patches: &[Patch]) -> Option<Self> {
+        if lights.is_empty() {
+            return None;
+        }
+        let bounds = patches.iter().fold(Aabb::EMPTY, |b, p| b.union(p.bounds()));
+        let far = 4.0 * bounds.diagonal().length().max(1e-300);
+        let lights = lights.iter().map(|l| Placed::new(l, &l.state_at(frame))).collect();
+        Some(DirectLight { lights, shadows: Shadows::new(patches), far })
+    }
+
+    /// Direct irradiance (W/m^2, RGB) at `x` on element `e`, front normal `n` (unit).
+    pub fn irradiance(&self, x: DVec3, n: DVec3, e: u32) -> [f64; 3] {
+        let mut out = [0.0; 3];
+        for l in &self.lights {
+            let k = self.factor(l, x, n, e);
+            for c in 0..3 {
+                out[c] += k * l.scale[c];
+            }
+        }
+        out
+    }
+
+    /// The light's irradiance at `x` per unit of its `scale`.
+    fn factor(&self, l: &Placed, x: DVec3, n: DVec3, e: u32) -> f64 {
+        match l.kind {
+            LightKind::Point | LightKind::Spot => {
+                let d = l.position - x;
+                let d2 = d.length_squared();
+                let cos = n.dot(d) / d2.sqrt();
+                if cos <= 0.0 || d2 == 0.0 {
+                    return 0.0;
+                }
+                let spot = if l.kind == LightKind::Spot {
+                    let off = (-d / d2.sqrt()).dot(l.axis);
+                    if off <= l.cos_half {
+                        return 0.0;
+                    }
+                    if l.smooth > 0.0 { smoothstep((off - l.cos_half) / l.smooth) } else { 1.0 }
+                } else {
+                    1.0
+                };
+                if !self.shadows.visible(x, l.position, e) {
+                    return 0.0;
+                }
+                spot * cos / d2
+            }
+            LightKind::Sun => {
+                let to_sun = -l.axis;
+                let cos = n.dot(to_sun);
+                if cos <= 0.0 || !self.shadows.visible(x, x + to_sun * self.far, e) {
+                    return 0.0;
+                }
+                cos
+            }
+            LightKind::Area => {
+                let f = point_to_polygon(x, n, &l.polygon, l.axis);
+                if f <= 0.0 {
+                    return 0.0;
+                }
+                // The unoccluded form factor times the arriving share of the sample points'
+                // form-factor weights.
+                let (mut seen, mut all) = (0.0, 0.0);
+                for &y in &l.samples {
+                    let d = y - x;
+                    let d2 = d.length_squared();
+                    let w = (n.dot(d) * (-l.axis).dot(d)).max(0.0) / (d2 * d2);
+                    if w > 0.0 {
+                        all += w;
+                        if self.shadows.visible(x, y, e) {
+                            seen += w;
+                        }
+                    }
+                }
+                if all > 0.0 { f * seen / all } else { f }
+            }
+        }
+    }
+
+    /// `rho E_d` projected on each element's basis (eq. 4's parameter-space inner product), `nb`
+    /// coefficients per element: the lights' share of the emission.
+    pub fn project(&self, patches: &[Patch], reflectance: &[[f64; 3]], basis: Basis) -> Vec<[f64; 3]> {
+        let nb = basis.len();
+        let rule = GaussLegendre::new(PROJECTION_POINTS);
+        let mut out = vec![[0.0; 3]; patches.len() * nb];
+        out.par_chunks_mut(nb).enumerate().for_each(|(e, coeffs)| {
+            let rho = reflectance[e];
+            if rho.iter().all(|&r| r == 0.0) {
+                return;
+            }
+            let mut g = vec![0.0; nb];
+            for (s, ws) in rule.iter() {
+                for (t, wt) in rule.iter() {
+                    let p = &patches[e];
+                    let n = p.area_vector(s, t).normalize_or_zero();
+                    let irr = self.irradiance(p.point(s, t), n, e as u32);
+                    if irr.iter().all(|&v| v == 0.0) {
+                        continue;
+                    }
+                    basis.eval_into(s, t, &mut g);
+                    for k in 0..nb {
+                        for c in 0..3 {
+                            coeffs[k][c] += ws * wt * g[k] * rho[c] * irr[c];
+                        }
+                    }
+                }
+            }
+        });
+        out
+    }
+}
