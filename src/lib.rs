@@ -21,6 +21,7 @@ pub mod kernel;
 pub mod lights;
 pub mod links;
 pub mod overlap;
+pub mod progress;
 pub mod quadrature;
 pub mod replay;
 pub mod scene;

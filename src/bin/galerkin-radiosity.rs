@@ -11,6 +11,7 @@ use std::process::ExitCode;
 use std::sync::Mutex;
 use std::time::Instant;
 
+use galerkin_radiosity::progress::{self, Meter};
 use galerkin_radiosity::scene::json::{FrameResult, ResultFile, read_scene, scene_to_json};
 use galerkin_radiosity::scene::{MAX_THREADS, Settings, check_animation, check_frames};
 use galerkin_radiosity::scenes;
@@ -179,17 +180,32 @@ fn bake_into(
     let start = Instant::now();
     let mut frames_out = Vec::new();
     let total = (last - first + 1) as usize;
-    let last_print = Mutex::new(Instant::now());
+    // A line a second at most (the session calls back every few ms), monotone, with the time
+    // spent and left (galerkin_radiosity::progress).
+    let meter = Mutex::new((Meter::new(total), Instant::now()));
     for (k, frame) in (first..=last).enumerate() {
         let progress = |fraction: f64, stage: &str| {
-            let mut t = last_print.lock().unwrap();
-            if !quiet && t.elapsed().as_secs_f64() > 1.0 {
-                *t = Instant::now();
-                eprintln!("frame {frame} ({}/{total}): {stage} {:.0}%", k + 1, 100.0 * fraction);
+            let mut guard = meter.lock().unwrap();
+            let (meter, last_print) = &mut *guard;
+            let now = Instant::now();
+            let r = meter.report(fraction, stage, now);
+            if !quiet && now.duration_since(*last_print).as_secs_f64() >= 1.0 {
+                *last_print = now;
+                let left = |d: Option<std::time::Duration>| d.map_or("?".to_string(), progress::human);
+                eprintln!(
+                    "frame {frame} ({}/{total}): {stage}, frame {:.0}%, {} left; bake {:.0}%, {} spent, {} left",
+                    k + 1,
+                    100.0 * r.frame_fraction,
+                    left(r.frame_left),
+                    100.0 * r.bake_fraction,
+                    progress::human(r.elapsed),
+                    left(r.bake_left),
+                );
             }
             true
         };
         let stats = session.solve_frame(frame as f64, &progress)?;
+        meter.lock().unwrap().0.frame_done(Instant::now());
         if !quiet {
             eprintln!(
                 "frame {frame} ({}/{total}): {:.3} s, {} links ({} by series, {} recomputed), {} shots",
