@@ -115,11 +115,12 @@ fn degenerate_placements_are_refused_naming_the_object_and_frame() {
     assert_eq!((code, written), (0, true), "{err}");
 }
 
-/// A face mean far below rounding is an error, not a result (a fuzz case minimised: a non-planar
-/// quad through a block standing on the floor left the floor's mean at -1.4e-5 of the peak at
-/// order 1; a mean is clamped to 0 only within `finite::ROUNDING` = 1e-6 of the peak).
+/// A face whose polynomial undershoots next to a crossing reads as 0, not as an error (a fuzz case
+/// minimised: a non-planar quad through a block standing on the floor leaves the floor's mean at
+/// -1.4e-5 of the peak at order 1; `finite::UNDERSHOOT`, 1% of the peak, is the limit; the unit
+/// test in `finite.rs` checks the refusal past it).
 #[test]
-fn a_negative_face_mean_is_an_error() {
+fn an_undershooting_face_mean_reads_as_zero() {
     let scene = r#"{"version": 1, "settings": {"basis_order": 1}, "frames": [1, 1],
       "materials": [{"name": "white", "reflectance": [0.7, 0.7, 0.7]},
                     {"name": "light", "reflectance": [0.5, 0.5, 0.5], "emission": [10, 10, 10]}],
@@ -132,11 +133,11 @@ fn a_negative_face_mean_is_an_error() {
          "faces": [[4,5,6,7],[0,1,5,4],[1,2,6,5],[2,3,7,6],[3,0,4,7]]},
         {"name": "Warped", "vertices": [[0.1,0.1,0.2],[0.9,0.1,0.6],[0.9,0.9,0.2],[0.1,0.9,0.6]],
          "faces": [[0,1,2,3]]}]}"#;
-    let (code, err, written) = bake("warped", scene);
-    assert_eq!(code, 1, "{err}");
-    assert!(err.contains("object \"Floor\" face 0 at frame 1: mean radiosity -"), "{err}");
-    assert!(err.contains("is negative"), "{err}");
-    assert!(!written);
+    let parsed = parse_scene(scene).unwrap();
+    let mut session = Session::new(parsed.clone(), Method::Incremental).unwrap();
+    session.solve_frame(1.0, &no_progress).unwrap();
+    let floor = &session.face_results().unwrap()[0];
+    assert!(floor.face_radiosity[0].iter().all(|&x| x >= 0.0), "{:?}", floor.face_radiosity[0]);
     // Without the warped quad the same room bakes, every mean >= 0.
     let parsed = parse_scene(scene).unwrap();
     let mut without = parsed.clone();
