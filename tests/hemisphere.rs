@@ -74,6 +74,17 @@ fn crossing_boxes_without_visibility_create_no_light() {
     }
 }
 
+/// Every corner of every frame of `scene` baked with `method`.
+fn bake_corners(scene: &Scene, method: galerkin_radiosity::session::Method) -> Vec<Vec<[f32; 3]>> {
+    let mut session = galerkin_radiosity::session::Session::new(scene.clone(), method).unwrap();
+    (scene.frames.0..=scene.frames.1)
+        .map(|f| {
+            session.solve_frame(f as f64, &no_progress).unwrap();
+            session.face_results().unwrap().into_iter().flat_map(|o| o.corner_radiosity).collect()
+        })
+        .collect()
+}
+
 /// A room with a light and `extra` inside, grey 0.7.
 fn room_with(extra: Vec<Object>) -> Scene {
     let mut objects = scenes::room(4.0, 3.0, 4.0, 2.0, [0; 6]);
@@ -171,7 +182,7 @@ fn corners_buried_in_another_object_get_no_light() {
 /// strict 1e-4 of the peak; skipping the bound's kernel change fails it: 8% of the peak at frame 2).
 #[test]
 fn the_bound_follows_a_moving_object_incrementally() {
-    use galerkin_radiosity::session::{Method, Session};
+    use galerkin_radiosity::session::Method;
     let a = scenes::box_mesh("A", DVec3::ZERO, DVec3::ONE, 2, true, 0);
     let mut b = scenes::box_mesh("B", DVec3::new(0.5, 0.3, 0.2), DVec3::new(1.5, 1.3, 1.2), 2, true, 1);
     b.animation = scenes::translation_keys(&[(1.0, DVec3::ZERO), (4.0, DVec3::new(0.3, -0.1, 0.2))]);
@@ -181,20 +192,7 @@ fn the_bound_follows_a_moving_object_incrementally() {
     ];
     let s = Settings { tolerance: 1e-6, corner_gather: false, visibility: false, ..Settings::default() };
     let scene = Scene::new(s, (1, 4), materials, vec![Vec::new(); 2], vec![a, b]).unwrap();
-    let bake = |method| {
-        let mut session = Session::new(scene.clone(), method).unwrap();
-        (1..=4)
-            .map(|f| {
-                session.solve_frame(f as f64, &no_progress).unwrap();
-                session
-                    .face_results()
-                    .unwrap()
-                    .into_iter()
-                    .flat_map(|o| o.corner_radiosity)
-                    .collect::<Vec<_>>()
-            })
-            .collect::<Vec<_>>()
-    };
+    let bake = |method| bake_corners(&scene, method);
     let full = bake(Method::Full);
     for method in [Method::Incremental, Method::Exact] {
         for (f, (a, b)) in bake(method).iter().zip(&full).enumerate() {
@@ -211,7 +209,7 @@ fn the_bound_follows_a_moving_object_incrementally() {
 /// the update rebuilds then, and every frame equals a from-scratch solve.
 #[test]
 fn a_coplanar_panel_sliding_over_the_floor_matches_full() {
-    use galerkin_radiosity::session::{Method, Session};
+    use galerkin_radiosity::session::Method;
     let mut objects = scenes::room(4.0, 3.0, 4.0, 1.0, [0; 6]);
     objects.push(scenes::panel(
         "Light",
@@ -234,20 +232,7 @@ fn a_coplanar_panel_sliding_over_the_floor_matches_full() {
     ];
     let s = Settings { tolerance: 1e-6, ..Settings::default() };
     let scene = Scene::new(s, (1, 3), materials, vec![Vec::new(); 3], objects).unwrap();
-    let bake = |method| {
-        let mut session = Session::new(scene.clone(), method).unwrap();
-        (1..=3)
-            .map(|f| {
-                session.solve_frame(f as f64, &no_progress).unwrap();
-                session
-                    .face_results()
-                    .unwrap()
-                    .into_iter()
-                    .flat_map(|o| o.corner_radiosity)
-                    .collect::<Vec<_>>()
-            })
-            .collect::<Vec<_>>()
-    };
+    let bake = |method| bake_corners(&scene, method);
     let full = bake(Method::Full);
     for (f, (a, b)) in bake(Method::Incremental).iter().zip(&full).enumerate() {
         let peak = b.iter().fold(0.0f32, |m, c| m.max(c[0]));
