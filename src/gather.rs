@@ -1200,12 +1200,17 @@ impl Gather<'_> {
     fn touch(&self, rx: &Receiver, i: usize, j: usize) -> Option<Touch> {
         let pj = &self.patches[j];
         let plane = self.planes[j]?;
-        let offset = 1e-2 * self.radii[i];
         let d = plane.normal.dot(rx.x - plane.centre);
         if rx.n.dot(plane.normal) < -FACING {
             return self.near_facing(rx, j, d);
         }
-        if !(d > 0.0 && d < offset) || rx.n.dot(plane.normal).abs() > 0.9 {
+        // Touching (within a hundredth of the corner's element), or standing closer than
+        // NEAR_FACING of the source's radius above it: the foot is as far along the corner's
+        // normal as the corner is above the source.
+        let touching = d > 0.0 && d < 1e-2 * self.radii[i];
+        let near = d > 0.0 && d < NEAR_FACING * self.radii[j];
+        let offset = if touching { 1e-2 * self.radii[i] } else { d };
+        if !(touching || near) || rx.n.dot(plane.normal).abs() > 0.9 {
             return None;
         }
         let foot = rx.x + offset * rx.n;
