@@ -541,6 +541,12 @@ fn corner_points(sys: &System, scene: &Scene) -> (Vec<CornerPoint>, Vec<usize>, 
     (points, point_of_corner, per_object)
 }
 
+/// The touch of a source at `foot` (on its plane) when the foot falls on the source.
+fn foot_on(source: &Patch, foot: DVec3, radius: f64) -> Option<Touch> {
+    let (s, t) = source.locate(foot);
+    ((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&t)).then_some(Touch { s, t, radius })
+}
+
 /// Per point, whether it lies inside another closed surface of the scene ([`Solids`]).
 fn buried_points(sys: &System, scene: &Scene, patches: &[Patch], points: &[CornerPoint]) -> Vec<bool> {
     let solids = Solids::new(&sys.elements, scene.objects.len());
@@ -1214,9 +1220,7 @@ impl Gather<'_> {
             return None;
         }
         let foot = rx.x + offset * rx.n;
-        let foot = foot - plane.normal.dot(foot - plane.centre) * plane.normal;
-        let (s, t) = pj.locate(foot);
-        ((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&t)).then_some(Touch { s, t, radius: 3.0 * offset })
+        foot_on(pj, foot - plane.normal.dot(foot - plane.centre) * plane.normal, 3.0 * offset)
     }
 
     /// Whether the corner faces source `j` from closer than [`NEAR_FACING`] of `j`'s radius (the
@@ -1229,12 +1233,7 @@ impl Gather<'_> {
         if !(d > 0.0 && d < NEAR_FACING * self.radii[j]) {
             return None;
         }
-        let (s, t) = self.patches[j].locate(rx.x - d * plane.normal);
-        ((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&t)).then_some(Touch {
-            s,
-            t,
-            radius: FOOT_BALL * d,
-        })
+        foot_on(&self.patches[j], rx.x - d * plane.normal, FOOT_BALL * d)
     }
 
     /// The Gauss sum over `nodes` of source `j` (inside `bounds`) into `out`.

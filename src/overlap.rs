@@ -15,7 +15,7 @@
 
 use glam::{DVec2, DVec3};
 
-use crate::geometry::{Aabb, Patch};
+use crate::geometry::{Aabb, FrontPlane, Patch};
 
 /// Normals closer than this (1 - cos) and planes closer than this fraction of the scene's size
 /// are one plane.
@@ -32,9 +32,10 @@ pub fn source_weights(patches: &[Patch]) -> Vec<f64> {
     let scale = scale.max(f64::MIN_POSITIVE);
     // Candidates share a cell of (normal, offset) quantized coarser than the tolerances; each
     // planar patch goes in one cell, and pairs found there are checked exactly.
+    let planes: Vec<Option<FrontPlane>> = patches.iter().map(Patch::front_plane).collect();
     let mut cells: HashMap<([i64; 3], i64), Vec<usize>> = HashMap::new();
-    for (e, p) in patches.iter().enumerate() {
-        if let Some(plane) = p.front_plane() {
+    for (e, plane) in planes.iter().enumerate() {
+        if let Some(plane) = plane {
             let n = plane.normal;
             let key = (
                 (n * 1e4).round().as_i64vec3().to_array(),
@@ -45,8 +46,7 @@ pub fn source_weights(patches: &[Patch]) -> Vec<f64> {
     }
     let mut covered = vec![0.0f64; patches.len()];
     for members in cells.values().filter(|m| m.len() > 1) {
-        let plane = patches[members[0]].front_plane().expect("planar");
-        let (u, v) = tangent_frame(plane.normal);
+        let (u, v) = tangent_frame(planes[members[0]].expect("planar").normal);
         let polygons: Vec<Vec<DVec2>> = members
             .iter()
             .map(|&e| polygon(&patches[e]).iter().map(|p| DVec2::new(p.dot(u), p.dot(v))).collect())
@@ -66,8 +66,7 @@ pub fn source_weights(patches: &[Patch]) -> Vec<f64> {
             active.retain(|&b| bounds[b].1.x > bounds[a].0.x);
             for &b in &active {
                 let (ea, eb) = (members[a], members[b]);
-                let (pa, pb) =
-                    (patches[ea].front_plane().expect("planar"), patches[eb].front_plane().expect("planar"));
+                let (pa, pb) = (planes[ea].expect("planar"), planes[eb].expect("planar"));
                 let same = 1.0 - pa.normal.dot(pb.normal) < SAME_NORMAL
                     && (pa.normal.dot(pb.centre - pa.centre)).abs() < SAME_PLANE * scale;
                 let meet = bounds[a].0.y < bounds[b].1.y && bounds[b].0.y < bounds[a].1.y;

@@ -15,6 +15,8 @@ use galerkin_radiosity::ffi::*;
 use galerkin_radiosity::scene::Scene;
 use galerkin_radiosity::scene::json::parse_scene;
 
+mod c_session;
+
 /// Twelve faces whose gather is slow: eight slivers 1 mm tall standing on a floor, each corner
 /// on the floor touching it, under a light, between two walls (0.5-0.7 s of gather on two cores).
 fn slivers() -> Scene {
@@ -42,46 +44,10 @@ fn slivers() -> Scene {
 /// A session of `scene` through `gr_session_new`, every frame from scratch (so the second
 /// frame's gather is as slow as the first's).
 fn new_session(scene: &Scene) -> *mut GrSession {
-    let (mut reflectance, mut emission) = (Vec::new(), Vec::new());
-    for m in &scene.materials {
-        reflectance.extend(m.reflectance.map(|x| x as f32));
-        emission.extend(m.emission.map(|x| x as f32));
-    }
-    let (mut vertex_counts, mut vertices, mut face_counts) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut face_vertex_counts, mut indices, mut face_materials) = (Vec::new(), Vec::new(), Vec::new());
-    for o in &scene.objects {
-        vertex_counts.push(o.vertices.len() as u32);
-        vertices.extend(o.vertices.iter().flat_map(|v| v.to_array().map(|x| x as f32)));
-        face_counts.push(o.faces.len() as u32);
-        for face in &o.faces {
-            face_vertex_counts.push(face.len() as u32);
-            indices.extend(face);
-        }
-        face_materials.extend(&o.face_materials);
-    }
     let mut settings = GrSettings::default();
     assert_eq!(unsafe { gr_settings_default(&mut settings) }, GrStatus::Ok);
     settings.method = GrMethod::Full;
-    let mut out = null_mut();
-    let status = unsafe {
-        gr_session_new(
-            &settings,
-            scene.materials.len() as u32,
-            reflectance.as_ptr(),
-            emission.as_ptr(),
-            scene.objects.len() as u32,
-            vertex_counts.as_ptr(),
-            vertices.as_ptr(),
-            face_counts.as_ptr(),
-            face_vertex_counts.as_ptr(),
-            indices.as_ptr(),
-            face_materials.as_ptr(),
-            std::ptr::null(),
-            vertices.len(),
-            indices.len(),
-            &mut out,
-        )
-    };
+    let (status, out) = c_session::new_session(scene, &settings);
     assert_eq!(status, GrStatus::Ok);
     out
 }

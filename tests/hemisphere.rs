@@ -85,18 +85,19 @@ fn bake_corners(scene: &Scene, method: galerkin_radiosity::session::Method) -> V
         .collect()
 }
 
+/// A 4 x 3 x 4 m room of material 0, walls split `per_metre`, and a light of material 1 hung
+/// under its ceiling.
+fn room_and_light(per_metre: f64) -> Vec<Object> {
+    let mut objects = scenes::room(4.0, 3.0, 4.0, per_metre, [0; 6]);
+    let light =
+        scenes::panel("Light", DVec3::new(0.0, 2.95, 0.0), DVec3::X * 0.3, DVec3::Z * 0.3, -DVec3::Y, 1, 1);
+    objects.push(light);
+    objects
+}
+
 /// A room with a light and `extra` inside, grey 0.7.
 fn room_with(extra: Vec<Object>) -> Scene {
-    let mut objects = scenes::room(4.0, 3.0, 4.0, 2.0, [0; 6]);
-    objects.push(scenes::panel(
-        "Light",
-        DVec3::new(0.0, 2.95, 0.0),
-        DVec3::X * 0.3,
-        DVec3::Z * 0.3,
-        -DVec3::Y,
-        1,
-        1,
-    ));
+    let mut objects = room_and_light(2.0);
     objects.extend(extra);
     let materials = vec![
         Material { name: "grey".into(), reflectance: [0.7; 3], emission: [0.0; 3] },
@@ -108,7 +109,8 @@ fn room_with(extra: Vec<Object>) -> Scene {
 /// Inside a closed room every point sees geometry in every direction, so its form factors sum to
 /// exactly 1: a closed-form reference for the kernel and the gather on a triangle mesh whose
 /// neighbouring faces meet at concave and convex edges (a bumpy icosphere, 320 faces), with no
-/// integration of our own to trust. Measured (session 13): elements 0.99-1.02 (RMS 0.5%),
+/// integration of our own to trust. Measured (`cargo test --release --test hemisphere --
+/// --nocapture`): elements 0.99-1.02 (RMS 0.5%),
 /// corners 0.988-1.020 (RMS 0.5%, mean 1.000).
 #[test]
 fn a_closed_room_sees_its_whole_hemisphere_from_a_triangle_mesh() {
@@ -210,16 +212,7 @@ fn the_bound_follows_a_moving_object_incrementally() {
 #[test]
 fn a_coplanar_panel_sliding_over_the_floor_matches_full() {
     use galerkin_radiosity::session::Method;
-    let mut objects = scenes::room(4.0, 3.0, 4.0, 1.0, [0; 6]);
-    objects.push(scenes::panel(
-        "Light",
-        DVec3::new(0.0, 2.95, 0.0),
-        DVec3::X * 0.3,
-        DVec3::Z * 0.3,
-        -DVec3::Y,
-        1,
-        1,
-    ));
+    let mut objects = room_and_light(1.0);
     let mut rug =
         scenes::panel("Rug", DVec3::new(0.0, 0.0, 0.0), DVec3::X * 0.7, DVec3::Z * 0.5, DVec3::Y, 1, 2);
     rug.animation =

@@ -3,12 +3,13 @@
 //! (it used to abort in the allocator after 35-158 s, taking a host application with it).
 
 use std::process::Command;
-use std::ptr::null_mut;
 
 use galerkin_radiosity::budget;
 use galerkin_radiosity::ffi::*;
 use galerkin_radiosity::scene::Settings;
 use galerkin_radiosity::scenes;
+
+mod c_session;
 
 /// Near the case (60,001 faces at order 2): a Cornell box of 100 x 100 patches per wall,
 /// over 50,000 faces, whose links alone would take tens of terabytes.
@@ -50,45 +51,11 @@ fn the_cli_refuses_a_scene_over_the_default_budget() {
 #[test]
 fn the_c_abi_refuses_it_in_gr_session_new() {
     let scene = huge();
-    let (mut vertex_counts, mut vertices, mut face_counts) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut face_vertex_counts, mut indices, mut face_materials) = (Vec::new(), Vec::new(), Vec::new());
-    for o in &scene.objects {
-        vertex_counts.push(o.vertices.len() as u32);
-        vertices.extend(o.vertices.iter().flat_map(|v| v.to_array().map(|x| x as f32)));
-        face_counts.push(o.faces.len() as u32);
-        for face in &o.faces {
-            face_vertex_counts.push(face.len() as u32);
-            indices.extend(face);
-        }
-        face_materials.extend(&o.face_materials);
-    }
-    let reflectance: Vec<f32> =
-        scene.materials.iter().flat_map(|m| m.reflectance.map(|x| x as f32)).collect();
-    let emission: Vec<f32> = scene.materials.iter().flat_map(|m| m.emission.map(|x| x as f32)).collect();
     let mut settings = GrSettings::default();
     assert_eq!(unsafe { gr_settings_default(&mut settings) }, GrStatus::Ok);
     assert_eq!(settings.memory_budget_mb, 0);
     settings.memory_budget_mb = 1024;
-    let mut out = null_mut();
-    let status = unsafe {
-        gr_session_new(
-            &settings,
-            scene.materials.len() as u32,
-            reflectance.as_ptr(),
-            emission.as_ptr(),
-            scene.objects.len() as u32,
-            vertex_counts.as_ptr(),
-            vertices.as_ptr(),
-            face_counts.as_ptr(),
-            face_vertex_counts.as_ptr(),
-            indices.as_ptr(),
-            face_materials.as_ptr(),
-            std::ptr::null(),
-            vertices.len(),
-            indices.len(),
-            &mut out,
-        )
-    };
+    let (status, out) = c_session::new_session(&scene, &settings);
     assert_eq!(status, GrStatus::InvalidScene);
     assert!(out.is_null());
     let mut buf = vec![0u8; 1024];
