@@ -117,6 +117,32 @@ pub fn check(scene: &Scene, frames: u64) -> Result<()> {
     )))
 }
 
+/// Bytes per input face a hierarchical bake plans for ([`check_hierarchical`]): measured peaks
+/// were 16-50 KB per face at order 1-2 (docs/benchmarks.md, "Hierarchy"); links and nodes grow
+/// about linearly with the faces, so this is a per-face allowance rather than a pair count.
+const HIERARCHY_BYTES_PER_FACE: u64 = 96 << 10;
+
+/// [`check`] for [`crate::session::Method::Hierarchical`]: links grow about linearly with the
+/// faces there, not with their pairs, so the estimate is a per-face allowance (scaled by the
+/// basis size) plus the results.
+pub fn check_hierarchical(scene: &Scene, frames: u64) -> Result<()> {
+    let Some(budget) = budget_bytes(scene.settings.memory_budget_mb) else { return Ok(()) };
+    let s = &scene.settings;
+    let nb = ((s.basis_order + 1) * (s.basis_order + 1)) as u64;
+    let faces = scene.face_count() as u64;
+    let need = faces.saturating_mul(HIERARCHY_BYTES_PER_FACE).saturating_mul(nb) / 4
+        + estimate(scene, frames).results;
+    if need <= budget {
+        return Ok(());
+    }
+    Err(Error::OverBudget(format!(
+        "this hierarchical bake may need up to {} MB but the budget is {} MB; use fewer faces, a larger \
+         settings.accuracy or a lower settings.basis_order, or raise memory_budget_mb",
+        need.div_ceil(MIB),
+        budget.div_ceil(MIB),
+    )))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -17,6 +17,7 @@ pub mod finite;
 pub mod gather;
 pub mod geometry;
 pub mod hemisphere;
+pub mod hierarchy;
 pub mod kernel;
 pub mod lights;
 pub mod links;

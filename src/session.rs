@@ -29,6 +29,10 @@ pub enum Method {
     Exact,
     /// Every frame from scratch: all links recomputed, fresh solve.
     Full,
+    /// Every frame from scratch on the hierarchy of clusters and elements below faces
+    /// ([`crate::hierarchy`]): what scenes of 10^4 faces and more need. Corners come from the
+    /// leaves' polynomials (no corner gather yet) and previews are full frames.
+    Hierarchical,
 }
 
 /// What one frame cost and did.
@@ -139,6 +143,8 @@ pub struct Session {
     system: Option<System>,
     /// What the incremental update keeps between frames (series, shape epochs).
     animation: Option<AnimationState>,
+    /// The readable frame when the method is [`Method::Hierarchical`].
+    hierarchical: Option<crate::hierarchy::HierarchicalFrame>,
     /// The links belong to a cancelled update: the next frame rebuilds from scratch.
     stale: bool,
     frame: Option<f64>,
@@ -152,7 +158,11 @@ impl Session {
     /// Refused at once when the scene's estimated memory is over its budget
     /// ([`crate::budget::check`], one frame's results kept).
     pub fn new(scene: Scene, method: Method) -> Result<Self> {
-        crate::budget::check(&scene, 1)?;
+        if method == Method::Hierarchical {
+            crate::budget::check_hierarchical(&scene, 1)?;
+        } else {
+            crate::budget::check(&scene, 1)?;
+        }
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(scene.settings.threads)
             .build()
@@ -168,6 +178,7 @@ impl Session {
             lights: None,
             system: None,
             animation: None,
+            hierarchical: None,
             stale: false,
             frame: None,
             preview: false,
@@ -327,6 +338,9 @@ impl Session {
         if self.preview {
             placed.settings.tolerance = preview_tolerance(placed.settings.tolerance);
         }
+        if self.method == Method::Hierarchical {
+            return self.solve_hierarchical(&placed, frame, start, progress);
+        }
         let gather = placed.settings.corner_gather && !self.preview;
         let incremental = self.method != Method::Full && !self.stale;
         if let (true, Some(sys), Some(state)) = (incremental, self.system.as_mut(), self.animation.as_mut()) {
@@ -416,6 +430,37 @@ impl Session {
         Ok(stats)
     }
 
+    /// [`Method::Hierarchical`]'s frame: solved from scratch on its own hierarchy, kept only when
+    /// its results are finite (else the last frame stays readable).
+    fn solve_hierarchical(
+        &mut self,
+        placed: &Scene,
+        frame: f64,
+        start: Instant,
+        progress: Progress,
+    ) -> Result<FrameStats> {
+        let settings = crate::hierarchy::HierarchySettings::of(&placed.settings);
+        let solved =
+            self.pool.install(|| crate::hierarchy::solve_frame(placed, frame, &settings, progress))?;
+        check_results(&solved.face_results(placed, frame), placed, frame)?;
+        let h = &solved.stats;
+        let stats = FrameStats {
+            frame,
+            seconds: start.elapsed().as_secs_f64(),
+            kernel_seconds: h.link_seconds,
+            solve_seconds: h.solve_seconds,
+            elements: h.leaves,
+            pairs: h.links,
+            links_recomputed: h.links,
+            full_rebuild: true,
+            preview: self.preview,
+            ..Default::default()
+        };
+        self.hierarchical = Some(solved);
+        self.frame = Some(frame);
+        Ok(stats)
+    }
+
     /// `placed` at `frame` built and solved from scratch, and gathered when `gather`, with the
     /// gather's time.
     fn rebuild(
@@ -458,7 +503,10 @@ impl Session {
     /// left of rounding is clamped at 0 here. Every value is finite (checked when solved).
     pub fn face_results(&self) -> Result<Vec<ObjectResult>> {
         let frame = self.frame.unwrap_or(0.0);
-        let mut results = self.solved()?.face_results(&self.scene_at(frame), frame);
+        let mut results = match &self.hierarchical {
+            Some(h) => h.face_results(&self.scene_at(frame), frame),
+            None => self.solved()?.face_results(&self.scene_at(frame), frame),
+        };
         clamp_rounding(&mut results);
         Ok(results)
     }
@@ -466,7 +514,9 @@ impl Session {
     /// `B` at `(s,t)` of face `f` of object `o`, clamped at 0 like the corners; a skipped
     /// zero-area face reports its exitance.
     pub fn eval(&self, o: usize, f: usize, s: f64, t: f64) -> Result<[f64; 3]> {
-        let sys = self.solved()?;
+        if self.hierarchical.is_none() {
+            self.solved()?;
+        }
         let obj = self
             .scene
             .objects
@@ -481,9 +531,16 @@ impl Session {
         if !((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&t)) {
             return Err(Error::InvalidArgument(format!("(s, t) = ({s}, {t}) is outside [0,1]^2")));
         }
+        let exitance = || self.scene.emission_at(obj.face_materials[f] as usize, self.frame.unwrap_or(0.0));
+        if let Some(h) = &self.hierarchical {
+            return Ok(h
+                .face_index(o, f)
+                .map_or_else(exitance, |i| h.eval_face(i, s, t).map(|x| x.max(0.0))));
+        }
+        let sys = self.solved()?;
         match sys.element_of_face(o, f, s, t) {
             Some((e, ls, lt)) => Ok(sys.eval(e, ls, lt).map(|x| x.max(0.0))),
-            None => Ok(self.scene.emission_at(obj.face_materials[f] as usize, self.frame.unwrap_or(0.0))),
+            None => Ok(exitance()),
         }
     }
 }

@@ -89,7 +89,7 @@ pub fn build_elements_reusing(scene: &Scene, frame: f64, basis: Basis, previous:
     elements
 }
 
-fn element(
+pub(crate) fn element(
     object: u32,
     face: u32,
     domain: Rect,

@@ -1,7 +1,7 @@
 //! `galerkin-radiosity`: bake a scene file, or write the demo scene.
 //!
 //! ```text
-//! galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--memory-budget MB] [--no-corner-gather] [--quiet]
+//! galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact | --hierarchy] [--accuracy A] [--threads N] [--memory-budget MB] [--no-corner-gather] [--quiet]
 //! galerkin-radiosity demo-scene -o SCENE.json [--frames N] [--subdiv N] [--order N]
 //! ```
 //! Exits 0 on success, 1 on any error with a one-line message on stderr, 2 on a usage error.
@@ -18,7 +18,7 @@ use galerkin_radiosity::scenes;
 use galerkin_radiosity::session::{Method, Session};
 
 const USAGE: &str = "usage:
-  galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact] [--threads N] [--memory-budget MB] [--no-corner-gather] [--quiet]
+  galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact | --hierarchy] [--accuracy A] [--threads N] [--memory-budget MB] [--no-corner-gather] [--quiet]
   galerkin-radiosity demo-scene -o SCENE.json [--kind cornell|cornell-light|room|billiard] [--frames N] [--subdiv N] [--order N]";
 
 fn main() -> ExitCode {
@@ -91,18 +91,31 @@ fn bake(args: &[String]) -> Result<(), CliError> {
     let threads = take_value(&mut args, &["--threads"])?;
     let budget: Option<u64> =
         take_value(&mut args, &["--memory-budget"])?.map(|v| parse(&v, "--memory-budget")).transpose()?;
+    let accuracy: Option<f64> =
+        take_value(&mut args, &["--accuracy"])?.map(|v| parse(&v, "--accuracy")).transpose()?;
+    let hierarchy = take_flag(&mut args, "--hierarchy");
     let full = take_flag(&mut args, "--full");
     let exact = take_flag(&mut args, "--exact");
     let quiet = take_flag(&mut args, "--quiet");
     let no_gather = take_flag(&mut args, "--no-corner-gather");
-    if full && exact {
-        return Err(CliError::Usage("--full and --exact exclude each other".into()));
+    if [full, exact, hierarchy].iter().filter(|&&x| x).count() > 1 {
+        return Err(CliError::Usage("--full, --exact and --hierarchy exclude each other".into()));
     }
     let [input] = args.as_slice() else {
         return Err(CliError::Usage(format!("bake takes one scene file, got {args:?}")));
     };
     let partial = writable_output(&out)?;
-    let result = bake_into(input, &out, &partial, (frames, threads, budget), (full, exact, quiet, no_gather));
+    let method = if hierarchy {
+        Method::Hierarchical
+    } else if full {
+        Method::Full
+    } else if exact {
+        Method::Exact
+    } else {
+        Method::Incremental
+    };
+    let result =
+        bake_into(input, &out, &partial, (frames, threads, budget, accuracy), (method, quiet, no_gather));
     let _ = std::fs::remove_file(&partial);
     result
 }
@@ -130,10 +143,16 @@ fn bake_into(
     input: &str,
     out: &str,
     partial: &Path,
-    (frames, threads, budget): (Option<String>, Option<String>, Option<u64>),
-    (full, exact, quiet, no_gather): (bool, bool, bool, bool),
+    (frames, threads, budget, accuracy): (Option<String>, Option<String>, Option<u64>, Option<f64>),
+    (method, quiet, no_gather): (Method, bool, bool),
 ) -> Result<(), CliError> {
     let mut scene = read_scene(&PathBuf::from(input))?;
+    if let Some(a) = accuracy {
+        if !(a.is_finite() && a > 0.0 && a < 1.0) {
+            return Err(CliError::Usage(format!("--accuracy {a} is outside (0,1)")));
+        }
+        scene.settings.accuracy = a;
+    }
     if let Some(t) = threads {
         let n: usize = parse(&t, "--threads")?;
         if n > MAX_THREADS {
@@ -165,17 +184,14 @@ fn bake_into(
             scene.objects[o].name
         );
     }
-    let method = if full {
-        Method::Full
-    } else if exact {
-        Method::Exact
-    } else {
-        Method::Incremental
-    };
     // Every frame's placement, before the first is baked (the session checks each again).
     check_animation(&scene, (first, last))?;
     // Every frame's results are kept until the file is written.
-    galerkin_radiosity::budget::check(&scene, (last - first + 1) as u64)?;
+    if method == Method::Hierarchical {
+        galerkin_radiosity::budget::check_hierarchical(&scene, (last - first + 1) as u64)?;
+    } else {
+        galerkin_radiosity::budget::check(&scene, (last - first + 1) as u64)?;
+    }
     let mut session = Session::new(scene, method)?;
     let start = Instant::now();
     let mut frames_out = Vec::new();

@@ -371,3 +371,20 @@ fn analytic_leaf(
     one_way(cache_i.get(ctx, rect_i), pj, rect_j, out.0, false);
     one_way(cache_j.get(ctx, rect_j), pi, rect_i, out.1, true);
 }
+
+/// A near pair integrated coarsely: the receivers' `rule` points against each whole source
+/// polygon analytically (Lambert's contour formula, exact for a constant source and no
+/// occlusion), the source's basis taken at its centre, no splitting. The hierarchy's choice for
+/// near links, which its oracle keeps to those carrying little (it refines the elements where
+/// they would carry more); `ij` and `ji` are accumulated into.
+pub fn integrate_near_coarse(
+    ctx: &PairContext,
+    pi: &Patch,
+    pj: &Patch,
+    vis: &Visibility,
+    ij: &mut [f64],
+    ji: &mut [f64],
+) {
+    let (mut cache_i, mut cache_j) = (SubSamples::new(pi), SubSamples::new(pj));
+    analytic_leaf(ctx, &mut cache_i, &Rect::UNIT, &mut cache_j, &Rect::UNIT, vis, &mut (ij, ji));
+}

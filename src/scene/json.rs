@@ -142,6 +142,7 @@ struct SettingsFile {
     adaptive_quadrature: Option<bool>,
     corner_gather: Option<bool>,
     memory_budget_mb: Option<u64>,
+    accuracy: Option<f64>,
 }
 
 #[derive(Deserialize)]
@@ -217,6 +218,7 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
         adaptive_quadrature: s.adaptive_quadrature.unwrap_or(d.adaptive_quadrature),
         corner_gather: s.corner_gather.unwrap_or(d.corner_gather),
         memory_budget_mb: s.memory_budget_mb.unwrap_or(d.memory_budget_mb),
+        accuracy: s.accuracy.unwrap_or(d.accuracy),
     };
     let mut materials = Vec::new();
     let mut emission_keys = Vec::new();
@@ -406,7 +408,7 @@ pub fn scene_to_json(scene: &Scene) -> String {
         "version": 1,
         "settings": {
             "basis_order": s.basis_order, "quadrature_order": s.quadrature_order, "tolerance": s.tolerance,
-            "visibility": s.visibility, "visibility_samples": s.visibility_samples, "threads": s.threads, "adaptive_quadrature": s.adaptive_quadrature, "corner_gather": s.corner_gather,
+            "visibility": s.visibility, "visibility_samples": s.visibility_samples, "threads": s.threads, "adaptive_quadrature": s.adaptive_quadrature, "corner_gather": s.corner_gather, "accuracy": s.accuracy,
             "memory_budget_mb": s.memory_budget_mb,
         },
         "frames": [scene.frames.0, scene.frames.1],

@@ -42,6 +42,9 @@ pub struct Settings {
     /// The memory a bake may plan to use, in MiB ([`crate::budget`]); 0: 80% of the memory
     /// available when the session starts.
     pub memory_budget_mb: u64,
+    /// The hierarchical solve's one accuracy knob ([`crate::hierarchy`]): the largest share of
+    /// the emitted power a link may carry without being refined (smaller is finer and slower).
+    pub accuracy: f64,
 }
 
 impl Default for Settings {
@@ -56,6 +59,7 @@ impl Default for Settings {
             adaptive_quadrature: true,
             corner_gather: true,
             memory_budget_mb: 0,
+            accuracy: crate::hierarchy::DEFAULT_ACCURACY,
         }
     }
 }

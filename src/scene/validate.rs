@@ -46,6 +46,9 @@ pub(super) fn validate(scene: &mut Scene) -> Result<()> {
              points per axis cannot integrate the products of basis functions of order {order}"
         ));
     }
+    if !(s.accuracy.is_finite() && s.accuracy > 0.0 && s.accuracy < 1.0) {
+        return Err(invalid_scene!("settings.accuracy {} is outside (0,1)", s.accuracy));
+    }
     if !(s.tolerance.is_finite() && s.tolerance > 0.0 && s.tolerance < 1.0) {
         return Err(invalid_scene!("settings.tolerance {} is outside (0,1)", s.tolerance));
     }

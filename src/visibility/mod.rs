@@ -260,6 +260,31 @@ impl Occluders {
         })
     }
 
+    /// [`Occluders::link_visibility`] between parts of elements: `pi` lies on element `i`
+    /// (a sub-rectangle, or the whole) and `pj` on `j`. The masks are over `pi`'s and `pj`'s own
+    /// sample cells; the two elements' triangles are skipped and their planes cull, as for
+    /// whole elements (a part of a planar element lies in its plane).
+    pub fn part_visibility(&self, i: usize, pi: &Patch, j: usize, pj: &Patch) -> Visibility {
+        let m = self.samples_per_axis;
+        let (xi, xj) = (sample_points(pi, m), sample_points(pj, m));
+        let (xi, xj) = (&xi[..m * m], &xj[..m * m]);
+        let shaft = Shaft::new(&Aabb::from_points(xi), &Aabb::from_points(xj));
+        let planes = [self.culling_planes[i], self.culling_planes[j]];
+        let mut culling = [(DVec3::ZERO, 0.0); 2];
+        let mut count = 0;
+        for p in planes.into_iter().flatten() {
+            culling[count] = p;
+            count += 1;
+        }
+        CANDIDATES.with_borrow_mut(|candidates| {
+            shaft_candidates(self, &shaft, &culling[..count], (i as u32, j as u32), candidates);
+            if candidates.is_empty() {
+                return Visibility::Full;
+            }
+            self.cast_between(i, xi, j, xj, candidates, planes == [None, None])
+        })
+    }
+
     /// Whether element `e`'s plane culls occluders in [`Occluders::link_visibility`] (some
     /// occluder lies wholly behind it). Links between elements that cull nothing have the masks
     /// of plain any-hit rays against every occluder but their own two elements.
@@ -426,10 +451,22 @@ impl Occluders {
         candidates: &[usize],
         complete: bool,
     ) -> Visibility {
+        self.cast_between(i, self.samples_of(i, pi), j, self.samples_of(j, pj), candidates, complete)
+    }
+
+    /// [`Occluders::cast`] between the sample points `xi` (on element `i`) and `xj` (on `j`).
+    fn cast_between(
+        &self,
+        i: usize,
+        xi: &[DVec3],
+        j: usize,
+        xj: &[DVec3],
+        candidates: &[usize],
+        complete: bool,
+    ) -> Visibility {
         let m = self.samples_per_axis;
         let cells = m * m;
         SEGMENTS_TESTED.fetch_add((cells * cells) as u64, std::sync::atomic::Ordering::Relaxed);
-        let (xi, xj) = (self.samples_of(i, pi), self.samples_of(j, pj));
         let mut bits = [0u64; 4];
         let mut visible = 0;
         if candidates.len() <= BRUTE_FORCE_CANDIDATES || complete {

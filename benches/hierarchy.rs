@@ -1,0 +1,271 @@
+//! The hierarchy's bench table (issue 20): `cargo bench --bench hierarchy [-- --quick]`, and with
+//! `GALERKIN_MONASTERY=path/to/samurai_monastry.obj` the full 124,789-triangle monastery too.
+//!
+//! Each case runs in a child process of this binary, so that its peak RSS is its own. Errors are
+//! the relative RMS of per-face mean radiosity (largest channel, lit faces) against the flat
+//! solution of the box with every face subdivided 8 x 8 at order 2 (the reference the issue's
+//! Cycles comparison stands in for here: within 1.6% of a converged Cycles bake).
+
+use std::process::Command;
+use std::time::Instant;
+
+use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
+use galerkin_radiosity::scene::json::read_scene;
+use galerkin_radiosity::scene::{Material, Object, Scene, Settings};
+use galerkin_radiosity::scenes;
+use galerkin_radiosity::system::{System, no_progress};
+
+fn peak_rss_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM")).map(|l| l.to_string()))
+        .and_then(|l| l.split_whitespace().nth(1).and_then(|k| k.parse::<f64>().ok()))
+        .map_or(f64::NAN, |kib| kib / 1024.0)
+}
+
+/// Per coarse face of `coarse`, the area-mean of `fine`'s solution over the fine faces whose
+/// centre lies on it (same object, on its plane, inside its domain).
+fn reference_means(coarse: &Scene, fine_sys: &System) -> Vec<f64> {
+    let coarse_elems =
+        galerkin_radiosity::system::build_elements(coarse, 0.0, galerkin_radiosity::basis::Basis::new(0));
+    let mut acc = vec![(0.0, 0.0); coarse_elems.len()];
+    for (i, e) in fine_sys.elements.iter().enumerate() {
+        let c = e.patch.point(0.5, 0.5);
+        let hit = coarse_elems.iter().position(|ce| {
+            let (s, t) = ce.patch.locate(c);
+            ce.object == e.object
+                && (-1e-6..=1.0 + 1e-6).contains(&s)
+                && (-1e-6..=1.0 + 1e-6).contains(&t)
+                && ce.patch.point(s, t).distance(c) < 1e-6
+        });
+        if let Some(k) = hit {
+            let m = fine_sys.mean(i);
+            acc[k].0 += m.iter().copied().fold(0.0, f64::max) * e.area;
+            acc[k].1 += e.area;
+        }
+    }
+    acc.into_iter().map(|(p, a)| if a > 0.0 { p / a } else { f64::NAN }).collect()
+}
+
+fn relative_rms(got: &[f64], want: &[f64]) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for (g, w) in got.iter().zip(want) {
+        if w.is_finite() && *w > 0.0 {
+            num += (g - w).powi(2);
+            den += w * w;
+        }
+    }
+    (num / den).sqrt()
+}
+
+/// One case, in this (child) process: prints `seconds faces leaves links error` on one line.
+fn run_case(case: &str, arg: &str) {
+    match case {
+        "cornell" => {
+            // arg: accuracy
+            let accuracy: f64 = arg.parse().unwrap();
+            let settings = Settings { basis_order: 1, threads: 1, ..Default::default() };
+            let coarse = scenes::cornell_box(1, settings.clone());
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+            let hs = HierarchySettings { accuracy, ..Default::default() };
+            let t = Instant::now();
+            let h = pool.install(|| solve_frame(&coarse, 0.0, &hs, &no_progress).unwrap());
+            let seconds = t.elapsed().as_secs_f64();
+            let got: Vec<f64> = (0..h.hierarchy.tree.faces.len())
+                .map(|f| h.face_mean(f).iter().copied().fold(0.0, f64::max))
+                .collect();
+            // The solve's own peak, before the reference is built beside it.
+            eprintln!("peak {}", peak_rss_mib());
+            let fine = scenes::cornell_box(8, Settings { basis_order: 2, ..settings });
+            let mut reference = System::build(&fine, 0.0, &no_progress).unwrap();
+            reference.solve(1e-5, &|| false).unwrap();
+            let mut want = reference_means(&coarse, &reference);
+            // Lit faces only: the light's own exitance would dominate the norm.
+            for (w, e) in want.iter_mut().zip(&h.hierarchy.tree.faces) {
+                if coarse.materials[e.material as usize].emission.iter().any(|&x| x > 0.0) {
+                    *w = f64::NAN;
+                }
+            }
+            let error = relative_rms(&got, &want);
+            println!("{seconds} {} {} {} {error}", h.stats.faces, h.stats.leaves, h.stats.links);
+            return;
+        }
+        "presubdivided" => {
+            let n: usize = arg.parse().unwrap();
+            let scene = scenes::cornell_box(n, Settings { basis_order: 1, ..Default::default() });
+            let t = Instant::now();
+            let h = solve_frame(&scene, 0.0, &HierarchySettings::of(&scene.settings), &no_progress).unwrap();
+            println!(
+                "{} {} {} {} NaN",
+                t.elapsed().as_secs_f64(),
+                h.stats.faces,
+                h.stats.leaves,
+                h.stats.links
+            );
+        }
+        "scene" => {
+            let mut scene = read_scene(std::path::Path::new(arg)).unwrap();
+            scene.settings.basis_order = 1;
+            let t = Instant::now();
+            let h = solve_frame(&scene, 0.0, &HierarchySettings::of(&scene.settings), &no_progress).unwrap();
+            println!(
+                "{} {} {} {} NaN",
+                t.elapsed().as_secs_f64(),
+                h.stats.faces,
+                h.stats.leaves,
+                h.stats.links
+            );
+        }
+        "obj" => {
+            let scene = obj_under_a_light(arg);
+            let t = Instant::now();
+            let h = solve_frame(&scene, 0.0, &HierarchySettings::of(&scene.settings), &no_progress).unwrap();
+            println!(
+                "{} {} {} {} NaN",
+                t.elapsed().as_secs_f64(),
+                h.stats.faces,
+                h.stats.leaves,
+                h.stats.links
+            );
+        }
+        c => panic!("unknown case {c}"),
+    }
+    eprintln!("peak {}", peak_rss_mib());
+}
+
+/// An OBJ (`v` and `f` lines) on a ground, lit by an emissive square above it: order 1.
+fn obj_under_a_light(path: &str) -> Scene {
+    use glam::DVec3;
+    let text = std::fs::read_to_string(path).unwrap();
+    let (mut vertices, mut faces) = (Vec::new(), Vec::new());
+    for line in text.lines() {
+        let mut it = line.split_whitespace();
+        match it.next() {
+            Some("v") => {
+                let p: Vec<f64> = it.take(3).map(|x| x.parse().unwrap()).collect();
+                // OBJ is y-up; the library is z-up.
+                vertices.push(DVec3::new(p[0], -p[2], p[1]));
+            }
+            Some("f") => {
+                let idx: Vec<u32> =
+                    it.map(|w| w.split('/').next().unwrap().parse::<i64>().unwrap() as u32 - 1).collect();
+                for k in 1..idx.len() - 1 {
+                    faces.push(vec![idx[0], idx[k], idx[k + 1]]);
+                }
+            }
+            _ => {}
+        }
+    }
+    let b = galerkin_radiosity::geometry::Aabb::from_points(&vertices);
+    let (c, d) = (b.centre(), b.diagonal());
+    let size = d.x.max(d.y) * 1.5;
+    let ground = [
+        DVec3::new(c.x - size, c.y - size, b.min.z),
+        DVec3::new(c.x + size, c.y - size, b.min.z),
+        DVec3::new(c.x + size, c.y + size, b.min.z),
+        DVec3::new(c.x - size, c.y + size, b.min.z),
+    ];
+    let h = b.max.z + d.z;
+    let l = 0.25 * size;
+    let light = [
+        DVec3::new(c.x - l, c.y + l, h),
+        DVec3::new(c.x + l, c.y + l, h),
+        DVec3::new(c.x + l, c.y - l, h),
+        DVec3::new(c.x - l, c.y - l, h),
+    ];
+    let n = faces.len();
+    let mesh = Object {
+        name: "Mesh".into(),
+        vertices,
+        faces,
+        face_materials: vec![0; n],
+        matrix: glam::DMat4::IDENTITY,
+        animation: Vec::new(),
+    };
+    let materials = vec![
+        Material { name: "Grey".into(), reflectance: [0.7; 3], emission: [0.0; 3] },
+        Material { name: "Light".into(), reflectance: [0.0; 3], emission: [30.0; 3] },
+    ];
+    let objects = vec![
+        mesh,
+        scenes::subdivided_quad("Ground", ground, 1, 0),
+        scenes::subdivided_quad("Light", light, 1, 1),
+    ];
+    Scene::new(
+        Settings { basis_order: 1, ..Default::default() },
+        (0, 0),
+        materials,
+        vec![Vec::new(); 2],
+        objects,
+    )
+    .unwrap()
+}
+
+fn child(case: &str, arg: &str) -> Option<(Vec<f64>, f64)> {
+    let out = Command::new(std::env::current_exe().unwrap()).args(["--case", case, arg]).output().ok()?;
+    if !out.status.success() {
+        eprintln!("{case} {arg}: {}", String::from_utf8_lossy(&out.stderr));
+        return None;
+    }
+    let line = String::from_utf8_lossy(&out.stdout);
+    let v: Vec<f64> = line.split_whitespace().map(|x| x.parse().unwrap_or(f64::NAN)).collect();
+    let err = String::from_utf8_lossy(&out.stderr);
+    let peak =
+        err.lines().find_map(|l| l.strip_prefix("peak ")).and_then(|x| x.parse().ok()).unwrap_or(f64::NAN);
+    Some((v, peak))
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    if let Some(i) = args.iter().position(|a| a == "--case") {
+        run_case(&args[i + 1], &args[i + 2]);
+        return;
+    }
+    let quick = args.iter().any(|a| a == "--quick");
+    println!("## Hierarchy: the Cornell box as modelled (16 faces), order 1, one thread\n");
+    println!("| accuracy | s | leaves | links | per-face error | peak RSS MiB |");
+    println!("|---|---|---|---|---|---|");
+    let accuracies: &[&str] =
+        if quick { &["3e-3", "1e-3"] } else { &["1e-2", "3e-3", "1e-3", "3e-4", "1e-4"] };
+    for a in accuracies {
+        if let Some((v, peak)) = child("cornell", a) {
+            println!("| {a} | {:.3} | {} | {} | {:.2}% | {peak:.0} |", v[0], v[2], v[3], 100.0 * v[4]);
+        }
+    }
+    println!("\n## Hierarchy: the Cornell box pre-subdivided n x n per face, order 1, default accuracy\n");
+    println!("| n | faces | s | leaves | links | links per face | peak RSS MiB |");
+    println!("|---|---|---|---|---|---|---|");
+    let sizes: &[&str] = if quick { &["1", "4"] } else { &["1", "2", "4", "8"] };
+    for n in sizes {
+        if let Some((v, peak)) = child("presubdivided", n) {
+            println!(
+                "| {n} | {} | {:.3} | {} | {} | {:.1} | {peak:.0} |",
+                v[1],
+                v[0],
+                v[2],
+                v[3],
+                v[3] / v[1]
+            );
+        }
+    }
+    println!("\n## Hierarchy: real meshes, order 1, default accuracy\n");
+    println!("| scene | faces | s | leaves | links | peak RSS MiB |");
+    println!("|---|---|---|---|---|---|");
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/real");
+    for (name, file) in [
+        ("monastery decimated (tests/data/real)", "monastery_scene.json"),
+        ("bunny scene", "bunny_scene.json"),
+    ] {
+        if let Some((v, peak)) = child("scene", &format!("{dir}/{file}")) {
+            println!("| {name} | {} | {:.2} | {} | {} | {peak:.0} |", v[1], v[0], v[2], v[3]);
+        }
+    }
+    if let Ok(path) = std::env::var("GALERKIN_MONASTERY")
+        && let Some((v, peak)) = child("obj", &path)
+    {
+        println!(
+            "| monastery, full ({path}) + ground + light | {} | {:.2} | {} | {} | {peak:.0} |",
+            v[1], v[0], v[2], v[3]
+        );
+    }
+}

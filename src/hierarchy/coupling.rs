@@ -1,0 +1,185 @@
+//! What a link between two nodes carries, and how it is computed.
+//!
+//! Between two surfaces (faces or parts of faces) a link holds the Galerkin blocks of eq. (6), as
+//! the flat system's pairs do, computed by the same pair integrator over the two patches with the
+//! visibility masks of their own sample cells. Where a cluster is at one end, the link holds only
+//! the fraction of rays between the two nodes that arrive: the transfer itself follows from the
+//! nodes' current state (a cluster's intensity lobes, a surface's mean radiosity and normal) and
+//! the distance between their centres, [`super::solve`].
+
+use glam::DVec3;
+
+use super::tree::{Kind, NodeId, Tree};
+use crate::geometry::Patch;
+use crate::kernel::PairContext;
+use crate::kernel::assemble::may_face;
+use crate::kernel::pair::{SEPARATION, integrate_near_coarse, integrate_pair};
+use crate::kernel::samples::Samples;
+use crate::quadrature::GaussLegendre;
+use crate::visibility::{Occluders, Visibility};
+
+/// Rays per cluster link (pairs of points that face each other).
+const CLUSTER_RAYS: usize = 8;
+
+#[derive(Clone, Debug)]
+pub enum Coupling {
+    /// `G_ab` then `G_ba`, `nb x nb` each, row = the receiver's function (eq. 6).
+    Surfaces(Box<[f32]>),
+    /// A cluster at one end at least: the share of rays between the nodes that arrive.
+    Clusters { transmittance: f32 },
+}
+
+/// A link between nodes `a` and `b`, both directions.
+#[derive(Clone, Debug)]
+pub struct Link {
+    pub a: NodeId,
+    pub b: NodeId,
+    pub coupling: Coupling,
+}
+
+/// What computing a link needs besides the two nodes.
+pub struct LinkContext<'a> {
+    pub pair: PairContext<'a>,
+    pub occluders: Option<&'a Occluders>,
+    /// Gauss rules of 1..=8 points, for the separated pairs' samples.
+    rules: Vec<GaussLegendre>,
+    /// How near surface pairs are integrated.
+    pub near: NearRule,
+}
+
+/// How a link between two near surfaces (bounding spheres within [`SEPARATION`] radii-sums) is
+/// integrated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NearRule {
+    /// As the flat system does: split adaptively, analytic at the deepest level.
+    Adaptive,
+    /// [`integrate_near_coarse`]: the oracle refines the elements where a near link would carry
+    /// much, so the links left near carry little and need no more.
+    Coarse,
+}
+
+impl<'a> LinkContext<'a> {
+    pub fn new(pair: PairContext<'a>, occluders: Option<&'a Occluders>) -> Self {
+        Self { pair, occluders, rules: (1..=8).map(GaussLegendre::new).collect(), near: NearRule::Coarse }
+    }
+}
+
+/// The outcome of computing a link.
+pub struct Computed {
+    /// `None` when the two nodes exchange nothing (facing away, blocked).
+    pub coupling: Option<Coupling>,
+    /// Some rays arrive and some do not: a shadow boundary crosses the link.
+    pub partial: bool,
+}
+
+/// Computes the link between `a` and `b`.
+pub fn compute(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Computed {
+    let (na, nb) = (tree.node(a), tree.node(b));
+    match (&na.kind, &nb.kind) {
+        (Kind::Surface(sa), Kind::Surface(sb)) => {
+            surfaces(ctx, (sa.face as usize, &sa.patch), (sb.face as usize, &sb.patch))
+        }
+        _ => {
+            let t = transmittance(ctx, tree, a, b);
+            Computed {
+                coupling: (t > 0.0).then_some(Coupling::Clusters { transmittance: t as f32 }),
+                partial: t > 0.0 && t < 1.0,
+            }
+        }
+    }
+}
+
+fn surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize, &Patch)) -> Computed {
+    let none = Computed { coupling: None, partial: false };
+    if fa == fb || !may_face(pa, pb) || !may_face(pb, pa) {
+        return none;
+    }
+    let vis = match ctx.occluders {
+        Some(o) => o.part_visibility(fa, pa, fb, pb),
+        None => Visibility::Full,
+    };
+    if vis == Visibility::Blocked {
+        return none;
+    }
+    let partial = matches!(vis, Visibility::Partial(_));
+    let p = &ctx.pair;
+    let ((ca, ra), (cb, rb)) = (pa.bounding_sphere(), pb.bounding_sphere());
+    let ratio = ca.distance(cb) / (ra + rb);
+    // Separated pairs take whole-patch samples; near ones are split by the integrator itself.
+    let samples = (ratio > SEPARATION).then(|| {
+        let rule = &ctx.rules[p.points_for(ratio) - 1];
+        let make =
+            |patch: &Patch| Samples::new(patch, &crate::geometry::Rect::UNIT, rule, p.basis, p.vis_axis);
+        (make(pa), make(pb))
+    });
+    let whole = |second: bool, _n: usize| {
+        let (x, y) = samples.as_ref().expect("separated pairs only");
+        if second { y } else { x }
+    };
+    let c = if samples.is_none() && ctx.near == NearRule::Coarse {
+        let mut c = crate::kernel::pair::PairCoefficients::zeros(p.basis.len());
+        integrate_near_coarse(p, pa, pb, &vis, &mut c.ij, &mut c.ji);
+        c
+    } else {
+        integrate_pair(p, pa, pb, whole, &vis)
+    };
+    if c.ij.iter().chain(&c.ji).all(|&x| x == 0.0) {
+        return none;
+    }
+    let blocks: Box<[f32]> = c.ij.iter().chain(&c.ji).map(|&x| x as f32).collect();
+    Computed { coupling: Some(Coupling::Surfaces(blocks)), partial }
+}
+
+/// The share of up to [`CLUSTER_RAYS`] segments between points of `a` and of `b` that face
+/// each other and arrive unobstructed; 1 without visibility, 0 when no sampled pair faces.
+fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> f64 {
+    let Some(occ) = ctx.occluders else { return 1.0 };
+    let mut rng = SplitMix(((a as u64) << 32) ^ b as u64 ^ 0x5851_F42D_4C95_7F2D);
+    let (mut facing, mut arrived) = (0, 0);
+    for _ in 0..4 * CLUSTER_RAYS {
+        let (fx, x, nx) = sample_point(tree, a, &mut rng);
+        let (fy, y, ny) = sample_point(tree, b, &mut rng);
+        let d = y - x;
+        if nx.dot(d) <= 0.0 || ny.dot(-d) <= 0.0 {
+            continue;
+        }
+        facing += 1;
+        arrived += occ.segment_visible(x, y, fx, fy) as usize;
+        if facing == CLUSTER_RAYS {
+            break;
+        }
+    }
+    if facing == 0 { 0.0 } else { arrived as f64 / facing as f64 }
+}
+
+/// A point below node `id` (face, position, normal), area-weighted down the tree.
+fn sample_point(tree: &Tree, mut id: NodeId, rng: &mut SplitMix) -> (u32, DVec3, DVec3) {
+    loop {
+        let node = tree.node(id);
+        match &node.kind {
+            Kind::Cluster { children } => {
+                let (l, r) = (tree.node(children[0]).area, tree.node(children[1]).area);
+                id = if rng.next() * (l + r) < l { children[0] } else { children[1] };
+            }
+            Kind::Surface(s) => {
+                let (u, v) = (rng.next(), rng.next());
+                let n = s.patch.area_vector(u, v).normalize_or_zero();
+                return (s.face, s.patch.point(u, v), n);
+            }
+        }
+    }
+}
+
+/// Deterministic uniform numbers in [0,1) (splitmix64).
+struct SplitMix(u64);
+
+impl SplitMix {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z >> 11) as f64 / (1u64 << 53) as f64
+    }
+}

@@ -1,0 +1,274 @@
+//! Hierarchical Galerkin radiosity with clustering (issue 20): elements below faces where the
+//! transfer needs them, clusters above faces where it does not, links between any two nodes.
+//!
+//! `tree.rs` holds the nodes (clusters over faces, quadtrees of `Rect`s below them),
+//! `two_scale.rs` the push and pull between a surface and its quadrants, `lobes.rs` how clusters
+//! shoot and receive, `coupling.rs` what a link holds and how it is computed, `refine.rs` the
+//! oracle and the link hierarchy, `solve.rs` the Jacobi sweeps with push-pull. [`solve_frame`]
+//! runs it on one frame of a scene from scratch: link from the sources' brightness, solve,
+//! link again where the solution's brightness asks for it, solve again.
+
+pub mod coupling;
+pub mod lobes;
+pub mod refine;
+pub mod solve;
+pub mod tree;
+pub mod two_scale;
+
+use std::time::Instant;
+
+use crate::basis::Basis;
+use crate::error::{Error, Result};
+use crate::geometry::Patch;
+use crate::kernel::PairContext;
+use crate::lights::direct::DirectLight;
+use crate::quadrature::GaussLegendre;
+use crate::scene::Scene;
+use crate::scene::json::ObjectResult;
+use crate::system::{Progress, build_elements, corner_params};
+use crate::visibility::Occluders;
+
+use coupling::LinkContext;
+use refine::{Hierarchy, Oracle};
+use solve::State;
+use tree::Tree;
+
+/// [`HierarchySettings::accuracy`] unless a scene says otherwise.
+pub const DEFAULT_ACCURACY: f64 = 1e-3;
+
+/// The hierarchy's knobs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HierarchySettings {
+    /// The largest power an unrefined link may carry, as a share of the emitted power: the one
+    /// accuracy knob (smaller is finer).
+    pub accuracy: f64,
+    /// Deepest quadtree level below a face.
+    pub max_depth: u32,
+    /// Smallest element, as a share of the scene's surface area.
+    pub min_area: f64,
+    /// Link-and-solve rounds (the first links from the sources' brightness alone).
+    pub rounds: usize,
+    /// Jacobi sweeps per round at most.
+    pub max_sweeps: usize,
+    /// Links may end at clusters (off only to test the surface hierarchy alone).
+    pub clusters: bool,
+    /// How links between near surfaces are integrated.
+    pub near: coupling::NearRule,
+}
+
+impl HierarchySettings {
+    /// The defaults with the scene's accuracy.
+    pub fn of(settings: &crate::scene::Settings) -> Self {
+        Self { accuracy: settings.accuracy, ..Default::default() }
+    }
+}
+
+impl Default for HierarchySettings {
+    fn default() -> Self {
+        Self {
+            accuracy: DEFAULT_ACCURACY,
+            max_depth: 6,
+            min_area: 1e-6,
+            rounds: 3,
+            max_sweeps: 500,
+            clusters: true,
+            near: coupling::NearRule::Coarse,
+        }
+    }
+}
+
+/// Counts and timings of one hierarchical frame.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct HierarchyStats {
+    pub faces: usize,
+    pub nodes: usize,
+    pub leaves: usize,
+    pub links: usize,
+    pub surface_links: usize,
+    pub cluster_links: usize,
+    pub link_bytes: usize,
+    pub sweeps: usize,
+    pub link_seconds: f64,
+    pub solve_seconds: f64,
+}
+
+/// One frame solved on the hierarchy.
+pub struct HierarchicalFrame {
+    pub hierarchy: Hierarchy,
+    pub state: State,
+    pub stats: HierarchyStats,
+}
+
+/// Solves `scene` at `frame` on the hierarchy, from scratch. Runs on the current rayon pool;
+/// `progress` may cancel between phases and sweeps.
+pub fn solve_frame(
+    scene: &Scene,
+    frame: f64,
+    hs: &HierarchySettings,
+    progress: Progress,
+) -> Result<HierarchicalFrame> {
+    let s = &scene.settings;
+    let basis = Basis::new(s.basis_order);
+    let rule = GaussLegendre::new(s.quadrature_order);
+    let faces = build_elements(scene, frame, basis);
+    if faces.is_empty() {
+        return Err(Error::InvalidScene("the scene has no faces with area".into()));
+    }
+    let patches: Vec<Patch> = faces.iter().map(|e| e.patch).collect();
+    let reflectance: Vec<[f64; 3]> =
+        faces.iter().map(|e| scene.materials[e.material as usize].reflectance).collect();
+    let emission: Vec<[f64; 3]> =
+        faces.iter().map(|e| scene.emission_at(e.material as usize, frame)).collect();
+    let total_area: f64 = faces.iter().map(|e| e.area).sum();
+    let start = Instant::now();
+    let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
+    let lights = DirectLight::new(&scene.lights, frame, &patches);
+    let tree = Tree::new(faces, reflectance, basis);
+    let mut state = State::new(&tree);
+    state.add_sources(&tree, &emission, lights.as_ref());
+    state.start_from_sources(&tree);
+    let power = state.source_power(&tree);
+    let oracle = Oracle {
+        threshold: hs.accuracy * power,
+        min_area: hs.min_area * total_area,
+        max_depth: hs.max_depth,
+        clusters: hs.clusters,
+    };
+    let mut ctx = LinkContext::new(
+        PairContext { basis, rule: &rule, vis_axis: s.visibility_samples, adaptive: s.adaptive_quadrature },
+        occluders.as_ref(),
+    );
+    ctx.near = hs.near;
+    let mut hierarchy = Hierarchy::new(tree, oracle);
+    let mut stats = HierarchyStats { faces: patches.len(), ..Default::default() };
+    let cancel = || !progress(0.0, "hierarchy");
+    let stop = s.tolerance * power;
+    for round in 0..hs.rounds.max(1) {
+        if !progress(round as f64 / hs.rounds as f64, "links") {
+            return Err(Error::Cancelled);
+        }
+        let t = Instant::now();
+        let mut radiosity = state.radiosity_estimate();
+        if round == 0 {
+            hierarchy.link_all(&ctx, &mut radiosity);
+        } else if hierarchy.relink(&ctx, &mut radiosity).relinked == 0 {
+            break;
+        }
+        state.grow(&hierarchy.tree);
+        state.add_sources(&hierarchy.tree, &emission, lights.as_ref());
+        stats.link_seconds += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let solved = state.solve(&hierarchy.tree, &hierarchy.links, stop, hs.max_sweeps, &cancel)?;
+        stats.sweeps += solved.sweeps;
+        stats.solve_seconds += t.elapsed().as_secs_f64();
+    }
+    let _ = start;
+    stats.nodes = hierarchy.tree.nodes.len();
+    let mut leaves = Vec::new();
+    hierarchy.tree.leaves_below(hierarchy.tree.root, &mut leaves);
+    stats.leaves = leaves.len();
+    stats.links = hierarchy.links.len();
+    stats.surface_links =
+        hierarchy.links.iter().filter(|l| matches!(l.coupling, coupling::Coupling::Surfaces(_))).count();
+    stats.cluster_links = stats.links - stats.surface_links;
+    stats.link_bytes = hierarchy
+        .links
+        .iter()
+        .map(|l| {
+            std::mem::size_of::<coupling::Link>()
+                + match &l.coupling {
+                    coupling::Coupling::Surfaces(b) => 4 * b.len(),
+                    coupling::Coupling::Clusters { .. } => 0,
+                }
+        })
+        .sum();
+    Ok(HierarchicalFrame { hierarchy, state, stats })
+}
+
+impl HierarchicalFrame {
+    /// The index among the tree's faces of face `f` of object `o`; `None` for a face skipped
+    /// for having no area.
+    pub fn face_index(&self, o: usize, f: usize) -> Option<usize> {
+        let faces = &self.hierarchy.tree.faces;
+        let key = (o as u32, f as u32);
+        faces.binary_search_by(|e| (e.object, e.face).cmp(&key)).ok()
+    }
+
+    /// Area-mean `B` of face `f` (index into the tree's faces).
+    pub fn face_mean(&self, f: usize) -> [f64; 3] {
+        self.state.mean[f]
+    }
+
+    /// `B` at face parameter `(s,t)` of face `f` (face corner order), from the leaf there.
+    pub fn eval_face(&self, f: usize, s: f64, t: f64) -> [f64; 3] {
+        let tree = &self.hierarchy.tree;
+        let s = if tree.faces[f].mirrored { 1.0 - s } else { s };
+        let (leaf, ls, lt) = tree.leaf_at(f, s, t);
+        let c = self.state.coefficients(leaf);
+        let g = tree.basis.eval(ls, lt);
+        let mut out = [0.0; 3];
+        for (k, gk) in g.iter().enumerate() {
+            for ch in 0..3 {
+                out[ch] += gk * c[k][ch];
+            }
+        }
+        out
+    }
+
+    /// `B` at a triangle's apex (its collapsed edge `t = 1`): the mean over that edge of the
+    /// leaf at the middle of it, as [`crate::system::System`] takes it.
+    fn apex(&self, f: usize) -> [f64; 3] {
+        let tree = &self.hierarchy.tree;
+        let (leaf, _, _) = tree.leaf_at(f, 0.5, 1.0);
+        let n = tree.basis.order() + 1;
+        let pt = crate::basis::legendre_1d(1.0);
+        let c = self.state.coefficients(leaf);
+        let mut out = [0.0; 3];
+        for b in 0..n {
+            for ch in 0..3 {
+                out[ch] += pt[b] * c[b][ch];
+            }
+        }
+        out
+    }
+
+    /// Per object, per face: the mean `B` and `B` at each corner from the leaf polynomials, as
+    /// [`crate::system::System::face_results`] reports them.
+    pub fn face_results(&self, scene: &Scene, frame: f64) -> Vec<ObjectResult> {
+        let tree = &self.hierarchy.tree;
+        let to_f32 = |v: [f64; 3]| v.map(|x| x as f32);
+        let mut out = Vec::with_capacity(scene.objects.len());
+        let mut faces = tree.faces.iter().enumerate().peekable();
+        for (o, obj) in scene.objects.iter().enumerate() {
+            let mut res = ObjectResult {
+                name: obj.name.clone(),
+                face_radiosity: Vec::with_capacity(obj.faces.len()),
+                corner_radiosity: Vec::new(),
+            };
+            for (fi, face) in obj.faces.iter().enumerate() {
+                match faces.peek() {
+                    Some((f, e)) if e.object as usize == o && e.face as usize == fi => {
+                        let f = *f;
+                        faces.next();
+                        res.face_radiosity.push(to_f32(self.face_mean(f)));
+                        for (s, t) in corner_params(face.len()) {
+                            let v = if face.len() == 3 && t == 1.0 {
+                                self.apex(f)
+                            } else {
+                                self.eval_face(f, s, t)
+                            };
+                            res.corner_radiosity.push(to_f32(v));
+                        }
+                    }
+                    _ => {
+                        let e = to_f32(scene.emission_at(obj.face_materials[fi] as usize, frame));
+                        res.face_radiosity.push(e);
+                        res.corner_radiosity.extend(std::iter::repeat_n(e, face.len()));
+                    }
+                }
+            }
+            out.push(res);
+        }
+        out
+    }
+}

@@ -1,0 +1,251 @@
+//! The refinement oracle and the link hierarchy it builds (Hanrahan, Salzman and Aupperle 1991,
+//! BF refinement; Smits, Arvo and Greenberg 1994 for clusters).
+//!
+//! A pair of nodes is linked as it stands when the energy it can carry is small, `rho_p B_q A_p
+//! min(1, F_pq^upper)` in either direction below the threshold (`accuracy` x the emitted power),
+//! with `F^upper = A_q cos_p^upper cos_q^upper / (pi d_min^2)` from the bounding spheres; otherwise
+//! the larger node that can split is split and its children are paired with the other. A cluster
+//! link also needs its two spheres apart (its transfer uses the centres' distance), and a link
+//! through which some rays pass and some do not (a shadow boundary) is split further while it can
+//! carry more than a quarter of the threshold. After each solve the links are tested again with
+//! the new radiosities (brightness decides where refinement pays), and split where they fail.
+
+use rayon::prelude::*;
+
+pub use super::coupling::Link;
+use super::coupling::{self, LinkContext};
+use super::tree::{Kind, NodeId, Tree};
+
+/// What the oracle needs to know.
+pub struct Oracle {
+    /// Largest power a link may carry unrefined (W).
+    pub threshold: f64,
+    /// Surfaces are not split below this area, nor deeper than `max_depth` below their face.
+    pub min_area: f64,
+    pub max_depth: u32,
+    /// Whether links may end at clusters (off: every link is between two surfaces, for tests).
+    pub clusters: bool,
+}
+
+/// Partially visible links are split while they can carry more than this share of the threshold.
+const PARTIAL_SHARE: f64 = 0.25;
+
+/// Cluster links need their bounding spheres this many radii-sums apart.
+const CLUSTER_SEPARATION: f64 = 3.0;
+
+/// The decision for one pair.
+enum Verdict {
+    Skip,
+    Link,
+    Split(NodeId),
+}
+
+impl Oracle {
+    fn splittable(&self, tree: &Tree, id: NodeId) -> bool {
+        match &tree.node(id).kind {
+            Kind::Cluster { .. } => true,
+            Kind::Surface(s) => s.depth < self.max_depth && tree.node(id).area > 4.0 * self.min_area,
+        }
+    }
+
+    /// The error an unrefined link from `q` into `p` may make, with `radiosity[q]` the current
+    /// estimate of `q`'s mean radiosity (largest channel): the power it carries,
+    /// `rho_p B_q A_p F`, with `F` the form factor of a facing disc of `q`'s area at the centres'
+    /// distance, `A_q cos_p cos_q / (pi d^2 + A_q)` (at most 1, finite at contact; the cosines
+    /// bounded over the spheres), times how far a polynomial of the basis order can be off over
+    /// the pair, `min(1, ((r_p + r_q) / d)^(order + 1))`.
+    fn carried(&self, tree: &Tree, radiosity: &[f64], p: NodeId, q: NodeId) -> f64 {
+        let (np, nq) = (tree.node(p), tree.node(q));
+        let b = radiosity[q as usize];
+        if b <= 0.0 || np.rho_max <= 0.0 {
+            return 0.0;
+        }
+        let v = nq.centre - np.centre;
+        let d = v.length().max(1e-300);
+        let reach = np.radius + nq.radius;
+        let sin = (reach / d).min(1.0);
+        let cos_bound = |id: NodeId, towards: glam::DVec3| match &tree.node(id).kind {
+            Kind::Surface(s) => (s.normal.dot(towards) / d + sin).clamp(0.0, 1.0),
+            Kind::Cluster { .. } => 1.0,
+        };
+        let (cp, cq) = (cos_bound(p, v), cos_bound(q, -v));
+        let f = nq.area * cp * cq / (std::f64::consts::PI * d * d + nq.area);
+        // A cluster's transfer from the centres is off by the spread of `1/r^2` over the pair,
+        // `~ ((r_p + r_q) / d)^2`; a surface pair's polynomials by the kernel's next order.
+        let power = if np.is_cluster() || nq.is_cluster() { 2 } else { tree.basis.order() as i32 + 1 };
+        let smooth = sin.powi(power);
+        np.rho_max * b * np.area * f * smooth
+    }
+
+    fn pair_carried(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId) -> f64 {
+        self.carried(tree, radiosity, a, b).max(self.carried(tree, radiosity, b, a))
+    }
+
+    fn decide(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId, bar: f64) -> Verdict {
+        let (na, nb) = (tree.node(a), tree.node(b));
+        if let (Some(sa), Some(sb)) = (na.surface(), nb.surface())
+            && sa.face == sb.face
+        {
+            return Verdict::Skip;
+        }
+        // A surface exchanges nothing with what lies wholly behind its plane.
+        let behind = |s: NodeId, o: NodeId| {
+            tree.node(s).surface().is_some_and(|x| {
+                x.normal.dot(tree.node(o).centre - x.patch.point(0.5, 0.5)) < -tree.node(o).radius
+            })
+        };
+        if behind(a, b) || behind(b, a) {
+            return Verdict::Skip;
+        }
+        let separated = na.centre.distance(nb.centre) > CLUSTER_SEPARATION * (na.radius + nb.radius);
+        let clustered = na.is_cluster() || nb.is_cluster();
+        let small = self.pair_carried(tree, radiosity, a, b) <= bar && (self.clusters || !clustered);
+        if small && (separated || !clustered) {
+            return Verdict::Link;
+        }
+        let (ca, cb) = (self.splittable(tree, a), self.splittable(tree, b));
+        match (ca, cb) {
+            (false, false) => Verdict::Link,
+            (true, false) => Verdict::Split(a),
+            (false, true) => Verdict::Split(b),
+            (true, true) => Verdict::Split(if na.radius >= nb.radius { a } else { b }),
+        }
+    }
+}
+
+/// Links of a tree and the oracle that made them.
+pub struct Hierarchy {
+    pub tree: Tree,
+    pub links: Vec<Link>,
+    pub oracle: Oracle,
+}
+
+/// Counts of one refinement.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct RefineStats {
+    pub links: usize,
+    pub split_for_shadows: usize,
+    pub relinked: usize,
+}
+
+impl Hierarchy {
+    pub fn new(tree: Tree, oracle: Oracle) -> Self {
+        Self { tree, links: Vec::new(), oracle }
+    }
+
+    /// Builds the links from the root's interaction with itself, `radiosity` per node (it grows
+    /// with the tree: new nodes take their parent's).
+    pub fn link_all(&mut self, ctx: &LinkContext, radiosity: &mut Vec<f64>) -> RefineStats {
+        let root = self.tree.root;
+        let mut stats = RefineStats::default();
+        self.refine_pairs(ctx, radiosity, vec![(root, root)], &mut stats);
+        stats.links = self.links.len();
+        stats
+    }
+
+    /// Tests every link again with the current `radiosity` and refines those that now carry too
+    /// much (Hanrahan's re-refinement after a solve).
+    pub fn relink(&mut self, ctx: &LinkContext, radiosity: &mut Vec<f64>) -> RefineStats {
+        let mut stats = RefineStats::default();
+        let bar = self.oracle.threshold;
+        let mut work = Vec::new();
+        let tree = &self.tree;
+        let oracle = &self.oracle;
+        self.links.retain(|l| {
+            let keep = oracle.pair_carried(tree, radiosity, l.a, l.b) <= bar
+                || (!oracle.splittable(tree, l.a) && !oracle.splittable(tree, l.b));
+            if !keep {
+                work.push((l.a, l.b));
+            }
+            keep
+        });
+        stats.relinked = work.len();
+        self.refine_pairs(ctx, radiosity, work, &mut stats);
+        stats.links = self.links.len();
+        stats
+    }
+
+    /// Refines `work` into links: decide (splitting nodes) one pair at a time, compute the
+    /// accepted links in parallel, and send partially visible ones that carry enough back.
+    fn refine_pairs(
+        &mut self,
+        ctx: &LinkContext,
+        radiosity: &mut Vec<f64>,
+        mut work: Vec<(NodeId, NodeId)>,
+        stats: &mut RefineStats,
+    ) {
+        let bar = self.oracle.threshold;
+        while !work.is_empty() {
+            let mut accepted = Vec::new();
+            while let Some((a, b)) = work.pop() {
+                if a == b {
+                    // A cluster's light among its own parts; a surface does not light itself.
+                    let children = self.tree.children(a).to_vec();
+                    for (i, &x) in children.iter().enumerate() {
+                        for &y in &children[i..] {
+                            work.push((x, y));
+                        }
+                    }
+                    continue;
+                }
+                match self.oracle.decide(&self.tree, radiosity, a, b, bar) {
+                    Verdict::Skip => {}
+                    Verdict::Link => accepted.push((a, b)),
+                    Verdict::Split(s) => self.split_pair(s, if s == a { b } else { a }, radiosity, &mut work),
+                }
+            }
+            let tree = &self.tree;
+            let computed: Vec<coupling::Computed> =
+                accepted.par_iter().map(|&(a, b)| coupling::compute(ctx, tree, a, b)).collect();
+            for (&(a, b), c) in accepted.iter().zip(computed) {
+                let Some(coupling) = c.coupling else { continue };
+                let refine_shadow = c.partial
+                    && self.oracle.pair_carried(&self.tree, radiosity, a, b) > PARTIAL_SHARE * bar
+                    && (self.oracle.splittable(&self.tree, a) || self.oracle.splittable(&self.tree, b));
+                if refine_shadow {
+                    stats.split_for_shadows += 1;
+                    let s = self.larger_splittable(a, b);
+                    self.split_pair(s, if s == a { b } else { a }, radiosity, &mut work);
+                } else {
+                    self.links.push(Link { a, b, coupling });
+                }
+            }
+        }
+    }
+
+    /// Pairs each child of `s` (split now if it is a surface leaf) with `other`, onto `work`; new
+    /// nodes start from their parent's radiosity estimate.
+    fn split_pair(
+        &mut self,
+        s: NodeId,
+        other: NodeId,
+        radiosity: &mut Vec<f64>,
+        work: &mut Vec<(NodeId, NodeId)>,
+    ) {
+        let children = match self.tree.node(s).kind {
+            Kind::Cluster { children } => children.to_vec(),
+            Kind::Surface(_) => {
+                let c = self.tree.split(s);
+                let r = radiosity[s as usize];
+                radiosity.resize(self.tree.nodes.len(), r);
+                c.to_vec()
+            }
+        };
+        work.extend(children.into_iter().map(|c| (c, other)));
+    }
+
+    fn larger_splittable(&self, a: NodeId, b: NodeId) -> NodeId {
+        let (ca, cb) = (self.oracle.splittable(&self.tree, a), self.oracle.splittable(&self.tree, b));
+        match (ca, cb) {
+            (true, false) => a,
+            (false, true) => b,
+            _ => {
+                if self.tree.node(a).radius >= self.tree.node(b).radius {
+                    a
+                } else {
+                    b
+                }
+            }
+        }
+    }
+}

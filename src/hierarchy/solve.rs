@@ -1,0 +1,458 @@
+//! The solve over hierarchical links: Jacobi iteration with push-pull.
+//!
+//! Each sweep gathers through every link from the sources' current state (eq. 6 blocks between
+//! surfaces; between a cluster and anything, the source's intensity towards the receiver over
+//! `d^2`, [`super::lobes`]), then pushes what each node gathered down to the leaves (a
+//! surface's polynomial restricted to its quadrants by [`TwoScale`]; a cluster's irradiance lobes
+//! to its faces, each with its own normal), sets `b = e + rho H` at the leaves, and pulls the
+//! result back up (the parent's projection of its children; a cluster's intensity lobes as the
+//! sum of its faces'). On a fixed set of leaves with links only between leaves this is the flat
+//! system's Jacobi iteration, so it converges to the flat solution of those elements.
+
+use rayon::prelude::*;
+
+use super::coupling::{Coupling, Link};
+use super::lobes::{self, Lobes};
+use super::tree::{Kind, NodeId, Tree};
+use super::two_scale::TwoScale;
+use crate::error::{Error, Result};
+use crate::lights::direct::DirectLight;
+use crate::quadrature::GaussLegendre;
+
+/// Gauss points per axis projecting the lights' `rho E_d` onto a leaf (as the flat system does).
+const PROJECTION_POINTS: usize = 6;
+
+/// The radiosity state of every node.
+pub struct State {
+    nb: usize,
+    /// `b^k` per surface node (`nodes x nb`): solved at leaves, pulled above.
+    pub b: Vec<[f64; 3]>,
+    /// `e^k + (rho E_d)^k` at leaves (`nodes x nb`), once `has_sources`.
+    pub sources: Vec<[f64; 3]>,
+    has_sources: Vec<bool>,
+    /// Area-mean radiosity per node.
+    pub mean: Vec<[f64; 3]>,
+    /// Intensity lobes per cluster and face (W/sr by direction): what it shoots through
+    /// cluster links.
+    lobes: Vec<Lobes>,
+    two_scale: TwoScale,
+}
+
+/// Per node, the links it receives through: `(link, side)`, side 0 when it is the link's `a`.
+pub struct Incoming {
+    offsets: Vec<usize>,
+    entries: Vec<(u32, u8)>,
+}
+
+impl Incoming {
+    pub fn new(nodes: usize, links: &[Link]) -> Self {
+        let mut count = vec![0usize; nodes + 1];
+        for l in links {
+            count[l.a as usize + 1] += 1;
+            count[l.b as usize + 1] += 1;
+        }
+        for i in 0..nodes {
+            count[i + 1] += count[i];
+        }
+        let mut fill = count.clone();
+        let mut entries = vec![(0u32, 0u8); 2 * links.len()];
+        for (k, l) in links.iter().enumerate() {
+            for (node, side) in [(l.a, 0u8), (l.b, 1u8)] {
+                entries[fill[node as usize]] = (k as u32, side);
+                fill[node as usize] += 1;
+            }
+        }
+        Self { offsets: count, entries }
+    }
+
+    fn of(&self, node: usize) -> &[(u32, u8)] {
+        &self.entries[self.offsets[node]..self.offsets[node + 1]]
+    }
+}
+
+/// Counts of one solve.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct SolveStats {
+    pub sweeps: usize,
+    /// Area-weighted change of the leaves' mean radiosity in the last sweep (W).
+    pub last_change: f64,
+}
+
+impl State {
+    pub fn new(tree: &Tree) -> Self {
+        let nb = tree.basis.len();
+        let n = tree.nodes.len();
+        Self {
+            nb,
+            b: vec![[0.0; 3]; n * nb],
+            sources: vec![[0.0; 3]; n * nb],
+            has_sources: vec![false; n],
+            mean: vec![[0.0; 3]; n],
+            lobes: vec![lobes::ZERO; n],
+            two_scale: TwoScale::new(tree.basis),
+        }
+    }
+
+    /// Takes in nodes the tree gained since: each new surface starts from its parent's polynomial
+    /// restricted to it, so a refined state is the state it refines.
+    pub fn grow(&mut self, tree: &Tree) {
+        let (nb, old) = (self.nb, self.mean.len());
+        let n = tree.nodes.len();
+        if n == old {
+            return;
+        }
+        self.b.resize(n * nb, [0.0; 3]);
+        self.sources.resize(n * nb, [0.0; 3]);
+        self.has_sources.resize(n, false);
+        self.mean.resize(n, [0.0; 3]);
+        self.lobes.resize(n, lobes::ZERO);
+        // Children are appended after their parent, so parents are complete when met.
+        for id in 0..old {
+            let Some(s) = tree.nodes[id].surface() else { continue };
+            let Some(children) = s.children else { continue };
+            for (q, &c) in children.iter().enumerate() {
+                let c = c as usize;
+                if c < old {
+                    continue;
+                }
+                self.push_from(id, q, c);
+            }
+        }
+        for id in old..n {
+            let Some(s) = tree.nodes[id].surface() else { continue };
+            let Some(children) = s.children else { continue };
+            for (q, &c) in children.iter().enumerate() {
+                self.push_from(id, q, c as usize);
+            }
+        }
+    }
+
+    fn push_from(&mut self, parent: usize, q: usize, child: usize) {
+        let nb = self.nb;
+        let p: Vec<[f64; 3]> = self.b[parent * nb..(parent + 1) * nb].to_vec();
+        let c = &mut self.b[child * nb..(child + 1) * nb];
+        c.iter_mut().for_each(|x| *x = [0.0; 3]);
+        self.two_scale.push_add(q, &p, c);
+        self.mean[child] = self.mean[parent];
+    }
+
+    /// Computes the sources of every leaf that has none yet: the face material's exitance on
+    /// `k = 0` and the lights' `rho E_d` projected on the leaf's basis (eq. 4).
+    pub fn add_sources(&mut self, tree: &Tree, emission: &[[f64; 3]], lights: Option<&DirectLight>) {
+        let nb = self.nb;
+        let todo: Vec<usize> = (0..tree.nodes.len())
+            .filter(|&id| {
+                !self.has_sources[id]
+                    && tree.children(id as NodeId).is_empty()
+                    && !tree.nodes[id].is_cluster()
+            })
+            .collect();
+        let rule = GaussLegendre::new(PROJECTION_POINTS);
+        let basis = tree.basis;
+        let computed: Vec<Vec<[f64; 3]>> = todo
+            .par_iter()
+            .map(|&id| {
+                let s = tree.nodes[id].surface().expect("leaves are surfaces");
+                let f = s.face as usize;
+                let mut out = vec![[0.0; 3]; nb];
+                out[0] = emission[f];
+                let rho = tree.reflectance[f];
+                if let Some(lights) = lights.filter(|_| rho.iter().any(|&r| r > 0.0)) {
+                    let mut g = vec![0.0; nb];
+                    for (u, wu) in rule.iter() {
+                        for (v, wv) in rule.iter() {
+                            let n = s.patch.area_vector(u, v).normalize_or_zero();
+                            let irr = lights.irradiance(s.patch.point(u, v), n, s.face);
+                            if irr.iter().all(|&x| x == 0.0) {
+                                continue;
+                            }
+                            basis.eval_into(u, v, &mut g);
+                            for k in 0..nb {
+                                for c in 0..3 {
+                                    out[k][c] += wu * wv * g[k] * rho[c] * irr[c];
+                                }
+                            }
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
+        for (&id, src) in todo.iter().zip(computed) {
+            self.sources[id * nb..(id + 1) * nb].copy_from_slice(&src);
+            self.has_sources[id] = true;
+        }
+    }
+
+    /// The sources' power, `sum over leaves of area x mean source` (largest channel): the
+    /// oracle's and the stopping test's reference.
+    pub fn source_power(&self, tree: &Tree) -> f64 {
+        let nb = self.nb;
+        let mut leaves = Vec::new();
+        tree.leaves_below(tree.root, &mut leaves);
+        leaves
+            .iter()
+            .map(|&id| {
+                let s = tree.nodes[id as usize].surface().expect("leaves are surfaces");
+                let src = &self.sources[id as usize * nb..(id as usize + 1) * nb];
+                (0..3).map(|c| (0..nb).map(|k| s.moments[k] * src[k][c]).sum::<f64>()).fold(0.0, f64::max)
+            })
+            .sum()
+    }
+
+    /// Largest channel of each node's mean radiosity: the oracle's `B`.
+    pub fn radiosity_estimate(&self) -> Vec<f64> {
+        self.mean.iter().map(|m| m.iter().copied().fold(0.0, f64::max)).collect()
+    }
+
+    /// Sets every leaf to its sources and pulls: the state before any light has bounced.
+    pub fn start_from_sources(&mut self, tree: &Tree) {
+        let nb = self.nb;
+        let mut leaves = Vec::new();
+        tree.leaves_below(tree.root, &mut leaves);
+        for id in leaves {
+            let i = id as usize;
+            let src: Vec<[f64; 3]> = self.sources[i * nb..(i + 1) * nb].to_vec();
+            self.b[i * nb..(i + 1) * nb].copy_from_slice(&src);
+        }
+        let gathered = Gathered { h: vec![[0.0; 3]; 0], lobes: Vec::new() };
+        self.push_pull(tree, &gathered, false);
+    }
+
+    /// Jacobi sweeps until the leaves' area-weighted change falls below `stop` (W), at most
+    /// `max_sweeps`.
+    pub fn solve(
+        &mut self,
+        tree: &Tree,
+        links: &[Link],
+        stop: f64,
+        max_sweeps: usize,
+        cancel: &(dyn Fn() -> bool + Sync),
+    ) -> Result<SolveStats> {
+        let incoming = Incoming::new(tree.nodes.len(), links);
+        let mut stats = SolveStats::default();
+        let first = self.source_power(tree).max(1e-300);
+        for sweep in 0..max_sweeps {
+            if cancel() {
+                return Err(Error::Cancelled);
+            }
+            let gathered = self.gather(tree, links, &incoming);
+            let change = self.push_pull(tree, &gathered, true);
+            stats.sweeps = sweep + 1;
+            stats.last_change = change;
+            if !change.is_finite() || change > 1e6 * first {
+                return Err(Error::Internal("the hierarchical solution diverges".into()));
+            }
+            if change <= stop {
+                break;
+            }
+        }
+        Ok(stats)
+    }
+
+    /// What every node receives through its own links from the current state.
+    fn gather(&self, tree: &Tree, links: &[Link], incoming: &Incoming) -> Gathered {
+        let (nb, n) = (self.nb, tree.nodes.len());
+        let mut h = vec![[0.0; 3]; n * nb];
+        let mut lobes_in = vec![lobes::ZERO; n];
+        h.par_chunks_mut(nb).zip(lobes_in.par_iter_mut()).enumerate().for_each(|(r, (hr, lr))| {
+            for &(l, side) in incoming.of(r) {
+                let link = &links[l as usize];
+                let s = if side == 0 { link.b } else { link.a } as usize;
+                match &link.coupling {
+                    Coupling::Surfaces(blocks) => {
+                        let block = &blocks[side as usize * nb * nb..(side as usize + 1) * nb * nb];
+                        let bs = &self.b[s * nb..(s + 1) * nb];
+                        for k in 0..nb {
+                            let row = &block[k * nb..(k + 1) * nb];
+                            for (l, &g) in row.iter().enumerate() {
+                                for c in 0..3 {
+                                    hr[k][c] += g as f64 * bs[l][c];
+                                }
+                            }
+                        }
+                    }
+                    Coupling::Clusters { transmittance } => {
+                        let (nr, ns) = (&tree.nodes[r], &tree.nodes[s]);
+                        let v = nr.centre - ns.centre;
+                        let d2 = v.length_squared();
+                        if d2 <= 0.0 {
+                            continue;
+                        }
+                        let w = v / d2.sqrt();
+                        let intensity = match ns.plane_normal {
+                            Some(n) => {
+                                let f = ns.area * n.dot(w).max(0.0) / std::f64::consts::PI;
+                                self.mean[s].map(|m| m * f)
+                            }
+                            None => lobes::eval(&self.lobes[s], w),
+                        };
+                        // Irradiance `I cos / d^2`, which `b = e + rho H` takes as it is (eq. 1).
+                        let scale = *transmittance as f64 / d2;
+                        let arriving = intensity.map(|i| i * scale);
+                        match (&nr.kind, nr.plane_normal) {
+                            (Kind::Surface(_), Some(n)) => {
+                                let cos = (-n.dot(w)).max(0.0);
+                                for c in 0..3 {
+                                    hr[0][c] += arriving[c] * cos;
+                                }
+                            }
+                            // A planar cluster holds its (constant) irradiance in `H^0`, which
+                            // the push hands to its faces unchanged.
+                            (Kind::Cluster { .. }, Some(n)) => {
+                                let cos = (-n.dot(w)).max(0.0);
+                                for c in 0..3 {
+                                    hr[0][c] += arriving[c] * cos;
+                                }
+                            }
+                            _ => lobes::add_lobe(lr, -w, arriving),
+                        }
+                    }
+                }
+            }
+        });
+        Gathered { h, lobes: lobes_in }
+    }
+
+    /// Pushes `gathered` to the leaves, sets `b = e + rho H` there (when `solve`; else keeps the
+    /// leaves' `b`) and pulls; returns the leaves' area-weighted change of mean radiosity.
+    fn push_pull(&mut self, tree: &Tree, gathered: &Gathered, solve: bool) -> f64 {
+        let mut change = 0.0;
+        let zero = vec![[0.0; 3]; self.nb];
+        self.visit(tree, tree.root, &lobes::ZERO, &zero, gathered, solve, &mut change);
+        change
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn visit(
+        &mut self,
+        tree: &Tree,
+        id: NodeId,
+        inherited: &Lobes,
+        pushed: &[[f64; 3]],
+        gathered: &Gathered,
+        solve: bool,
+        change: &mut f64,
+    ) {
+        let nb = self.nb;
+        let i = id as usize;
+        let node = &tree.nodes[i];
+        match &node.kind {
+            Kind::Cluster { children } => {
+                let mut l = *inherited;
+                if let Some(own) = gathered.lobes.get(i) {
+                    lobes::add(&mut l, own);
+                }
+                // What a planar cluster gathered is a constant irradiance of all its faces.
+                let mut flat = pushed.to_vec();
+                if let Some(own) = gathered.h.get(i * nb) {
+                    for c in 0..3 {
+                        flat[0][c] += own[c];
+                    }
+                }
+                let mut out = lobes::ZERO;
+                let mut power = [0.0; 3];
+                for &c in children {
+                    self.visit(tree, c, &l, &flat, gathered, solve, change);
+                    lobes::add(&mut out, &self.lobes[c as usize]);
+                    let a = tree.nodes[c as usize].area;
+                    for ch in 0..3 {
+                        power[ch] += self.mean[c as usize][ch] * a;
+                    }
+                }
+                self.lobes[i] = out;
+                self.mean[i] = power.map(|p| if node.area > 0.0 { p / node.area } else { 0.0 });
+            }
+            Kind::Surface(s) => {
+                let mut h: Vec<[f64; 3]> = pushed.to_vec();
+                if let Some(own) = gathered.h.get(i * nb..(i + 1) * nb) {
+                    for k in 0..nb {
+                        for c in 0..3 {
+                            h[k][c] += own[k][c];
+                        }
+                    }
+                }
+                if s.depth == 0 {
+                    let e = lobes::eval(inherited, s.normal);
+                    for c in 0..3 {
+                        h[0][c] += e[c];
+                    }
+                }
+                match s.children {
+                    None => {
+                        if solve {
+                            let rho = tree.reflectance[s.face as usize];
+                            let before = self.mean[i];
+                            for k in 0..nb {
+                                for c in 0..3 {
+                                    self.b[i * nb + k][c] = self.sources[i * nb + k][c] + rho[c] * h[k][c];
+                                }
+                            }
+                            let after = self.mean_of(s, i);
+                            *change +=
+                                node.area * (0..3).map(|c| (after[c] - before[c]).abs()).fold(0.0, f64::max);
+                        }
+                    }
+                    Some(children) => {
+                        let mut parts: [Vec<[f64; 3]>; 4] = Default::default();
+                        for (q, &c) in children.iter().enumerate() {
+                            let mut hq = vec![[0.0; 3]; nb];
+                            self.two_scale.push_add(q, &h, &mut hq);
+                            self.visit(tree, c, &lobes::ZERO, &hq, gathered, solve, change);
+                            parts[q] = self.b[c as usize * nb..(c as usize + 1) * nb].to_vec();
+                        }
+                        let mut pulled = vec![[0.0; 3]; nb];
+                        self.two_scale.pull([&parts[0], &parts[1], &parts[2], &parts[3]], &mut pulled);
+                        self.b[i * nb..(i + 1) * nb].copy_from_slice(&pulled);
+                    }
+                }
+                // The mean from the leaves (area-weighted), which a pulled polynomial keeps only
+                // where the area element is polynomial of the basis order.
+                self.mean[i] = match s.children {
+                    None => self.mean_of(s, i),
+                    Some(children) => {
+                        let mut p = [0.0; 3];
+                        for &c in &children {
+                            let a = tree.nodes[c as usize].area;
+                            for ch in 0..3 {
+                                p[ch] += self.mean[c as usize][ch] * a;
+                            }
+                        }
+                        p.map(|x| if node.area > 0.0 { x / node.area } else { 0.0 })
+                    }
+                };
+                if s.depth == 0 {
+                    let mut l = lobes::ZERO;
+                    let f = node.area / std::f64::consts::PI;
+                    lobes::add_lobe(&mut l, s.normal, self.mean[i].map(|m| m * f));
+                    self.lobes[i] = l;
+                }
+            }
+        }
+    }
+
+    fn mean_of(&self, s: &super::tree::Surface, i: usize) -> [f64; 3] {
+        let nb = self.nb;
+        let area: f64 = s.moments[0];
+        let mut out = [0.0; 3];
+        for k in 0..nb {
+            for c in 0..3 {
+                out[c] += s.moments[k] * self.b[i * nb + k][c];
+            }
+        }
+        out.map(|x| if area > 0.0 { x / area } else { 0.0 })
+    }
+
+    /// `b` of surface node `id`.
+    pub fn coefficients(&self, id: NodeId) -> &[[f64; 3]] {
+        &self.b[id as usize * self.nb..(id as usize + 1) * self.nb]
+    }
+}
+
+/// What one gather sweep delivered per node.
+struct Gathered {
+    /// `H^k` per surface node (`nodes x nb`; empty: nothing).
+    h: Vec<[f64; 3]>,
+    /// Irradiance lobes per cluster (empty: nothing).
+    lobes: Vec<Lobes>,
+}

@@ -1,0 +1,262 @@
+//! The element tree: clusters over faces, faces split into quadtrees of `Rect`s.
+//!
+//! Faces (the input geometry: patches, occluder ids, read-back) are the scene's non-degenerate
+//! faces in [`crate::system::build_elements`] order; a face is a surface node of depth 0. Above
+//! them a binary volume hierarchy of clusters (median splits of the face centroids along the
+//! longest axis); below them each face's parameter domain is split into quadrants on demand, and
+//! a sub-rectangle of a bilinear patch is again a bilinear patch
+//! ([`crate::geometry::Patch::sub_patch`]), so every kernel sees only patches. Node ids are
+//! indices that are only appended while a tree lives: a frame builds its own tree.
+
+use glam::DVec3;
+
+use crate::basis::Basis;
+use crate::geometry::{Aabb, Patch, Rect};
+use crate::quadrature::GaussLegendre;
+use crate::system::Element;
+
+pub type NodeId = u32;
+
+/// `|sum A_f n_f| / sum A_f` above which a cluster counts as planar.
+pub const PLANAR: f64 = 0.999;
+
+/// A face or a sub-rectangle of one.
+#[derive(Clone, Debug)]
+pub struct Surface {
+    /// The face (index into [`Tree::faces`]).
+    pub face: u32,
+    /// The node's part of the face's parameter domain.
+    pub domain: Rect,
+    /// World-space geometry over `domain`.
+    pub patch: Patch,
+    /// Unit front normal at the centre.
+    pub normal: DVec3,
+    /// `integral Gamma_k A ds dt` over the node's own `(s,t)`: mean `B = sum_k b^k m_k / area`.
+    pub moments: Vec<f64>,
+    /// Quadtree depth below the face.
+    pub depth: u32,
+    /// The four quadrants, once split, in [`Rect::quadrants`] order.
+    pub children: Option<[NodeId; 4]>,
+}
+
+/// A node of the tree.
+#[derive(Clone, Debug)]
+pub enum Kind {
+    Cluster { children: [NodeId; 2] },
+    Surface(Surface),
+}
+
+#[derive(Clone, Debug)]
+pub struct Node {
+    /// Bounding sphere.
+    pub centre: DVec3,
+    pub radius: f64,
+    /// Surface area below the node.
+    pub area: f64,
+    /// Largest reflectance channel of any face below (the oracle's `rho`).
+    pub rho_max: f64,
+    /// The common unit normal when every face below is coplanar-facing (area-weighted normals
+    /// summing to at least [`PLANAR`] of the area): such a node shoots and receives with the
+    /// exact cosine, not the lobes' truncation.
+    pub plane_normal: Option<DVec3>,
+    /// `sum A_f n_f` over the faces below.
+    pub normal_sum: DVec3,
+    pub kind: Kind,
+}
+
+impl Node {
+    pub fn surface(&self) -> Option<&Surface> {
+        match &self.kind {
+            Kind::Surface(s) => Some(s),
+            Kind::Cluster { .. } => None,
+        }
+    }
+
+    pub fn is_cluster(&self) -> bool {
+        matches!(self.kind, Kind::Cluster { .. })
+    }
+}
+
+/// Clusters, faces and their sub-elements.
+pub struct Tree {
+    pub basis: Basis,
+    pub nodes: Vec<Node>,
+    pub root: NodeId,
+    /// The input faces, one element each (whole domain).
+    pub faces: Vec<Element>,
+    /// Each face's reflectance.
+    pub reflectance: Vec<[f64; 3]>,
+    rule: GaussLegendre,
+}
+
+impl Tree {
+    /// Clusters over `faces` (non-empty), each face a surface node.
+    pub fn new(faces: Vec<Element>, reflectance: Vec<[f64; 3]>, basis: Basis) -> Self {
+        assert!(!faces.is_empty(), "a tree needs a face");
+        let mut tree =
+            Tree { basis, nodes: Vec::new(), root: 0, faces, reflectance, rule: GaussLegendre::new(4) };
+        for f in 0..tree.faces.len() {
+            let e = &tree.faces[f];
+            let (centre, radius) = e.patch.bounding_sphere();
+            let node = Node {
+                centre,
+                radius,
+                area: e.area,
+                rho_max: tree.reflectance[f].iter().copied().fold(0.0, f64::max),
+                plane_normal: Some(e.patch.centre_normal()),
+                normal_sum: e.patch.centre_normal() * e.area,
+                kind: Kind::Surface(Surface {
+                    face: f as u32,
+                    domain: Rect::UNIT,
+                    patch: e.patch,
+                    normal: e.patch.centre_normal(),
+                    moments: e.moments.clone(),
+                    depth: 0,
+                    children: None,
+                }),
+            };
+            tree.nodes.push(node);
+        }
+        let mut ids: Vec<NodeId> = (0..tree.faces.len() as NodeId).collect();
+        let bounds: Vec<Aabb> = tree.faces.iter().map(|e| e.patch.bounds()).collect();
+        tree.root = tree.cluster(&mut ids, &bounds);
+        tree
+    }
+
+    /// A cluster over the face nodes `ids` (their node id is their face index), by median split
+    /// of the centroids along the longest axis of their spread.
+    fn cluster(&mut self, ids: &mut [NodeId], bounds: &[Aabb]) -> NodeId {
+        if ids.len() == 1 {
+            return ids[0];
+        }
+        let spread = ids.iter().fold(Aabb::EMPTY, |b, &i| b.grow(bounds[i as usize].centre()));
+        let d = spread.diagonal();
+        let axis = if d.x >= d.y && d.x >= d.z {
+            0
+        } else if d.y >= d.z {
+            1
+        } else {
+            2
+        };
+        let mid = ids.len() / 2;
+        ids.select_nth_unstable_by(mid, |&a, &b| {
+            bounds[a as usize].centre()[axis].total_cmp(&bounds[b as usize].centre()[axis])
+        });
+        let (lo, hi) = ids.split_at_mut(mid);
+        let a = self.cluster(lo, bounds);
+        let b = self.cluster(hi, bounds);
+        let box_of = |ids: &[NodeId]| ids.iter().fold(Aabb::EMPTY, |u, &i| u.union(bounds[i as usize]));
+        let all = box_of(lo).union(box_of(hi));
+        let (na, nb) = (&self.nodes[a as usize], &self.nodes[b as usize]);
+        let area = na.area + nb.area;
+        let normal_sum = na.normal_sum + nb.normal_sum;
+        let node = Node {
+            centre: all.centre(),
+            radius: 0.5 * all.diagonal().length(),
+            area,
+            rho_max: na.rho_max.max(nb.rho_max),
+            plane_normal: (normal_sum.length() >= PLANAR * area && area > 0.0)
+                .then(|| normal_sum.normalize()),
+            normal_sum,
+            kind: Kind::Cluster { children: [a, b] },
+        };
+        self.nodes.push(node);
+        (self.nodes.len() - 1) as NodeId
+    }
+
+    pub fn node(&self, id: NodeId) -> &Node {
+        &self.nodes[id as usize]
+    }
+
+    /// The node's children: two for a cluster, four for a split surface, none for a leaf.
+    pub fn children(&self, id: NodeId) -> &[NodeId] {
+        match &self.nodes[id as usize].kind {
+            Kind::Cluster { children } => children,
+            Kind::Surface(s) => s.children.as_ref().map_or(&[], |c| &c[..]),
+        }
+    }
+
+    /// Splits surface node `id` into its four quadrants (a no-op when split already).
+    pub fn split(&mut self, id: NodeId) -> [NodeId; 4] {
+        let Kind::Surface(s) = &self.nodes[id as usize].kind else { panic!("node {id} is a cluster") };
+        if let Some(c) = s.children {
+            return c;
+        }
+        let (face, domain, depth) = (s.face, s.domain, s.depth);
+        let rho_max = self.nodes[id as usize].rho_max;
+        let face_patch = self.faces[face as usize].patch;
+        let first = self.nodes.len() as NodeId;
+        for q in domain.quadrants() {
+            // From the face's own patch, so that deep nodes do not accumulate rounding.
+            let patch = face_patch.sub_patch(&q);
+            let e = crate::system::element(0, face, q, patch, 0, self.basis, &self.rule);
+            let (centre, radius) = patch.bounding_sphere();
+            self.nodes.push(Node {
+                centre,
+                radius,
+                area: e.area,
+                rho_max,
+                plane_normal: Some(patch.centre_normal()),
+                normal_sum: patch.centre_normal() * e.area,
+                kind: Kind::Surface(Surface {
+                    face,
+                    domain: q,
+                    patch,
+                    normal: patch.centre_normal(),
+                    moments: e.moments,
+                    depth: depth + 1,
+                    children: None,
+                }),
+            });
+        }
+        let children = [first, first + 1, first + 2, first + 3];
+        if let Kind::Surface(s) = &mut self.nodes[id as usize].kind {
+            s.children = Some(children);
+        }
+        children
+    }
+
+    /// The leaf of face `f`'s quadtree holding the face parameter `(s,t)`, and `(s,t)` in it.
+    pub fn leaf_at(&self, f: usize, s: f64, t: f64) -> (NodeId, f64, f64) {
+        let mut id = f as NodeId;
+        loop {
+            let surface = self.nodes[id as usize].surface().expect("face nodes are surfaces");
+            let Some(children) = surface.children else {
+                let d = &surface.domain;
+                return (id, (s - d.s0) / (d.s1 - d.s0), (t - d.t0) / (d.t1 - d.t0));
+            };
+            let d = &surface.domain;
+            let (sm, tm) = (0.5 * (d.s0 + d.s1), 0.5 * (d.t0 + d.t1));
+            id = match (s >= sm, t >= tm) {
+                (false, false) => children[0],
+                (true, false) => children[1],
+                (true, true) => children[2],
+                (false, true) => children[3],
+            };
+        }
+    }
+
+    /// The leaves below `id`, in depth-first order.
+    pub fn leaves_below(&self, id: NodeId, out: &mut Vec<NodeId>) {
+        let children = self.children(id);
+        if children.is_empty() {
+            out.push(id);
+        } else {
+            for &c in children {
+                self.leaves_below(c, out);
+            }
+        }
+    }
+
+    /// The faces below `id`.
+    pub fn faces_below(&self, id: NodeId, out: &mut Vec<u32>) {
+        match &self.nodes[id as usize].kind {
+            Kind::Surface(s) => out.push(s.face),
+            Kind::Cluster { children } => {
+                for &c in children {
+                    self.faces_below(c, out);
+                }
+            }
+        }
+    }
+}
