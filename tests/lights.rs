@@ -514,8 +514,9 @@ fn a_half_bright_sky_lights_up_facing_and_side_facing_faces_by_their_share() {
     let f = floor_values.iter().map(|(_, b)| b[0] as f64).sum::<f64>() / floor_values.len() as f64;
     let w = wall_values.iter().map(|(_, b)| b[0] as f64).sum::<f64>() / wall_values.len() as f64;
     eprintln!("half sky: floor {f} vs {}, wall {w} vs {}", RHO * floor_e, RHO * wall_e);
-    assert!((f - RHO * floor_e).abs() < 0.01 * RHO * floor_e, "{f} vs {}", RHO * floor_e);
-    assert!((w - RHO * wall_e).abs() < 0.02 * RHO * wall_e, "{w} vs {}", RHO * wall_e);
+    // Measured: floor +0.34% (the ramp's strata averaged over their sub-strata), wall exact.
+    assert!((f - RHO * floor_e).abs() < 5e-3 * RHO * floor_e, "{f} vs {}", RHO * floor_e);
+    assert!((w - RHO * wall_e).abs() < 5e-3 * RHO * wall_e, "{w} vs {}", RHO * wall_e);
 }
 
 #[test]

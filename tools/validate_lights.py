@@ -183,13 +183,25 @@ def run(args):
             for o in objs
         }
         low_err = bakes.relative_rmse(bakes.values(objs, "CyclesLow"), ref)
+        # Noise of the reference: the quarter-sample bake has twice its noise, so the two differ
+        # by sqrt(1 + 4) = sqrt(5) of it.
+        noise_per_object = {
+            o.name: bakes.relative_rmse(corner_values(o, "CyclesLow"), corner_values(o, "Cycles"))
+            / np.sqrt(5)
+            for o in objs
+        }
+        mean_ratio_per_object = {
+            o.name: float(corner_values(o, "Rad_0001").mean() / corner_values(o, "Cycles").mean())
+            for o in objs
+        }
         row = {
             "faces": faces,
             "rmse": bakes.relative_rmse(bakes.values(objs, "Rad_0001"), ref),
             "rmse_per_object": per_object,
+            "reference_noise_per_object": noise_per_object,
+            "mean_ratio_per_object": mean_ratio_per_object,
             "mean_ratio": float(bakes.values(objs, "Rad_0001").mean() / ref.mean()),
-            # Noise of the reference: the quarter-sample bake's error is twice it.
-            "reference_noise": low_err / 2.0,
+            "reference_noise": low_err / np.sqrt(5),
             "cycles_seconds": t_ref,
             "cycles_low_seconds": t_low,
             "ours_seconds": t_ours,
@@ -199,7 +211,8 @@ def run(args):
             f"{kind}: {faces} faces, relative RMSE {100 * row['rmse']:.2f}% "
             f"(mean ratio {row['mean_ratio']:.4f}; "
             f"Cycles noise ~{100 * row['reference_noise']:.2f}%); per object "
-            + ", ".join(f"{k} {100 * v:.1f}%" for k, v in per_object.items())
+            + ", ".join(f"{k} {100 * v:.1f}% (noise {100 * noise_per_object[k]:.1f}%, "
+                        f"mean {mean_ratio_per_object[k]:.3f})" for k, v in per_object.items())
             + f"; Cycles {args.samples} spp {t_ref:.1f} s, ours {t_ours:.2f} s",
             flush=True,
         )

@@ -174,7 +174,8 @@ impl PlacedWorld {
     /// shut, one that straddles an edge of what occludes is split into `SPLIT x SPLIT` with a
     /// ray each. So the edges of the sky, where a fixed pattern's error is, are sampled as a
     /// `(SPLIT m)^2` pattern would sample them, for about `(m + 1)^2` rays plus `SPLIT^2` per
-    /// stratum on an edge. An occluder smaller than a stratum that no corner sees is missed.
+    /// stratum on an edge. An occluder smaller than a stratum that no corner sees is missed. With
+    /// an image, an open stratum whose corners' radiances differ is averaged over its sub-strata.
     pub(super) fn irradiance(&self, n: DVec3, m: usize, open: impl Fn(DVec3) -> bool) -> [f64; 3] {
         let (t, b) = n.any_orthonormal_pair();
         let direction = |u: f64, v: f64| {
@@ -186,8 +187,15 @@ impl PlacedWorld {
         // Corners on the square's edge are horizon directions, which graze the receiver's plane
         // and slip past what stands on it: they are raised to about 1 degree.
         let edge = |k: usize| (k as f64 / mf).clamp(HORIZON, 1.0 - HORIZON);
-        let corners: Vec<bool> =
-            (0..(m + 1) * (m + 1)).map(|k| open(direction(edge(k % (m + 1)), edge(k / (m + 1))))).collect();
+        let corner_dirs: Vec<DVec3> =
+            (0..(m + 1) * (m + 1)).map(|k| direction(edge(k % (m + 1)), edge(k / (m + 1)))).collect();
+        let corners: Vec<bool> = corner_dirs.iter().map(|&w| open(w)).collect();
+        // With an image, the radiance at the corners too: a stratum the sky's colour changes
+        // across is averaged over its sub-strata (lookups only, no rays).
+        let radiance: Vec<[f64; 3]> = match self.image {
+            Some(_) => corner_dirs.iter().map(|&w| self.radiance(w)).collect(),
+            None => Vec::new(),
+        };
         let mut sum = [0.0; 3];
         let mut add = |w: DVec3, weight: f64| {
             let l = self.radiance(w);
@@ -195,18 +203,28 @@ impl PlacedWorld {
                 sum[c] += weight * l[c];
             }
         };
+        let sf = SPLIT as f64;
+        let sub = |i: usize, j: usize, k: usize| {
+            let u = (i as f64 + ((k % SPLIT) as f64 + 0.5) / sf) / mf;
+            let v = (j as f64 + ((k / SPLIT) as f64 + 0.5) / sf) / mf;
+            direction(u, v)
+        };
         for j in 0..m {
             for i in 0..m {
-                let at = |di: usize, dj: usize| corners[(j + dj) * (m + 1) + i + di];
-                let seen = [at(0, 0), at(1, 0), at(0, 1), at(1, 1)];
+                let index = |di: usize, dj: usize| (j + dj) * (m + 1) + i + di;
+                let cell = [index(0, 0), index(1, 0), index(0, 1), index(1, 1)];
+                let seen = cell.map(|k| corners[k]);
                 if seen.iter().all(|&o| o) {
-                    add(direction((i as f64 + 0.5) / mf, (j as f64 + 0.5) / mf), 1.0);
+                    if !radiance.is_empty() && varies(cell.map(|k| radiance[k])) {
+                        for k in 0..SPLIT * SPLIT {
+                            add(sub(i, j, k), 1.0 / (sf * sf));
+                        }
+                    } else {
+                        add(direction((i as f64 + 0.5) / mf, (j as f64 + 0.5) / mf), 1.0);
+                    }
                 } else if seen.iter().any(|&o| o) {
-                    let sf = SPLIT as f64;
                     for k in 0..SPLIT * SPLIT {
-                        let u = (i as f64 + ((k % SPLIT) as f64 + 0.5) / sf) / mf;
-                        let v = (j as f64 + ((k / SPLIT) as f64 + 0.5) / sf) / mf;
-                        let w = direction(u, v);
+                        let w = sub(i, j, k);
                         if open(w) {
                             add(w, 1.0 / (sf * sf));
                         }
@@ -218,8 +236,16 @@ impl PlacedWorld {
     }
 }
 
-/// Sub-strata per axis of a stratum on an edge of the sky.
+/// Sub-strata per axis of a stratum on an edge of the sky (or of its colours).
 const SPLIT: usize = 4;
+
+/// Whether radiances at a stratum's corners differ by more than 2% of the largest (per channel).
+fn varies(l: [[f64; 3]; 4]) -> bool {
+    (0..3).any(|c| {
+        let (lo, hi) = l.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), x| (lo.min(x[c]), hi.max(x[c])));
+        hi - lo > 0.02 * hi
+    })
+}
 
 /// How far the strata's corner rays stay inside the square: `1e-4` lifts the horizon to
 /// `asin(sqrt(1 - (1 - 2e-4)^2))`, 1.15 degrees.

@@ -327,3 +327,27 @@ def test_a_room_lit_by_the_world_agrees_with_cycles(blender):
         print(line)
         assert rmse < 0.03 + 2 * noise, line
         assert mean_error < 0.03 + 2 * noise / np.sqrt(ref.size), line
+
+
+def test_a_keyed_world_strength_bakes_incrementally_like_full_solves(blender):
+    """The World's Strength keyframed 0.5 -> 3 over frames 1-3 over a floor and a box: the
+    incremental bake's frames equal full solves, and frame 3 is six times frame 1."""
+    bpy = blender
+    grey = material(bpy, "Grey", (0.6, 0.6, 0.6))
+    floor = _floor(bpy, grey, n=4)
+    box = cube(bpy, "Box", 0.3, (0.0, 0.0, 0.3), grey)
+    world = _world(bpy, (0.5, 0.6, 0.9), 0.5)
+    strength = world.node_tree.nodes["Background"].inputs["Strength"]
+    strength.keyframe_insert("default_value", frame=1)
+    strength.default_value = 3.0
+    strength.keyframe_insert("default_value", frame=3)
+    sc = bpy.context.scene
+    sc.frame_start, sc.frame_end = 1, 3
+    out = {}
+    for method in ("INCREMENTAL", "FULL"):
+        bpy.ops.radiosity.clear()
+        assert bake(bpy, method=method) == {"FINISHED"}
+        out[method] = [np.concatenate([stored(o.data, f) for o in (floor, box)]) for f in (1, 2, 3)]
+    for a, b in zip(out["INCREMENTAL"], out["FULL"], strict=True):
+        assert np.abs(a - b).max() < 2e-3 * b.max()
+    np.testing.assert_allclose(out["FULL"][2], 6.0 * out["FULL"][0], rtol=1e-3, atol=1e-5)
