@@ -351,3 +351,37 @@ def test_a_keyed_world_strength_bakes_incrementally_like_full_solves(blender):
     for a, b in zip(out["INCREMENTAL"], out["FULL"], strict=True):
         assert np.abs(a - b).max() < 2e-3 * b.max()
     np.testing.assert_allclose(out["FULL"][2], 6.0 * out["FULL"][0], rtol=1e-3, atol=1e-5)
+
+
+def test_set_world_and_two_sided_through_the_binding_check_their_input():
+    """``Session.set_world`` / ``set_two_sided`` through the C ABI: a World lights the floor by
+    rho pi L; bad values fail with one line and change nothing; strength 0 removes the World."""
+    import pytest
+
+    from addon.native import binding as b
+
+    verts, faces = grid_quad((-1, -1, 0), (2, 0, 0), (0, 2, 0), 2)
+    obj = {"vertices": np.asarray(verts, np.float32), "face_sizes": np.full(len(faces), 4, np.uint32),
+           "face_indices": np.asarray(faces, np.uint32).reshape(-1), "face_materials": np.zeros(4, np.uint32),
+           "matrix": np.eye(4)}
+    with b.Session({"method": "full"}, [[0.5] * 3], [[0.0] * 3], [obj]) as s:
+        s.set_world((0.2, 0.4, 0.6), 2.0)
+        s.solve_frame(1)
+        want = 0.5 * np.pi * 2.0 * np.array([0.2, 0.4, 0.6])
+        np.testing.assert_allclose(s.corner_radiosity(0)[2], want, rtol=1e-5)
+        s.set_world((1, 1, 1), 1.0, np.full((4, 8, 3), 0.3))  # an image: texels times strength
+        s.solve_frame(1)
+        np.testing.assert_allclose(s.corner_radiosity(0)[2], 0.5 * np.pi * 0.3, rtol=1e-5)
+        for bad, says in [(dict(color=(1, -1, 1), strength=1.0), "color"),
+                          (dict(color=(1, 1, 1), strength=float("nan")), "strength NaN"),
+                          (dict(color=(1, 1, 1), strength=1.0, image=np.full((2, 2, 3), -1.0)), "pixel 0")]:
+            with pytest.raises(b.RadiosityError, match=says) as e:
+                s.set_world(**bad)
+            assert "\n" not in str(e.value)
+        with pytest.raises(b.RadiosityError, match="object 3 out of range"):
+            s.set_two_sided(3, True)
+        s.solve_frame(1)
+        np.testing.assert_allclose(s.corner_radiosity(0)[2], 0.5 * np.pi * 0.3, rtol=1e-5)
+        s.set_world((1, 1, 1), 0.0)
+        s.solve_frame(1)
+        assert np.abs(s.corner_radiosity(0)).max() == 0.0
