@@ -112,6 +112,10 @@ class RadiosityObjectSettings(bpy.types.PropertyGroup):
         name="Emission Multiplier", default=1.0, min=0.0, soft_max=100.0,
         description="Makes this object's emitting materials brighter or dimmer in the bake only "
                     "(your materials are not changed)")
+    two_sided: BoolProperty(
+        name="Two-Sided Emitter", default=False,
+        description="Emitting faces of this object emit from their back too, as Cycles' mesh lights "
+                    "do (by default a face emits from its front, the side its normal points to)")
 
 
 classes = (RadiositySceneSettings, RadiosityObjectSettings)

@@ -92,9 +92,10 @@ class OBJECT_PT_radiosity(bpy.types.Panel):
         layout.use_property_decorate = False
         p = context.object.radiosity
         layout.prop(p, "exclude")
-        row = layout.row()
-        row.enabled = not p.exclude
-        row.prop(p, "emission_multiplier")
+        col = layout.column()
+        col.enabled = not p.exclude
+        col.prop(p, "emission_multiplier")
+        col.prop(p, "two_sided")
 
 
 classes = (RENDER_PT_radiosity, RENDER_PT_radiosity_frames, RENDER_PT_radiosity_output, OBJECT_PT_radiosity)

@@ -283,6 +283,34 @@ GrStatus gr_light_default(struct GrLight *out);
 GrStatus gr_session_set_lights(struct GrSession *s, const struct GrLight *lights, size_t count);
 
 /**
+ * Replaces the session's World from the next solved frame on: radiance `strength x color`
+ * from every direction, times the equirectangular image's texel where `pixels` is given
+ * (`width x height` RGB triples, linear, bottom row first as Blender stores images; Blender's
+ * equirectangular mapping, README of the add-on, "The World"). `strength` 0 removes the
+ * World. Checked (finite, non-negative, `pixels` NULL with `width = height = 0` or both > 0);
+ * on error nothing changes.
+ *
+ * # Safety
+ * `s` is NULL or a live session; `color` is NULL or points to 3 readable doubles; `pixels` is
+ * NULL or points to `3 * width * height` readable floats.
+ */
+GrStatus gr_session_set_world(struct GrSession *s,
+                              const double *color,
+                              double strength,
+                              const float *pixels,
+                              uint32_t width,
+                              uint32_t height);
+
+/**
+ * Makes object `object`'s emitting faces emit from both sides (`on` non-zero) or only from
+ * their front (0, the default) from the next solved frame on.
+ *
+ * # Safety
+ * `s` is NULL or a live session.
+ */
+GrStatus gr_session_set_two_sided(struct GrSession *s, uint32_t object, uint32_t on);
+
+/**
  * Creates a session from a scene given as flat arrays and writes it to `*out`.
  *
  * - `settings`: see `GrSettings`.

@@ -140,6 +140,10 @@ pub struct Session {
     emission: Vec<Option<[f64; 3]>>,
     /// Host override of the lights ([`Session::set_lights`]).
     lights: Option<Vec<crate::lights::Light>>,
+    /// Host override of the World ([`Session::set_world`]): `Some(None)` is no World.
+    world: Option<Option<crate::lights::World>>,
+    /// Host override of the two-sided objects ([`Session::set_two_sided`]).
+    two_sided: Option<Vec<bool>>,
     system: Option<System>,
     /// What the incremental update keeps between frames (series, shape epochs).
     animation: Option<AnimationState>,
@@ -176,6 +180,8 @@ impl Session {
             placement,
             emission,
             lights: None,
+            world: None,
+            two_sided: None,
             system: None,
             animation: None,
             hierarchical: None,
@@ -310,11 +316,41 @@ impl Session {
         Ok(())
     }
 
+    /// Replaces the scene's World from the next solved frame on (`None`: black); validated as a
+    /// scene's is.
+    pub fn set_world(&mut self, world: Option<crate::lights::World>) -> Result<()> {
+        if let Some(w) = &world {
+            w.validate()?;
+        }
+        self.world = Some(world);
+        Ok(())
+    }
+
+    /// Makes object `o`'s emitting faces emit from both sides (or only their front) from the
+    /// next solved frame on.
+    pub fn set_two_sided(&mut self, o: usize, on: bool) -> Result<()> {
+        let n = self.scene.objects.len();
+        if o >= n {
+            return Err(Error::InvalidArgument(format!("object {o} out of range (0..{n})")));
+        }
+        let flags = self.two_sided.get_or_insert_with(|| {
+            (0..n).map(|i| self.scene.two_sided.get(i).copied().unwrap_or(false)).collect()
+        });
+        flags[o] = on;
+        Ok(())
+    }
+
     /// The scene as placed at `frame`: keys, then host overrides.
     fn scene_at(&self, frame: f64) -> Scene {
         let mut scene = self.scene.clone();
         if let Some(lights) = &self.lights {
             scene.lights = lights.clone();
+        }
+        if let Some(world) = &self.world {
+            scene.world = world.clone();
+        }
+        if let Some(two_sided) = &self.two_sided {
+            scene.two_sided = two_sided.clone();
         }
         for (o, obj) in scene.objects.iter_mut().enumerate() {
             obj.matrix = self.placement[o].unwrap_or_else(|| obj.world_from_object(frame));

@@ -268,10 +268,12 @@ impl System {
             .objects
             .iter()
             .enumerate()
-            .filter(|&(o, _)| emits[o] && !lights[o])
+            // A two-sided emitter's backs light by the direct path, not by links.
+            .filter(|&(o, _)| emits[o] && !lights[o] && !scene.two_sided.get(o).copied().unwrap_or(false))
             .map(|(_, obj)| {
                 format!(
-                    "emitter \"{}\" lights nothing: its emitting faces face away from all geometry",
+                    "emitter \"{}\" lights nothing: its emitting faces face away from all geometry \
+                     (flip its normals, or turn on Two-Sided in its Radiosity object panel)",
                     obj.name
                 )
             })
@@ -449,7 +451,7 @@ pub fn frame_sources(scene: &Scene, frame: f64, elements: &[Element], basis: Bas
         emission[i * nb] = scene.emission_at(e.material as usize, frame);
     }
     let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
-    let Some(lights) = DirectLight::new(&scene.lights, frame, &patches) else {
+    let Some(lights) = DirectLight::new(scene, frame, elements) else {
         return (emission, Vec::new(), None);
     };
     let rho: Vec<[f64; 3]> =

@@ -1,11 +1,14 @@
-"""Validation of Blender Light objects against Cycles (issue 22): a small room lit only by one
-Point, Spot, Sun or Area light, baked by the add-on (default settings) and by Cycles (DIFFUSE:
-direct + indirect + colour), relative RMSE per object.
+"""Validation of Blender Light objects and the World against Cycles (issue 22): a small room lit
+only by one Point, Spot, Sun or Area light, or by the World (``world``: a uniform colour;
+``sky``: an equirectangular image, bright and warm towards +X, dim and blue towards -X, so a
+mirrored or rotated mapping lights the wrong walls), baked by the add-on (default settings) and
+by Cycles (DIFFUSE: direct + indirect + colour), relative RMSE per object.
 
-    .venv/bin/python -m tools.validate_lights [--samples 2048] [--subdiv 6] [--lights point spot sun area]
+    .venv/bin/python -m tools.validate_lights [--samples 2048] [--subdiv 6]
+        [--lights point spot sun area world sky]
 
 The room: floor, walls (red left, green right) and a white block, Lambertian Diffuse BSDFs; the
-ceiling is left off for the sun (it shines in through the open top). Point and Spot radius 0
+ceiling is left off for the sun and the World (they shine in through the open top). Point and Spot radius 0
 and Sun angle 0 (our soft shadows are not modelled yet), the World black. Ground truth as in
 tools/validate_cycles.py: 64 bounces, no clamping, no denoising, no adaptive sampling. Cycles'
 own noise is estimated from a second bake at a quarter of the samples.
@@ -28,7 +31,7 @@ def parse(argv):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--samples", type=int, default=2048, help="Cycles samples of the reference")
     p.add_argument("--subdiv", type=int, default=6, help="walls split n x n")
-    p.add_argument("--lights", nargs="+", default=["point", "spot", "sun", "area"])
+    p.add_argument("--lights", nargs="+", default=["point", "spot", "sun", "area", "world", "sky"])
     p.add_argument("--out", default=str(REPO / "out" / "validation"))
     return p.parse_args(argv)
 
@@ -117,6 +120,41 @@ def add_light(bpy, kind):
     return ob
 
 
+OPEN_TOP = ("sun", "world", "sky")
+
+
+def sky_image(bpy, width=64, height=32):
+    """An equirectangular image: columns looking towards +X (u in [0.25, 0.75), Blender's
+    mapping) bright and warm, the others dim and blue, all brighter towards the zenith (v = 1,
+    the top row); float, linear."""
+    img = bpy.data.images.new("Sky", width, height, float_buffer=True)
+    u = (np.arange(width) + 0.5) / width
+    east = (u >= 0.25) & (u < 0.75)
+    row = np.where(east[:, None], [2.0, 1.6, 1.0, 1.0], [0.15, 0.25, 0.5, 1.0])
+    v = (np.arange(height) + 0.5) / height  # rows bottom first
+    pixels = np.tile(row, (height, 1, 1))
+    pixels[..., :3] *= (0.5 + v)[:, None, None]
+    img.pixels.foreach_set(pixels.astype(np.float32).ravel())
+    return img
+
+
+def set_world(bpy, kind):
+    """The scene's World: a uniform colour (``world``) or the sky image (``sky``)."""
+    world = bpy.data.worlds.new("World")
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
+    nt = world.node_tree
+    bg = nt.nodes["Background"]
+    bg.inputs["Color"].default_value = (0.6, 0.7, 0.9, 1.0)
+    bg.inputs["Strength"].default_value = 1.5
+    if kind == "sky":
+        env = nt.nodes.new("ShaderNodeTexEnvironment")
+        env.image = sky_image(bpy)
+        nt.links.new(env.outputs["Color"], bg.inputs["Color"])
+    bpy.context.scene.world = world
+    return world
+
+
 def run(args):
     from . import bakes
     from .blender_scene import corner_values
@@ -127,8 +165,11 @@ def run(args):
     report = {"samples": args.samples, "subdiv": args.subdiv, "lights": {}}
     for kind in args.lights:
         bpy.ops.wm.read_factory_settings(use_empty=True)
-        objs = room(bpy, args.subdiv, ceiling=kind != "sun")
-        add_light(bpy, kind)
+        objs = room(bpy, args.subdiv, ceiling=kind not in OPEN_TOP)
+        if kind in ("world", "sky"):
+            set_world(bpy, kind)
+        else:
+            add_light(bpy, kind)
         sc = bpy.context.scene
         sc.frame_start = sc.frame_end = 1
         sc.frame_set(1)
@@ -142,13 +183,25 @@ def run(args):
             for o in objs
         }
         low_err = bakes.relative_rmse(bakes.values(objs, "CyclesLow"), ref)
+        # Noise of the reference: the quarter-sample bake has twice its noise, so the two differ
+        # by sqrt(1 + 4) = sqrt(5) of it.
+        noise_per_object = {
+            o.name: bakes.relative_rmse(corner_values(o, "CyclesLow"), corner_values(o, "Cycles"))
+            / np.sqrt(5)
+            for o in objs
+        }
+        mean_ratio_per_object = {
+            o.name: float(corner_values(o, "Rad_0001").mean() / corner_values(o, "Cycles").mean())
+            for o in objs
+        }
         row = {
             "faces": faces,
             "rmse": bakes.relative_rmse(bakes.values(objs, "Rad_0001"), ref),
             "rmse_per_object": per_object,
+            "reference_noise_per_object": noise_per_object,
+            "mean_ratio_per_object": mean_ratio_per_object,
             "mean_ratio": float(bakes.values(objs, "Rad_0001").mean() / ref.mean()),
-            # Noise of the reference: the quarter-sample bake's error is twice it.
-            "reference_noise": low_err / 2.0,
+            "reference_noise": low_err / np.sqrt(5),
             "cycles_seconds": t_ref,
             "cycles_low_seconds": t_low,
             "ours_seconds": t_ours,
@@ -158,7 +211,8 @@ def run(args):
             f"{kind}: {faces} faces, relative RMSE {100 * row['rmse']:.2f}% "
             f"(mean ratio {row['mean_ratio']:.4f}; "
             f"Cycles noise ~{100 * row['reference_noise']:.2f}%); per object "
-            + ", ".join(f"{k} {100 * v:.1f}%" for k, v in per_object.items())
+            + ", ".join(f"{k} {100 * v:.1f}% (noise {100 * noise_per_object[k]:.1f}%, "
+                        f"mean {mean_ratio_per_object[k]:.3f})" for k, v in per_object.items())
             + f"; Cycles {args.samples} spp {t_ref:.1f} s, ours {t_ours:.2f} s",
             flush=True,
         )

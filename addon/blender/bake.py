@@ -29,7 +29,7 @@ from ..core.marshal import with_object_names
 from ..core.materials import radiance_from_radiosity
 from ..core.record import BakeRecord, FrameState, first_changed
 from ..core.settings import BakeSettings, SettingsError
-from . import attributes, switch
+from . import attributes, switch, world
 from .export import TopologyChanged, collect, export, sample
 
 RECORD_PROPERTY = "radiosity_bake"
@@ -104,6 +104,7 @@ def new_session(settings: BakeSettings, exp, state: FrameState, scene_key: str) 
         session = b.Session(settings.native(), rho, emission, [o.data.native() for o in exp.objects])
         if exp.lights:
             session.set_lights(exp.lights)
+        world.apply(session, exp.world, exp.two_sided)
     except b.RadiosityError as e:
         raise BakeError(str(e)) from e
     return Held(session, scene_key, state, None, exp)
@@ -120,6 +121,7 @@ def apply_sample(h: Held, smp, state: FrameState) -> int:
         for m, rgb in enumerate(smp.emission):
             h.session.set_material_emission(m, tuple(float(x) for x in rgb))
         h.session.set_lights(smp.lights)
+        world.apply(h.session, smp.world, smp.two_sided)
         changed += 1
     h.state = FrameState(list(state.matrices), list(h.state.geometry), state.emission)
     return changed
@@ -255,10 +257,13 @@ class BakeJob:
             claimed.add(mesh.name)
         self.session_key = session_key(s, rest)
         self.scene_key = rest.scene_key(s.solve_signature(), extra=f"L{level}:" + ",".join(modes))
-        if not rest.light_objects and not self._has_emitter(dg):
-            raise BakeError(f"no emitters: no Light object and no material in {where} emits light in "
-                            f"frames {self.frames[0]}-{self.frames[-1]} (add a light, give a Principled "
-                            "BSDF an Emission Strength > 0, or use an Emission shader)")
+        if line := world.problems_line(rest.world):
+            self.warnings.append(line)
+        if not rest.light_objects and rest.world.strength == 0.0 and not self._has_emitter(dg):
+            raise BakeError(f"no emitters: no Light object, no World and no material in {where} emits "
+                            f"light in frames {self.frames[0]}-{self.frames[-1]} (add a light, give the "
+                            "World a Strength > 0, give a Principled BSDF an Emission Strength > 0, or "
+                            "use an Emission shader)")
         # Storage targets.
         self.targets = []
         copies = [o for o, m in zip(rest.objects, modes, strict=True) if m == "copy"]

@@ -6,7 +6,8 @@ settings, sorted by name so the library order is stable. Other kinds of object a
 
 Light objects (Point, Spot, Sun, Area) of the same selection are sources: their evaluated state
 (``matrix_world``, colour, power or strength, radius, spot size and blend, angle, area shape and
-size) is sampled per frame and handed to the session with ``set_lights``.
+size) is sampled per frame and handed to the session with ``set_lights``; the scene's World and
+the objects' Two-Sided Emitter settings likewise (``world.py``).
 
 Geometry is the evaluated mesh (modifiers, shape keys, drivers applied) via
 ``evaluated_get(depsgraph).to_mesh()``, in object space; the placement is the evaluated
@@ -23,6 +24,7 @@ from ..core import materials as core_materials
 from ..core.marshal import ObjectData, digest, emission_key
 from ..core.record import FrameState
 from .materials import read_material
+from .world import WorldState, two_sided, world_state
 
 SWITCH_MODIFIER = "Radiosity"
 SWITCH_GROUP = "Radiosity Switch"
@@ -149,6 +151,8 @@ class Export:
     material_sources: list      # (bpy material or None, multiplier) per library material
     light_objects: list = field(default_factory=list)   # bpy Light objects
     lights: list = field(default_factory=list)          # their states at the export's frame
+    world: WorldState = field(default_factory=WorldState)
+    two_sided: list = field(default_factory=list)       # per object: emits from both sides
 
     def scene_key(self, settings_signature: dict, extra: str = "") -> str:
         rho, _ = self.materials.arrays()
@@ -207,7 +211,8 @@ def export(depsgraph, objects, light_objects=()) -> Export:
             same = bool((osizes == sizes).all())
         out.append(ExportedObject(obj, data, slots, smooth, same, may_deform(obj)))
     light_objects = list(light_objects)
-    return Export(out, table, sources, light_objects, [light_state(o, depsgraph) for o in light_objects])
+    return Export(out, table, sources, light_objects, [light_state(o, depsgraph) for o in light_objects],
+                  world_state(depsgraph), two_sided(objects))
 
 
 def frame_emission(export: Export) -> np.ndarray:
@@ -226,6 +231,8 @@ class Sample:
     vertices: list[np.ndarray | None]   # None: the object does not deform
     emission: np.ndarray
     lights: list = field(default_factory=list)   # light states (``light_state``)
+    world: WorldState = field(default_factory=WorldState)
+    two_sided: list = field(default_factory=list)
 
     def state(self, rest: Export) -> FrameState:
         geometry = [
@@ -233,7 +240,9 @@ class Sample:
             for v, o in zip(self.vertices, rest.objects, strict=True)
         ]
         mats = [digest(m, decimals=6) for m in self.matrices]
-        return FrameState(mats, geometry, emission_key(self.emission) + lights_key(self.lights))
+        sided = "".join("2" if t else "1" for t in self.two_sided)
+        return FrameState(mats, geometry,
+                          emission_key(self.emission) + lights_key(self.lights) + self.world.key() + sided)
 
 
 def sample(depsgraph, rest: Export, objects=None) -> Sample:
@@ -258,7 +267,8 @@ def sample(depsgraph, rest: Export, objects=None) -> Sample:
         else:
             vertices.append(None)
     lights = [light_state(o, depsgraph) for o in rest.light_objects]
-    return Sample(matrices, vertices, frame_emission(rest), lights)
+    objs = objects if objects is not None else [o.obj for o in rest.objects]
+    return Sample(matrices, vertices, frame_emission(rest), lights, world_state(depsgraph), two_sided(objs))
 
 
 class TopologyChanged(Exception):

@@ -1,7 +1,8 @@
 """Live preview: while it is on, every frame change and every depsgraph update that moves an
-object or changes a material re-solves the current frame incrementally, in the held session
-(``set_object_matrix`` / ``set_material_emission`` + ``solve_frame``), and writes the result
-into each object's ``Radiosity`` attribute. The solve runs on the main thread (it blocks the UI
+object or a Light, or changes a material, a Light's data or the World, re-solves the current
+frame incrementally, in the held session (``set_object_matrix`` / ``set_material_emission`` /
+``set_lights`` / ``set_world`` + ``solve_frame``, as a bake hands them over), and writes the
+result into each object's ``Radiosity`` attribute. The solve runs on the main thread (it blocks the UI
 for its duration: keep live scenes small, or use a low basis order and Draft quality).
 
 With "Refine When Idle" (the default) a frame change solves a *preview* of the frame: to ten
@@ -90,22 +91,26 @@ def _update(scene) -> bool:
     h = bake.held(scene)
     rest = h.export if h is not None else None
     names = [o.name for o in sel.objects]
-    if rest is None or [o.data.name for o in rest.objects] != names:
-        rest = export(dg, sel.objects)
+    lights = [o.name for o in sel.light_objects]
+    if (rest is None or [o.data.name for o in rest.objects] != names
+            or [o.name for o in rest.light_objects] != lights):
+        rest = export(dg, sel.objects, sel.light_objects)
         key = _scene_key(scene, rest)
         if h is None or h.scene_key != key:
             _, e = rest.materials.arrays()
-            if not (e > 0).any():
-                raise bake.BakeError("no emitters in the scene")
+            if not (e > 0).any() and not rest.light_objects and rest.world.strength == 0.0:
+                raise bake.BakeError("no emitters in the scene (no emissive material, Light or World)")
             bake.drop_held(scene)
             smp = sample(dg, rest, sel.objects)
             h = bake.new_session(bake.settings_from_scene(scene), rest, smp.state(rest), key)
             bake._held[bake.scene_id(scene)] = h
             h.frame = None
+        else:
+            h.export = rest  # the same meshes; its lights are handed over with each sample
     smp = sample(dg, rest, sel.objects)
     state = smp.state(rest)
     if state.geometry != h.state.geometry:
-        rest = export(dg, sel.objects)
+        rest = export(dg, sel.objects, sel.light_objects)
         h.close()
         h = bake.new_session(bake.settings_from_scene(scene), rest, state, _scene_key(scene, rest))
         bake._held[bake.scene_id(scene)] = h
@@ -201,7 +206,8 @@ def on_frame_change(scene, depsgraph=None):
 def on_depsgraph_update(scene, depsgraph):
     if _busy or bake.running or not scene.radiosity.live_preview:
         return
-    relevant = any(u.is_updated_transform or isinstance(u.id, bpy.types.Material) for u in depsgraph.updates)
+    watched = (bpy.types.Material, bpy.types.Light, bpy.types.World)
+    relevant = any(u.is_updated_transform or isinstance(u.id, watched) for u in depsgraph.updates)
     if relevant:
         update(scene, depsgraph)
 

@@ -149,6 +149,8 @@ def _declare(lib: ctypes.CDLL) -> None:
         "gr_session_set_material_emission": ([_SESSION, c_uint32, _F32], c_uint32),
         "gr_light_default": ([POINTER(_Light)], c_uint32),
         "gr_session_set_lights": ([_SESSION, POINTER(_Light), c_size_t], c_uint32),
+        "gr_session_set_world": ([_SESSION, POINTER(c_double), c_double, _F32, c_uint32, c_uint32], c_uint32),
+        "gr_session_set_two_sided": ([_SESSION, c_uint32, c_uint32], c_uint32),
         "gr_session_solve_frame": ([_SESSION, c_double, _PROGRESS, c_void_p], c_uint32),
         "gr_session_set_preview": ([_SESSION, c_uint32], c_uint32),
         "gr_session_refine": ([_SESSION, _PROGRESS, c_void_p, _U32], c_uint32),
@@ -459,6 +461,22 @@ class Session:
             if "size" in d:
                 g.area_size[:] = [float(x) for x in _floats(d["size"], (2,), f"lights[{i}].size")]
         self._call("gr_session_set_lights", arr, len(lights))
+
+    def set_world(self, color=(0.0, 0.0, 0.0), strength: float = 0.0, image=None) -> None:
+        """The World from the next frame on: radiance ``strength * color`` from every direction,
+        times ``image`` ((H, W, 3) linear RGB, bottom row first, Blender's equirectangular
+        mapping) where given; strength 0 removes it."""
+        rgb = (c_double * 3)(*[float(x) for x in _floats(color, (3,), "color")])
+        if image is None:
+            pixels, w, h = None, 0, 0
+        else:
+            arr = _floats(image, (-1, -1, 3), "image")
+            pixels, (h, w) = _ptr(arr, _F32), arr.shape[:2]
+        self._call("gr_session_set_world", rgb, float(strength), pixels, w, h)
+
+    def set_two_sided(self, index: int, on: bool) -> None:
+        """Object ``index``'s emitting faces emit from both sides (``on``) from the next frame on."""
+        self._call("gr_session_set_two_sided", _u32(index, "object"), 1 if on else 0)
 
     # -- solving --------------------------------------------------------------------------------
 

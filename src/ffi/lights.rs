@@ -144,3 +144,65 @@ pub unsafe extern "C" fn gr_session_set_lights(
         Ok(())
     })
 }
+
+/// Replaces the session's World from the next solved frame on: radiance `strength x color`
+/// from every direction, times the equirectangular image's texel where `pixels` is given
+/// (`width x height` RGB triples, linear, bottom row first as Blender stores images; Blender's
+/// equirectangular mapping, README of the add-on, "The World"). `strength` 0 removes the
+/// World. Checked (finite, non-negative, `pixels` NULL with `width = height = 0` or both > 0);
+/// on error nothing changes.
+///
+/// # Safety
+/// `s` is NULL or a live session; `color` is NULL or points to 3 readable doubles; `pixels` is
+/// NULL or points to `3 * width * height` readable floats.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn gr_session_set_world(
+    s: *mut GrSession,
+    color: *const f64,
+    strength: f64,
+    pixels: *const f32,
+    width: u32,
+    height: u32,
+) -> GrStatus {
+    boundary("gr_session_set_world", || {
+        let s = unsafe { session(s) }?;
+        let color = unsafe { array(color, 3, "color") }?;
+        let (w, h) = (width as usize, height as usize);
+        let texels = if pixels.is_null() && w == 0 && h == 0 {
+            None
+        } else {
+            if w == 0 || h == 0 {
+                return Err(Failure::invalid(format!("world image is {w} x {h}: both must be > 0")));
+            }
+            let n = w
+                .checked_mul(h)
+                .and_then(|n| n.checked_mul(3))
+                .ok_or_else(|| Failure::invalid(format!("world image {w} x {h} is too large")))?;
+            let p = unsafe { array(pixels, n, "pixels") }?;
+            Some(p.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+        };
+        let world = (strength != 0.0).then(|| {
+            let mut world = crate::lights::World::uniform([color[0], color[1], color[2]], strength);
+            world.image = texels.map(|pixels| {
+                std::sync::Arc::new(crate::lights::Environment { width: w, height: h, pixels })
+            });
+            world
+        });
+        s.write()?.session.set_world(world)?;
+        Ok(())
+    })
+}
+
+/// Makes object `object`'s emitting faces emit from both sides (`on` non-zero) or only from
+/// their front (0, the default) from the next solved frame on.
+///
+/// # Safety
+/// `s` is NULL or a live session.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn gr_session_set_two_sided(s: *mut GrSession, object: u32, on: u32) -> GrStatus {
+    boundary("gr_session_set_two_sided", || {
+        let s = unsafe { session(s) }?;
+        s.write()?.session.set_two_sided(object as usize, on != 0)?;
+        Ok(())
+    })
+}

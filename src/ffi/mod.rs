@@ -18,7 +18,10 @@ pub mod settings;
 use std::ffi::{CStr, c_char};
 
 pub use error::{GrStatus, gr_last_error};
-pub use lights::{GrLight, GrLightKind, GrLightShape, gr_light_default, gr_session_set_lights};
+pub use lights::{
+    GrLight, GrLightKind, GrLightShape, gr_light_default, gr_session_set_lights, gr_session_set_two_sided,
+    gr_session_set_world,
+};
 pub use panic::run_in_boundary;
 pub use session::{
     GrProgressFn, GrSession, gr_session_cancel, gr_session_corner_count, gr_session_corner_radiosity,

@@ -20,8 +20,16 @@
 //!   `E = (P / A) F(x -> light)` with the exact unoccluded point-to-polygon form factor
 //!   ([`crate::kernel::point::point_to_polygon`]; a disk or an ellipse as a 32-gon) times the
 //!   fraction of shadow rays to the light's sample points that arrive.
+//!
+//! Beside the Light objects, the same direct path carries the World ([`world`]: a background
+//! colour or equirectangular image from infinitely far, with the sky's visibility) and the
+//! backs of two-sided emitters ([`backs`]).
 
+mod backs;
 pub mod direct;
+pub mod world;
+
+pub use world::{Environment, World, WorldKey};
 
 use glam::{DMat4, DVec3};
 

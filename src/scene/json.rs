@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{EmissionKey, Key, KeyTransform, Material, Object, Scene, Settings};
 use crate::error::{Error, Result, invalid_scene};
-use crate::lights::{AreaShape, Light, LightKey, LightKind};
+use crate::lights::{AreaShape, Environment, Light, LightKey, LightKind, World, WorldKey};
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -17,6 +17,48 @@ struct SceneFile {
     objects: Vec<ObjectFile>,
     #[serde(default)]
     lights: Vec<LightFile>,
+    world: Option<WorldFile>,
+}
+
+/// Blender's World (README of the add-on, "The World"; [`crate::lights::world`]).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WorldFile {
+    color: Option<[f64; 3]>,
+    strength: Option<f64>,
+    image: Option<ImageFile>,
+    #[serde(default)]
+    animation: Vec<WorldKeyFile>,
+}
+
+/// An equirectangular image: `width x height` RGB triples, bottom row first.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ImageFile {
+    width: usize,
+    height: usize,
+    pixels: Vec<[f32; 3]>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WorldKeyFile {
+    frame: f64,
+    color: Option<[f64; 3]>,
+    strength: Option<f64>,
+}
+
+fn parse_world(f: WorldFile) -> World {
+    let mut world = World::uniform(f.color.unwrap_or([1.0; 3]), f.strength.unwrap_or(1.0));
+    world.image = f
+        .image
+        .map(|i| std::sync::Arc::new(Environment { width: i.width, height: i.height, pixels: i.pixels }));
+    world.animation = f
+        .animation
+        .into_iter()
+        .map(|k| WorldKey { frame: k.frame, color: k.color, strength: k.strength })
+        .collect();
+    world
 }
 
 /// A Blender Light object (README of the add-on, "Lights"; [`crate::lights`]).
@@ -175,6 +217,9 @@ struct ObjectFile {
     matrix: Option<[f64; 16]>,
     #[serde(default)]
     animation: Vec<KeyFile>,
+    /// Its emitting faces emit from both sides ([`Scene::two_sided`]).
+    #[serde(default)]
+    two_sided: bool,
 }
 
 #[derive(Deserialize)]
@@ -238,7 +283,11 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
     }
     let n_materials = materials.len();
     let mut objects = Vec::new();
+    let mut two_sided = Vec::new();
     for (o, obj) in file.objects.into_iter().enumerate() {
+        if obj.two_sided {
+            two_sided.push(o);
+        }
         let name = obj.name.unwrap_or_else(|| format!("object {o}"));
         let place = format!("object \"{name}\"");
         let vertices: Vec<DVec3> = obj.vertices.iter().map(|v| DVec3::from_array(*v)).collect();
@@ -297,7 +346,10 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
     };
     let lights =
         file.lights.into_iter().enumerate().map(|(l, f)| parse_light(l, f)).collect::<Result<_>>()?;
-    Scene::new(settings, frames, materials, emission_keys, objects)?.with_lights(lights)
+    Scene::new(settings, frames, materials, emission_keys, objects)?
+        .with_lights(lights)?
+        .with_world(file.world.map(parse_world))?
+        .with_two_sided(&two_sided)
 }
 
 /// Reads and parses a scene file.
@@ -346,7 +398,8 @@ pub fn scene_to_json(scene: &Scene) -> String {
     let objects: Vec<_> = scene
         .objects
         .iter()
-        .map(|o| {
+        .enumerate()
+        .map(|(i, o)| {
             let animation: Vec<_> = o
                 .animation
                 .iter()
@@ -364,6 +417,7 @@ pub fn scene_to_json(scene: &Scene) -> String {
                 "face_materials": o.face_materials,
                 "matrix": row_major(&o.matrix),
                 "animation": animation,
+                "two_sided": scene.two_sided.get(i).copied().unwrap_or(false),
             })
         })
         .collect();
@@ -404,7 +458,7 @@ pub fn scene_to_json(scene: &Scene) -> String {
             light
         })
         .collect();
-    let file = json!({
+    let mut file = json!({
         "version": 1,
         "settings": {
             "basis_order": s.basis_order, "quadrature_order": s.quadrature_order, "tolerance": s.tolerance,
@@ -416,5 +470,26 @@ pub fn scene_to_json(scene: &Scene) -> String {
         "objects": objects,
         "lights": lights,
     });
+    if let Some(w) = &scene.world {
+        let animation: Vec<_> = w
+            .animation
+            .iter()
+            .map(|k| {
+                let mut key = json!({"frame": k.frame});
+                if let Some(c) = k.color {
+                    key["color"] = json!(c);
+                }
+                if let Some(s) = k.strength {
+                    key["strength"] = json!(s);
+                }
+                key
+            })
+            .collect();
+        let mut world = json!({"color": w.color, "strength": w.strength, "animation": animation});
+        if let Some(i) = &w.image {
+            world["image"] = json!({"width": i.width, "height": i.height, "pixels": i.pixels});
+        }
+        file["world"] = world;
+    }
     serde_json::to_string_pretty(&file).expect("a scene serializes")
 }

@@ -15,7 +15,7 @@ pub use validate::{
 
 use glam::{DMat4, DVec3};
 
-use crate::lights::Light;
+use crate::lights::{Light, World};
 
 /// Solver settings. Defaults are documented in the README.
 #[derive(Clone, Debug, PartialEq)]
@@ -128,6 +128,12 @@ pub struct Scene {
     pub degenerate_faces: Vec<(usize, usize)>,
     /// Blender Light objects ([`crate::lights`]); set with [`Scene::with_lights`].
     pub lights: Vec<Light>,
+    /// Blender's World as light from infinitely far ([`crate::lights::world`]); set with
+    /// [`Scene::with_world`].
+    pub world: Option<World>,
+    /// Objects whose emitting faces emit from both sides, by object index (missing: one-sided;
+    /// [`crate::lights`]'s `backs`); set with [`Scene::with_two_sided`].
+    pub two_sided: Vec<bool>,
 }
 
 impl Scene {
@@ -148,6 +154,8 @@ impl Scene {
             objects,
             degenerate_faces: Vec::new(),
             lights: Vec::new(),
+            world: None,
+            two_sided: Vec::new(),
         };
         validate::validate(&mut scene)?;
         Ok(scene)
@@ -160,6 +168,28 @@ impl Scene {
         }
         crate::lights::validate(&lights)?;
         self.lights = lights;
+        Ok(self)
+    }
+
+    /// The scene lit by `world` too (validated; its keys sorted by frame).
+    pub fn with_world(mut self, mut world: Option<World>) -> crate::Result<Self> {
+        if let Some(w) = &mut world {
+            w.animation.sort_by(|a, b| a.frame.total_cmp(&b.frame));
+            w.validate()?;
+        }
+        self.world = world;
+        Ok(self)
+    }
+
+    /// The scene with the emitting faces of `objects` (indices) emitting from both sides.
+    pub fn with_two_sided(mut self, objects: &[usize]) -> crate::Result<Self> {
+        let mut two_sided = vec![false; self.objects.len()];
+        for &o in objects {
+            *two_sided.get_mut(o).ok_or_else(|| {
+                crate::error::invalid_scene!("two-sided object {o} out of range (0..{})", self.objects.len())
+            })? = true;
+        }
+        self.two_sided = two_sided;
         Ok(self)
     }
 
