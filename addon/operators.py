@@ -145,6 +145,7 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
             self._timer = None
         wm.progress_end()
         context.workspace.status_text_set(None)
+        self._job.failed = failed  # a failed bake, like a cancelled one, keeps the previous bake
         self._job.finish()
         # FINISHED whenever frames were written, so that the undo step covers them.
         result = {"FINISHED"} if self._job.done else {"CANCELLED"}

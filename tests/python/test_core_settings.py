@@ -46,6 +46,10 @@ def test_baked_frames_and_interpolation():
     assert frames.attribute_name(7) == "Rad_0007"
     assert frames.frame_of_attribute("Rad_0123") == 123
     assert frames.frame_of_attribute("Radiosity") is None
+    # Staging names are never read as frames (the switch and re-bakes ignore them).
+    assert frames.staging_name(7) == "RadNew_0007"
+    assert frames.frame_of_attribute("RadNew_0007") is None
+    assert frames.frame_of_attribute("RadNew_0007", frames.STAGING_PREFIX) == 7
 
 
 def test_material_maths():
