@@ -77,6 +77,13 @@ enum GrStatus
    * A bug: a panic (or other internal failure) caught at the boundary; the message says what.
    */
   GR_STATUS_INTERNAL = 6,
+  /**
+   * A big allocation failed (the link rows or the link store) although the scene's estimate
+   * was within the memory budget: the machine had less than it reported, or something else
+   * took it meanwhile. The message ("out of memory while building ...") says how much was
+   * asked for; the session keeps its last completed frame, as after `GR_STATUS_CANCELLED`.
+   */
+  GR_STATUS_OUT_OF_MEMORY = 7,
 };
 #ifndef __cplusplus
 #if __STDC_VERSION__ >= 202311L

@@ -41,8 +41,8 @@ fn cdylib_name() -> &'static str {
     }
 }
 
-#[test]
-fn c_program_solves_two_patches() {
+/// Compiles `tests/c/NAME.c` against the checked-in header and the cdylib; returns the program.
+fn compile_c(name: &str) -> PathBuf {
     let dirs = cdylib_dirs();
     let Some(dir) = dirs.iter().find(|d| d.join(cdylib_name()).is_file()).cloned() else {
         panic!(
@@ -55,13 +55,13 @@ fn c_program_solves_two_patches() {
     };
     println!("linking {}", dir.join(cdylib_name()).display());
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let exe = Path::new(env!("CARGO_TARGET_TMPDIR")).join("two_patches");
+    let exe = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
     let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
     let out = Command::new(&cc)
         .args(["-Wall", "-Wextra", "-Werror", "-std=c11"])
         .arg("-I")
         .arg(root.join("include"))
-        .arg(root.join("tests/c/two_patches.c"))
+        .arg(root.join(format!("tests/c/{name}.c")))
         .arg("-o")
         .arg(&exe)
         .arg(format!("-L{}", dir.display()))
@@ -72,14 +72,34 @@ fn c_program_solves_two_patches() {
         .unwrap_or_else(|e| panic!("cannot run the C compiler `{cc}`: {e}"));
     assert!(
         out.status.success(),
-        "compiling tests/c/two_patches.c failed:\n{}",
+        "compiling tests/c/{name}.c failed:\n{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    exe
+}
+
+#[test]
+fn c_program_solves_two_patches() {
+    let exe = compile_c("two_patches");
     let run = Command::new(&exe).output().expect("run two_patches");
     let stdout = String::from_utf8_lossy(&run.stdout);
     let stderr = String::from_utf8_lossy(&run.stderr);
     println!("{stdout}{stderr}");
     assert!(run.status.success(), "two_patches failed: {stdout}{stderr}");
+    assert!(stdout.contains("all checks passed"));
+}
+
+/// Issue 23: an allocation the machine refuses past the estimate is `GR_STATUS_OUT_OF_MEMORY`,
+/// not an abort of the host (tests/c/out_of_memory.c limits its own address space).
+#[cfg(target_os = "linux")]
+#[test]
+fn c_program_gets_out_of_memory_as_a_status() {
+    let exe = compile_c("out_of_memory");
+    let run = Command::new(&exe).output().expect("run out_of_memory");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    println!("{stdout}{stderr}");
+    assert!(run.status.success(), "out_of_memory failed ({:?}): {stdout}{stderr}", run.status);
     assert!(stdout.contains("all checks passed"));
 }
 

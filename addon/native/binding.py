@@ -46,6 +46,7 @@ INVALID_SCENE = 3
 CANCELLED = 4
 NOT_SOLVED = 5
 INTERNAL = 6
+OUT_OF_MEMORY = 7
 #: Not a GrStatus: the library could not be found or loaded.
 NOT_LOADED = -1
 
