@@ -122,7 +122,9 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
             job.cancelled = True
             return self._end(context)
         if outcome is not None:
-            self._error = str(outcome)
+            from .core.settings import in_panel_words
+
+            self._error = in_panel_words(str(outcome))
             return self._end(context, failed=True)
         try:
             job.commit()  # the frame completed: keep it, even if Esc came meanwhile

@@ -31,7 +31,7 @@ from ..core.grids import Grid, subdivide
 from ..core.marshal import with_object_names
 from ..core.materials import radiance_from_radiosity
 from ..core.record import BakeRecord, FrameState, first_changed
-from ..core.settings import BakeSettings, SettingsError
+from ..core.settings import BakeSettings, SettingsError, in_panel_words
 from . import attributes, switch
 from .export import TopologyChanged, collect, export, sample
 
@@ -97,7 +97,7 @@ def drop_held(scene=None) -> None:
 
 def session_key(settings: BakeSettings, exp) -> str:
     """Sessions are reused while this stays the same: solve settings, objects, topology, reflectances."""
-    return exp.scene_key(settings.solve_signature())
+    return exp.scene_key(settings.session_signature())
 
 
 def new_session(settings: BakeSettings, exp, state: FrameState, scene_key: str) -> Held:
@@ -108,7 +108,7 @@ def new_session(settings: BakeSettings, exp, state: FrameState, scene_key: str) 
         if exp.lights:
             session.set_lights(exp.lights)
     except b.RadiosityError as e:
-        raise BakeError(str(e)) from e
+        raise BakeError(in_panel_words(str(e))) from e
     return Held(session, scene_key, state, None, exp)
 
 
@@ -607,7 +607,7 @@ class BakeJob:
         except b.RadiosityError as e:
             self.failed = True
             self.finish()
-            raise BakeError(str(e)) from e
+            raise BakeError(in_panel_words(str(e))) from e
         except BaseException:
             self.failed = True
             self.finish()
@@ -634,6 +634,7 @@ def settings_from_scene(scene) -> BakeSettings:
         frame_step=p.frame_step,
         display_subdivision=p.display_subdivision,
         preview_material=p.preview_material,
+        memory_limit_mb=p.memory_limit_mb,
     )
 
 

@@ -195,6 +195,32 @@ def test_successful_rebake_of_a_shorter_range_removes_the_frames_past_it(blender
     assert bake.read_record(bpy.context.scene).complete == (1, 2)
 
 
+def test_a_memory_limit_below_the_estimate_is_refused_in_one_line_and_changes_nothing(blender):
+    """Memory Limit (MB) = 1 on a 217-face room that a bake estimates at several MB: the operator
+    reports one line in the panel's words, and the previous bake is untouched; 0 (automatic)
+    bakes it again."""
+    bpy = blender
+    objs = scenes.cornell_box(bpy, n=6, light_frames=(1, 2), box=False)
+    assert scenes.bake(bpy, basis_order=0) == {"FINISHED"}
+    before = _snapshot(bpy, objs)
+    sc = bpy.context.scene
+    sc.radiosity.memory_limit_mb = 1
+    with pytest.raises(RuntimeError) as info:
+        bpy.ops.radiosity.bake()
+    line = str(info.value).strip()
+    print(line)
+    assert "\n" not in line
+    assert "over the memory budget: this bake needs up to" in line
+    assert "but the budget is 1 MB (Memory Limit (MB))" in line
+    assert "a lower Detail" in line and "raise Memory Limit (MB)" in line
+    assert "memory_budget_mb" not in line and "basis_order" not in line
+    _assert_same(before, _snapshot(bpy, objs))
+    sc.radiosity.memory_limit_mb = 0
+    sc.radiosity.basis_order = 1
+    assert bpy.ops.radiosity.bake() == {"FINISHED"}
+    assert scenes.rad_frames(objs["Floor"].data) == [1, 2]
+
+
 def test_cancel_before_any_frame_leaves_the_file_as_it_was(blender):
     bpy = blender
     from addon.blender import bake
