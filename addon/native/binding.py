@@ -35,10 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-ABI_VERSION = 1
+ABI_VERSION = 2
 ENV = "GALERKIN_RADIOSITY_LIB"
 
-# GrStatus
+# GrStatus (tests/python/test_binding.py checks these against include/galerkin_radiosity.h)
 OK = 0
 NULL_POINTER = 1
 INVALID_ARGUMENT = 2
@@ -72,15 +72,19 @@ class Cancelled(RadiosityError):
 
 
 class _Settings(Structure):
+    """``GrSettings``; ``gr_settings_default`` sets ``struct_size`` (tests/python/test_binding.py
+    checks the fields against the header)."""
+
     _fields_ = [
+        ("struct_size", c_uint32),
         ("basis_order", c_uint32),
         ("quadrature_order", c_uint32),
-        ("tolerance", c_double),
         ("visibility", c_uint32),
         ("visibility_samples", c_uint32),
         ("threads", c_uint32),
         ("method", c_uint32),
         ("corner_gather", c_uint32),
+        ("tolerance", c_double),
         ("memory_budget_mb", c_uint64),
     ]
 
