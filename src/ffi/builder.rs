@@ -203,48 +203,58 @@ pub unsafe extern "C" fn gr_scene_builder_add_mesh(
         if mesh.is_null() {
             return Err(Failure::null("mesh"));
         }
-        // SAFETY: non-null and readable: its first field is there in every version.
-        let size = unsafe { mesh.cast::<u32>().read_unaligned() };
-        super::sized::check("mesh", size, MESH_V2_SIZE, size_of::<GrMesh>(), "gr_mesh_default")?;
-        // SAFETY: at least the version-2 size is readable (checked), and that is all of it.
-        let m = unsafe { mesh.read_unaligned() };
-        let (nv, nf) = (m.vertex_count as usize, m.face_count as usize);
-        let vertices = unsafe { array(m.vertices, 3 * nv, "mesh.vertices") }?;
-        let counts = unsafe { array(m.face_vertex_counts, nf, "mesh.face_vertex_counts") }?;
-        let materials = unsafe { array(m.face_materials, nf, "mesh.face_materials") }?;
-        let total: u64 = counts.iter().map(|&c| u64::from(c)).sum();
-        if total != m.face_indices_len as u64 {
-            return Err(Failure::invalid(format!(
-                "mesh.face_indices_len is {} but mesh.face_vertex_counts sum to {total}",
-                m.face_indices_len
-            )));
-        }
-        let indices = unsafe { array(m.face_indices, m.face_indices_len, "mesh.face_indices") }?;
-        let matrix = if m.matrix.is_null() {
-            glam::DMat4::IDENTITY
-        } else {
-            matrix_from_row_major(unsafe { array(m.matrix, 16, "mesh.matrix") }?)
-        };
-        let mut faces = Vec::with_capacity(nf);
-        let mut start = 0usize;
-        for &k in counts {
-            faces.push(indices[start..start + k as usize].to_vec());
-            start += k as usize;
-        }
         let index = b.objects.len();
+        let object =
+            unsafe { read_mesh(mesh, index) }.map_err(|f| f.prefixed(&format!("object {index}: ")))?;
         unsafe { write_index(out_index, index) }?;
-        b.objects.push(Object {
-            name: format!("object {index}"),
-            vertices: vertices
-                .chunks_exact(3)
-                .map(|p| glam::DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2])))
-                .collect(),
-            faces,
-            face_materials: materials.to_vec(),
-            matrix,
-            animation: Vec::new(),
-        });
+        b.objects.push(object);
         Ok(())
+    })
+}
+
+/// The object `index` described by `mesh`.
+///
+/// # Safety
+/// As `gr_scene_builder_add_mesh`'s `mesh`, non-NULL.
+unsafe fn read_mesh(mesh: *const GrMesh, index: usize) -> Result<Object, Failure> {
+    // SAFETY: non-null and readable: its first field is there in every version.
+    let size = unsafe { mesh.cast::<u32>().read_unaligned() };
+    super::sized::check("mesh", size, MESH_V2_SIZE, size_of::<GrMesh>(), "gr_mesh_default")?;
+    // SAFETY: at least the version-2 size is readable (checked), and that is all of it.
+    let m = unsafe { mesh.read_unaligned() };
+    let (nv, nf) = (m.vertex_count as usize, m.face_count as usize);
+    let vertices = unsafe { array(m.vertices, 3 * nv, "mesh.vertices") }?;
+    let counts = unsafe { array(m.face_vertex_counts, nf, "mesh.face_vertex_counts") }?;
+    let materials = unsafe { array(m.face_materials, nf, "mesh.face_materials") }?;
+    let total: u64 = counts.iter().map(|&c| u64::from(c)).sum();
+    if total != m.face_indices_len as u64 {
+        return Err(Failure::invalid(format!(
+            "mesh.face_indices_len is {} but mesh.face_vertex_counts sum to {total}",
+            m.face_indices_len
+        )));
+    }
+    let indices = unsafe { array(m.face_indices, m.face_indices_len, "mesh.face_indices") }?;
+    let matrix = if m.matrix.is_null() {
+        glam::DMat4::IDENTITY
+    } else {
+        matrix_from_row_major(unsafe { array(m.matrix, 16, "mesh.matrix") }?)
+    };
+    let mut faces = Vec::with_capacity(nf);
+    let mut start = 0usize;
+    for &k in counts {
+        faces.push(indices[start..start + k as usize].to_vec());
+        start += k as usize;
+    }
+    Ok(Object {
+        name: format!("object {index}"),
+        vertices: vertices
+            .chunks_exact(3)
+            .map(|p| glam::DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2])))
+            .collect(),
+        faces,
+        face_materials: materials.to_vec(),
+        matrix,
+        animation: Vec::new(),
     })
 }
 

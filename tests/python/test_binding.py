@@ -131,6 +131,9 @@ def test_the_binding_agrees_with_the_header():
         # GrMethod is a uint32_t enum in C.
         want = [("uint32_t" if ty == "GrMethod" else ty, n, a) for ty, n, a in fields(struct)]
         assert got == want, f"{declared.__name__} differs from the header's {struct}"
+    # GrMesh holds pointers: its field names in order.
+    body = re.search(r"typedef struct GrMesh \{(.*?)\} GrMesh;", header, re.S)[1]
+    assert [n for n, _ in binding._Mesh._fields_] == re.findall(r"(\w+);", body)
 
 
 def test_two_patches_value_and_shapes(b):
