@@ -122,7 +122,9 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
             job.cancelled = True
             return self._end(context)
         if outcome is not None:
-            self._error = str(outcome)
+            from .core.settings import in_panel_words
+
+            self._error = in_panel_words(str(outcome))
             return self._end(context, failed=True)
         try:
             job.commit()  # the frame completed: keep it, even if Esc came meanwhile
@@ -145,6 +147,7 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
             self._timer = None
         wm.progress_end()
         context.workspace.status_text_set(None)
+        self._job.failed = failed  # a failed bake, like a cancelled one, keeps the previous bake
         self._job.finish()
         # FINISHED whenever frames were written, so that the undo step covers them.
         result = {"FINISHED"} if self._job.done else {"CANCELLED"}

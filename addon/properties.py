@@ -69,6 +69,12 @@ class RadiositySceneSettings(bpy.types.PropertyGroup):
                     "vertices take each face's smooth light. Technical: corner gather")
     threads: IntProperty(name="Threads", default=0, min=0, max=1024,
                          description="CPU threads for the bake (0: all cores)")
+    memory_limit_mb: IntProperty(
+        name="Memory Limit (MB)", default=0, min=0, soft_max=1 << 20, subtype="UNSIGNED",
+        description="The most memory a bake may plan to use. A bake that would need more is "
+                    "refused at once, before anything is changed, with the amount it needs and "
+                    "what to lower (Detail, faces, Sharp Corners). 0: automatic, 80% of the memory "
+                    "free when the bake starts")
     method: EnumProperty(name="Method", items=METHOD_ITEMS, default="INCREMENTAL",
                          description="How each frame is solved")
     use_scene_range: BoolProperty(name="Scene Frame Range", default=True,

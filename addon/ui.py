@@ -32,6 +32,7 @@ class RENDER_PT_radiosity(bpy.types.Panel):
         col = layout.column()
         col.prop(p, "method")
         col.prop(p, "threads")
+        col.prop(p, "memory_limit_mb")
         col.prop(p, "collection")
         layout.prop(p, "live_preview")
         row = layout.row()

@@ -15,6 +15,17 @@
  * - The progress callback may be called from the solver's worker threads (one call at a time).
  * - Units: radiosity and emission in W/m^2 per RGB channel; faces are one-sided, front
  *   counter-clockwise; matrices are row-major world-from-object.
+ * - Making a session: gr_scene_builder_new, then gr_scene_builder_set_settings,
+ *   gr_scene_builder_add_material, gr_scene_builder_add_mesh (a GrMesh per object) and
+ *   gr_scene_builder_add_light in any order, then gr_scene_builder_build (and
+ *   gr_scene_builder_free). gr_session_new (positional arrays) is deprecated but kept working.
+ * - Growth without breaking (ABI version 2 on): GrSettings, GrMesh and GrLight begin with
+ *   struct_size; fill them with gr_settings_default, gr_mesh_default, gr_light_default. New
+ *   fields only ever go at a struct's end and are read only when the caller's struct_size
+ *   covers them; a struct_size above the library's is refused (the host's header is newer).
+ *   New functions and new GrStatus codes may appear without a version change: treat an
+ *   unknown status as a failure and read gr_last_error. gr_abi_version() changes only when
+ *   something breaks.
  */
 
 #ifndef GALERKIN_RADIOSITY_H
@@ -28,9 +39,13 @@
 
 /**
  * The version of this C ABI. It changes only when a declaration in this header changes
- * incompatibly; check it after loading the library.
+ * incompatibly; check it after loading the library. Version 2: `GrSettings` begins with
+ * `struct_size` (its layout changed), the scene builder and `GrMesh`, `GR_STATUS_OUT_OF_MEMORY`.
+ * From version 2 on the ABI grows without breaking: new functions, new fields at the end of the
+ * sized structs (read only when the caller's `struct_size` covers them) and new status codes
+ * (treat an unknown one as an error) leave the version as it is.
  */
-#define GR_ABI_VERSION 1
+#define GR_ABI_VERSION 2
 
 /**
  * What a call did. Every fallible function returns one; the codes are stable and never reused.
@@ -77,6 +92,13 @@ enum GrStatus
    * A bug: a panic (or other internal failure) caught at the boundary; the message says what.
    */
   GR_STATUS_INTERNAL = 6,
+  /**
+   * A big allocation failed (the link rows or the link store) although the scene's estimate
+   * was within the memory budget: the machine had less than it reported, or something else
+   * took it meanwhile. The message ("out of memory while building ...") says how much was
+   * asked for; the session keeps its last completed frame, as after `GR_STATUS_CANCELLED`.
+   */
+  GR_STATUS_OUT_OF_MEMORY = 7,
 };
 #ifndef __cplusplus
 #if __STDC_VERSION__ >= 202311L
@@ -117,10 +139,110 @@ typedef uint32_t GrMethod;
 #endif // __cplusplus
 
 /**
+ * A scene being built. Create with `gr_scene_builder_new`, release with
+ * `gr_scene_builder_free` (building does not consume it). Not for use from two threads at once.
+ */
+typedef struct GrSceneBuilder GrSceneBuilder;
+
+/**
  * An opaque baking session: a validated scene, its thread pool, and the solution of the last
  * completed frame. Create with `gr_session_new`, release with `gr_session_free`.
  */
 typedef struct GrSession GrSession;
+
+/**
+ * Solver settings. Fill with `gr_settings_default`, then change what you need.
+ *
+ * The struct grows at its end only: a library that adds fields reads those past
+ * `struct_size` as their defaults, so a host built against an older header keeps working
+ * (ABI version 2 on). A `struct_size` larger than the library's `GrSettings` (a host built
+ * against a newer header) or smaller than version 2's is `GR_STATUS_INVALID_ARGUMENT`.
+ */
+typedef struct GrSettings {
+  /**
+   * `sizeof(GrSettings)` of the header the host was built with; set by `gr_settings_default`.
+   */
+  uint32_t struct_size;
+  /**
+   * Legendre degree per axis, 0..=3 (0: classic constant radiosity). Default 2.
+   */
+  uint32_t basis_order;
+  /**
+   * Gauss-Legendre points per axis for a well-separated pair of patches, 1..=16, more than
+   * `basis_order` (fewer cannot integrate the basis products). Default 4.
+   */
+  uint32_t quadrature_order;
+  /**
+   * 1: ray-cast visibility; 0: everything sees everything. Other values are invalid.
+   * Default 1.
+   */
+  uint32_t visibility;
+  /**
+   * Visibility samples per axis of each patch, 1..=4 (rays per link = this^4). Default 2.
+   */
+  uint32_t visibility_samples;
+  /**
+   * Worker threads, at most 1024; 0 means one per core. Default 0.
+   */
+  uint32_t threads;
+  /**
+   * How frames after the first are computed. Default `GR_METHOD_INCREMENTAL`.
+   */
+  GrMethod method;
+  /**
+   * 1: face corners report radiosity gathered at the corner with its own shadow rays (sharp
+   * contact shadows, corners hidden under objects go dark; costs about one kernel build per
+   * frame); 0: the face polynomial at the corner. Other values are invalid. Default 1.
+   */
+  uint32_t corner_gather;
+  /**
+   * Progressive refinement stops when the unshot coefficients would deliver less than this
+   * fraction of the emitted power in one bounce, in (0,1). Default 1e-4.
+   */
+  double tolerance;
+  /**
+   * The memory a session may plan to use, in MiB: a scene whose estimate is over it is
+   * refused by `gr_session_new` and `gr_scene_builder_build` with `GR_STATUS_INVALID_SCENE`
+   * ("over the memory budget"),
+   * at once. 0: 80% of the memory available (`MemAvailable`) when the session is made.
+   * Default 0.
+   */
+  uint64_t memory_budget_mb;
+} GrSettings;
+
+/**
+ * One mesh object for `gr_scene_builder_add_mesh`. Fill with `gr_mesh_default`, then set the
+ * arrays; they are read during the call only. Like `GrSettings` it grows at its end only, and
+ * fields past the caller's `struct_size` take their defaults.
+ */
+typedef struct GrMesh {
+  /**
+   * `sizeof(GrMesh)` of the header the host was built with; set by `gr_mesh_default`.
+   */
+  uint32_t struct_size;
+  /**
+   * Vertices; `vertices` holds 3 floats per vertex (object space).
+   */
+  uint32_t vertex_count;
+  const float *vertices;
+  /**
+   * Faces; `face_vertex_counts` (3 or 4 each) and `face_materials` (an index returned by
+   * `gr_scene_builder_add_material`) hold one entry per face.
+   */
+  uint32_t face_count;
+  const uint32_t *face_vertex_counts;
+  const uint32_t *face_materials;
+  /**
+   * The vertex indices of every face in order, counter-clockwise seen from the lit (front)
+   * side; `face_indices_len` is the sum of `face_vertex_counts`.
+   */
+  const uint32_t *face_indices;
+  size_t face_indices_len;
+  /**
+   * 16 floats, row-major world-from-object, or NULL for identity.
+   */
+  const float *matrix;
+} GrMesh;
 
 /**
  * One light as it is at the coming frame. Fill with `gr_light_default` first: `struct_size`
@@ -172,56 +294,6 @@ typedef struct GrLight {
 } GrLight;
 
 /**
- * Solver settings. Fill with `gr_settings_default`, then change what you need.
- */
-typedef struct GrSettings {
-  /**
-   * Legendre degree per axis, 0..=3 (0: classic constant radiosity). Default 2.
-   */
-  uint32_t basis_order;
-  /**
-   * Gauss-Legendre points per axis for a well-separated pair of patches, 1..=16, more than
-   * `basis_order` (fewer cannot integrate the basis products). Default 4.
-   */
-  uint32_t quadrature_order;
-  /**
-   * Progressive refinement stops when the unshot coefficients would deliver less than this
-   * fraction of the emitted power in one bounce, in (0,1). Default 1e-4.
-   */
-  double tolerance;
-  /**
-   * 1: ray-cast visibility; 0: everything sees everything. Other values are invalid.
-   * Default 1.
-   */
-  uint32_t visibility;
-  /**
-   * Visibility samples per axis of each patch, 1..=4 (rays per link = this^4). Default 2.
-   */
-  uint32_t visibility_samples;
-  /**
-   * Worker threads, at most 1024; 0 means one per core. Default 0.
-   */
-  uint32_t threads;
-  /**
-   * How frames after the first are computed. Default `GR_METHOD_INCREMENTAL`.
-   */
-  GrMethod method;
-  /**
-   * 1: face corners report radiosity gathered at the corner with its own shadow rays (sharp
-   * contact shadows, corners hidden under objects go dark; costs about one kernel build per
-   * frame); 0: the face polynomial at the corner. Other values are invalid. Default 1.
-   */
-  uint32_t corner_gather;
-  /**
-   * The memory a session may plan to use, in MiB: a scene whose estimate is over it is
-   * refused by `gr_session_new` with `GR_STATUS_INVALID_SCENE` ("over the memory budget"),
-   * at once. 0: 80% of the memory available (`MemAvailable`) when the session is made.
-   * Default 0.
-   */
-  uint64_t memory_budget_mb;
-} GrSettings;
-
-/**
  * Progress callback: `fraction` done in [0,1], a short NUL-terminated `stage` name (valid only
  * during the call), and the `user` pointer given to `gr_session_solve_frame`. Return 0 to
  * cancel, non-zero to go on.
@@ -237,7 +309,7 @@ extern "C" {
 #endif // __cplusplus
 
 /**
- * Returns the ABI version, `GR_ABI_VERSION` (1).
+ * Returns the ABI version, `GR_ABI_VERSION` (2).
  */
 uint32_t gr_abi_version(void);
 
@@ -246,6 +318,92 @@ uint32_t gr_abi_version(void);
  * do not free it.
  */
 const char *gr_version_string(void);
+
+/**
+ * Creates an empty scene builder with the library's default settings (`gr_settings_default`)
+ * and writes it to `*out`.
+ *
+ * # Safety
+ * `out` is NULL or points to a writable `GrSceneBuilder *`.
+ */
+GrStatus gr_scene_builder_new(struct GrSceneBuilder **out);
+
+/**
+ * Sets the settings of the sessions this builder makes (copied; `GR_STATUS_INVALID_ARGUMENT`
+ * for an unknown enum value or a `struct_size` this library cannot read). Their ranges are
+ * checked by the build.
+ *
+ * # Safety
+ * `b` is NULL or a live builder; `settings` is NULL or points to a readable `GrSettings` of
+ * at least `settings->struct_size` bytes.
+ */
+GrStatus gr_scene_builder_set_settings(struct GrSceneBuilder *b, const struct GrSettings *settings);
+
+/**
+ * Adds a material: `reflectance` and `emission` 3 floats each (RGB; reflectance in [0,1),
+ * emission radiant exitance in W/m^2). Its index (0, 1, ... in the order added) goes to
+ * `*out_index` unless that is NULL. Named "material N" in messages.
+ *
+ * # Safety
+ * `b` is NULL or a live builder; `reflectance` and `emission` are NULL or point to 3 readable
+ * floats; `out_index` is NULL or writable.
+ */
+GrStatus gr_scene_builder_add_material(struct GrSceneBuilder *b,
+                                       const float *reflectance,
+                                       const float *emission,
+                                       uint32_t *out_index);
+
+/**
+ * Writes an empty `GrMesh` (no vertices, no faces, identity matrix) with `struct_size` set.
+ *
+ * # Safety
+ * `out` is NULL or points to a writable `GrMesh`.
+ */
+GrStatus gr_mesh_default(struct GrMesh *out);
+
+/**
+ * Adds a mesh object (copied); its index (0, 1, ... in the order added: the `object` of the
+ * session's functions) goes to `*out_index` unless that is NULL. Named "object N" in messages.
+ * `GR_STATUS_INVALID_ARGUMENT` when `face_indices_len` disagrees with `face_vertex_counts`;
+ * indices and materials out of range are found by the build (`GR_STATUS_INVALID_SCENE`).
+ *
+ * # Safety
+ * `b` is NULL or a live builder; `mesh` is NULL or points to a readable `GrMesh` whose
+ * pointers hold the lengths it gives; `out_index` is NULL or writable.
+ */
+GrStatus gr_scene_builder_add_mesh(struct GrSceneBuilder *b,
+                                   const struct GrMesh *mesh,
+                                   uint32_t *out_index);
+
+/**
+ * Adds a light (copied; fill it with `gr_light_default`). Named "lights[N]" in messages;
+ * `GR_STATUS_INVALID_ARGUMENT` for an unknown kind or shape or a wrong `struct_size`. The
+ * session's `gr_session_set_lights` replaces the list later.
+ *
+ * # Safety
+ * `b` is NULL or a live builder; `light` is NULL or points to a readable `GrLight`.
+ */
+GrStatus gr_scene_builder_add_light(struct GrSceneBuilder *b, const struct GrLight *light);
+
+/**
+ * Validates the scene built so far and creates a session from it, written to `*out`; the
+ * builder is left as it is (free it with `gr_scene_builder_free`, or build again).
+ * `GR_STATUS_INVALID_SCENE` (the message names the object, face, light or field) when the
+ * scene fails validation or its estimated memory is over the budget. `*out` is written only
+ * on success.
+ *
+ * # Safety
+ * `b` is NULL or a live builder; `out` is NULL or points to a writable `GrSession *`.
+ */
+GrStatus gr_scene_builder_build(struct GrSceneBuilder *b, struct GrSession **out);
+
+/**
+ * Releases a builder (NULL is ignored). Sessions it built are independent of it.
+ *
+ * # Safety
+ * `b` is NULL or a live builder, not used afterwards.
+ */
+void gr_scene_builder_free(struct GrSceneBuilder *b);
 
 /**
  * Copies this thread's last error message into `buf`.
@@ -312,6 +470,11 @@ GrStatus gr_session_set_two_sided(struct GrSession *s, uint32_t object, uint32_t
 
 /**
  * Creates a session from a scene given as flat arrays and writes it to `*out`.
+ *
+ * **Deprecated** since ABI version 2: use the scene builder (`gr_scene_builder_new`,
+ * `gr_scene_builder_add_material`, `gr_scene_builder_add_mesh`, `gr_scene_builder_add_light`,
+ * `gr_scene_builder_set_settings`, `gr_scene_builder_build`), which can take new kinds of input
+ * without changing a signature. This function keeps working as documented here.
  *
  * - `settings`: see `GrSettings`.
  * - `material_count` materials: `reflectance` and `emission` hold 3 floats (RGB) per material.

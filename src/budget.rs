@@ -16,6 +16,11 @@
 //!
 //! Series terms of the incremental update (a few KB per expanded pair, only where they pay) are
 //! not counted.
+//!
+//! What still fails past the estimate (the machine had less than it said, or the series) fails
+//! in the big allocations (the link rows and the link store) through [`try_vec`] and
+//! [`try_reserve`]: an [`Error::OutOfMemory`], never an abort. Small allocations elsewhere still
+//! abort when the system has nothing left at all.
 
 use crate::error::{Error, Result};
 use crate::scene::Scene;
@@ -143,6 +148,39 @@ pub fn check_hierarchical(scene: &Scene, frames: u64) -> Result<()> {
     )))
 }
 
+/// The error for `bytes` that could not be had while building `what`; one line, with what to
+/// change.
+pub fn out_of_memory(what: &str, bytes: u64) -> Error {
+    Error::OutOfMemory(format!(
+        "while building {what}: could not allocate {} MB more; use fewer faces or a lower basis \
+         order (a lower memory budget refuses such bakes before they start)",
+        bytes.div_ceil(MIB)
+    ))
+}
+
+/// An empty vector with room for `len` values of `T`, or [`Error::OutOfMemory`] naming `what`.
+pub fn try_vec<T>(len: usize, what: &str) -> Result<Vec<T>> {
+    let mut v = Vec::new();
+    try_reserve(&mut v, len, what)?;
+    Ok(v)
+}
+
+/// `v.try_reserve(additional)` (amortised growth, as `push` does), with the failure as
+/// [`Error::OutOfMemory`] naming `what`.
+pub fn try_reserve<T>(v: &mut Vec<T>, additional: usize, what: &str) -> Result<()> {
+    v.try_reserve(additional).map_err(|_| out_of_memory(what, bytes_for::<T>(v.len(), additional)))
+}
+
+/// `v.try_reserve_exact(additional)`, with the failure as [`Error::OutOfMemory`] naming `what`.
+pub fn try_reserve_exact<T>(v: &mut Vec<T>, additional: usize, what: &str) -> Result<()> {
+    v.try_reserve_exact(additional).map_err(|_| out_of_memory(what, bytes_for::<T>(v.len(), additional)))
+}
+
+/// The bytes of `len + additional` values of `T` (saturating: the request may be past `usize`).
+fn bytes_for<T>(len: usize, additional: usize) -> u64 {
+    (len as u64).saturating_add(additional as u64).saturating_mul(size_of::<T>() as u64)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -173,5 +211,29 @@ mod tests {
         assert!(m.contains("but the budget is 1 MB (settings.memory_budget_mb)"), "{m}");
         scene.settings.memory_budget_mb = 1 << 20;
         check(&scene, 1).unwrap();
+    }
+
+    #[test]
+    fn an_allocation_no_machine_can_give_is_an_error_not_an_abort() {
+        // 2^60 bytes (1 EiB): below isize::MAX, so the allocator itself is asked and refuses.
+        let Err(Error::OutOfMemory(m)) = try_vec::<u64>(1 << 57, "the links") else {
+            panic!("an exabyte was reserved")
+        };
+        let line = Error::OutOfMemory(m).to_string();
+        assert!(
+            line.starts_with(
+                "out of memory while building the links: could not allocate 1099511627776 MB more;"
+            ),
+            "{line}"
+        );
+        assert!(!line.contains('\n'));
+        // Past usize (a capacity overflow, not an allocator failure): the same error.
+        let mut v = vec![0u8; 8];
+        assert!(matches!(try_reserve(&mut v, usize::MAX, "rows"), Err(Error::OutOfMemory(_))));
+        assert!(matches!(try_reserve_exact(&mut v, usize::MAX - 4, "rows"), Err(Error::OutOfMemory(_))));
+        assert_eq!(v, [0; 8], "a failed reservation keeps the vector");
+        // What fits is reserved as asked.
+        let v = try_vec::<f32>(1000, "rows").unwrap();
+        assert!(v.capacity() >= 1000 && v.is_empty());
     }
 }

@@ -15,6 +15,9 @@ pub enum Error {
     /// The bake's estimated memory is over the budget ([`crate::budget`]); the message gives
     /// both and what to change.
     OverBudget(String),
+    /// A big allocation failed although the estimate was within the budget ([`crate::budget::try_vec`]);
+    /// the message says what was being built and how much it asked for.
+    OutOfMemory(String),
     /// A bug: a panic caught at the boundary, with its message.
     Internal(String),
 }
@@ -27,6 +30,7 @@ impl fmt::Display for Error {
             Error::InvalidArgument(m) => write!(f, "invalid argument: {m}"),
             Error::Cancelled => write!(f, "cancelled"),
             Error::OverBudget(m) => write!(f, "over the memory budget: {m}"),
+            Error::OutOfMemory(m) => write!(f, "out of memory {m}"),
             Error::Internal(m) => write!(f, "internal error: {m}"),
         }
     }

@@ -17,6 +17,8 @@
 //! `b_j^l` delivers in one bounce, which the solver ranks shots by. Every write of coefficients
 //! updates it for the columns it touches.
 
+use crate::budget;
+use crate::error::Result;
 use crate::visibility::Visibility;
 
 pub type ElementId = u32;
@@ -25,6 +27,9 @@ pub type PairId = u32;
 /// [`LinkStore::extend_rows`] leaves each shooter's columns room for `1 / GROWTH_ROOM` more
 /// receivers, plus 4.
 const GROWTH_ROOM: usize = 16;
+
+/// What the store is called in an out-of-memory message.
+const STORE: &str = "the link store";
 
 /// How many block writes ahead [`LinkStore::replace_blocks`] prefetches.
 const PREFETCH_WRITES: usize = 2;
@@ -221,15 +226,38 @@ impl LinkStore {
 
     /// Adds rows of pairs `(a, b_k)` with their f32 blocks `[G_ab | G_ba]` one pair after the other
     /// (`2 nb^2` each), in row order then `b` order: as [`LinkStore::push`] one by one, with the
-    /// coefficients copied in parallel (one shooter per task).
-    pub fn extend_rows(&mut self, mut rows: Vec<LinkRow>) {
+    /// coefficients copied in parallel (one shooter per task). The big arrays are reserved
+    /// first ([`crate::budget::try_reserve`]): when the allocator refuses, the error is returned
+    /// and the store is as it was, except for spare capacity.
+    pub fn extend_rows(&mut self, mut rows: Vec<LinkRow>) -> Result<()> {
         use rayon::prelude::*;
         let nb = self.nb;
         let n2 = nb * nb;
         let first = self.pairs.len();
+        let added: usize = rows.iter().map(|r| r.sources.len()).sum();
         // Where each new pair's blocks are: (row, index in row).
-        let mut origin: Vec<(u32, u32)> = Vec::with_capacity(rows.iter().map(|r| r.sources.len()).sum());
+        let mut origin: Vec<(u32, u32)> = budget::try_vec(added, STORE)?;
+        budget::try_reserve(&mut self.pairs, added, STORE)?;
+        budget::try_reserve(&mut self.slots, added, STORE)?;
+        // The columns: each shooter's new receivers (and room), counted from the rows.
+        let mut new_of = vec![0usize; self.receivers.len()];
+        for row in &rows {
+            new_of[row.a as usize] += row.sources.len();
+            for &b in &row.sources {
+                new_of[b as usize] += 1;
+            }
+        }
         let old_len: Vec<usize> = self.receivers.iter().map(Vec::len).collect();
+        self.columns.par_chunks_mut(nb).enumerate().try_for_each(|(e, cols)| {
+            if new_of[e] == 0 {
+                return Ok(());
+            }
+            // Room for the pairs an animation adds later (`push`): growing every column of a
+            // shooter on its first new pair (a copy and fresh pages each) cost one frame of the
+            // moving-light box 42-54 ms for its 1,132 new pairs.
+            let room = (old_len[e] + new_of[e]) / GROWTH_ROOM + 4;
+            cols.iter_mut().try_for_each(|col| budget::try_reserve_exact(col, (new_of[e] + room) * nb, STORE))
+        })?;
         for (ri, row) in rows.iter_mut().enumerate() {
             debug_assert_eq!(row.coeffs.len(), row.sources.len() * 2 * n2);
             for (k, (&b, v)) in row.sources.iter().zip(row.visibility.drain(..)).enumerate() {
@@ -243,16 +271,6 @@ impl LinkStore {
         let (adjacency, pairs) = (&self.adjacency, &self.pairs);
         self.columns.par_chunks_mut(nb).enumerate().for_each(|(e, cols)| {
             let new = &adjacency[e][old_len[e]..];
-            if new.is_empty() {
-                return;
-            }
-            // Room for the pairs an animation adds later (`push`): growing every column of a
-            // shooter on its first new pair (a copy and fresh pages each) cost one frame of the
-            // moving-light box 42-54 ms for its 1,132 new pairs.
-            let room = (old_len[e] + new.len()) / GROWTH_ROOM + 4;
-            for col in cols.iter_mut() {
-                col.reserve_exact((new.len() + room) * nb);
-            }
             for &p in new {
                 let (ri, k) = origin[p as usize - first];
                 let row = &rows[ri as usize];
@@ -268,6 +286,7 @@ impl LinkStore {
             let areas = std::mem::take(&mut self.areas);
             self.set_receiver_areas(&areas);
         }
+        Ok(())
     }
 
     /// Replaces the coefficients of many stored pairs at once: for each `(p, r, g)`,

@@ -6,7 +6,7 @@ use std::time::Instant;
 use glam::DVec3;
 
 use crate::basis::Basis;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::gather::{CornerGather, GatherStats};
 use crate::geometry::{Patch, Rect};
 use crate::kernel::PairContext;
@@ -195,8 +195,7 @@ impl System {
         let geom = ElementGeometry::new(&patches, &ctx);
         let mut links = assemble(&ctx, &geom, occluders.as_ref(), &|done, total| {
             progress(if total > 0 { done as f64 / total as f64 } else { 1.0 }, "kernel")
-        })
-        .ok_or(Error::Cancelled)?;
+        })?;
         let source_weights = geom.source_weights().to_vec();
         links.set_receiver_areas(&elements.iter().map(|e| e.area).collect::<Vec<_>>());
         let kernel_seconds = start.elapsed().as_secs_f64();

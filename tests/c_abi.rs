@@ -41,8 +41,8 @@ fn cdylib_name() -> &'static str {
     }
 }
 
-#[test]
-fn c_program_solves_two_patches() {
+/// Compiles `tests/c/NAME.c` against the checked-in header and the cdylib; returns the program.
+fn compile_c(name: &str) -> PathBuf {
     let dirs = cdylib_dirs();
     let Some(dir) = dirs.iter().find(|d| d.join(cdylib_name()).is_file()).cloned() else {
         panic!(
@@ -55,13 +55,13 @@ fn c_program_solves_two_patches() {
     };
     println!("linking {}", dir.join(cdylib_name()).display());
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let exe = Path::new(env!("CARGO_TARGET_TMPDIR")).join("two_patches");
+    let exe = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
     let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
     let out = Command::new(&cc)
         .args(["-Wall", "-Wextra", "-Werror", "-std=c11"])
         .arg("-I")
         .arg(root.join("include"))
-        .arg(root.join("tests/c/two_patches.c"))
+        .arg(root.join(format!("tests/c/{name}.c")))
         .arg("-o")
         .arg(&exe)
         .arg(format!("-L{}", dir.display()))
@@ -72,14 +72,34 @@ fn c_program_solves_two_patches() {
         .unwrap_or_else(|e| panic!("cannot run the C compiler `{cc}`: {e}"));
     assert!(
         out.status.success(),
-        "compiling tests/c/two_patches.c failed:\n{}",
+        "compiling tests/c/{name}.c failed:\n{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    exe
+}
+
+#[test]
+fn c_program_solves_two_patches() {
+    let exe = compile_c("two_patches");
     let run = Command::new(&exe).output().expect("run two_patches");
     let stdout = String::from_utf8_lossy(&run.stdout);
     let stderr = String::from_utf8_lossy(&run.stderr);
     println!("{stdout}{stderr}");
     assert!(run.status.success(), "two_patches failed: {stdout}{stderr}");
+    assert!(stdout.contains("all checks passed"));
+}
+
+/// Issue 23: an allocation the machine refuses past the estimate is `GR_STATUS_OUT_OF_MEMORY`,
+/// not an abort of the host (tests/c/out_of_memory.c limits its own address space).
+#[cfg(target_os = "linux")]
+#[test]
+fn c_program_gets_out_of_memory_as_a_status() {
+    let exe = compile_c("out_of_memory");
+    let run = Command::new(&exe).output().expect("run out_of_memory");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    println!("{stdout}{stderr}");
+    assert!(run.status.success(), "out_of_memory failed ({:?}): {stdout}{stderr}", run.status);
     assert!(stdout.contains("all checks passed"));
 }
 
@@ -200,6 +220,83 @@ impl Flat {
     }
 }
 
+impl Flat {
+    /// The same scene through the scene builder, `light` added when given.
+    fn build(
+        &self,
+        settings: &GrSettings,
+        light: Option<&GrLight>,
+    ) -> Result<*mut GrSession, (GrStatus, String)> {
+        let fail = |st| Err((st, last_error()));
+        let mut b = null_mut();
+        assert_eq!(unsafe { gr_scene_builder_new(&mut b) }, GrStatus::Ok);
+        let _free = Freed(b);
+        let st = unsafe { gr_scene_builder_set_settings(b, settings) };
+        if st != GrStatus::Ok {
+            return fail(st);
+        }
+        for m in 0..self.reflectance.len() / 3 {
+            let mut index = u32::MAX;
+            let st = unsafe {
+                gr_scene_builder_add_material(
+                    b,
+                    self.reflectance[3 * m..].as_ptr(),
+                    self.emission[3 * m..].as_ptr(),
+                    &mut index,
+                )
+            };
+            assert_eq!((st, index), (GrStatus::Ok, m as u32));
+        }
+        let (mut v0, mut f0, mut i0) = (0usize, 0usize, 0usize);
+        for (o, (&nv, &nf)) in self.vertex_counts.iter().zip(&self.face_counts).enumerate() {
+            let (nv, nf) = (nv as usize, nf as usize);
+            let ni: usize = self.face_vertex_counts[f0..f0 + nf].iter().map(|&c| c as usize).sum();
+            let mut mesh = unsafe { std::mem::zeroed::<GrMesh>() };
+            assert_eq!(unsafe { gr_mesh_default(&mut mesh) }, GrStatus::Ok);
+            mesh.vertex_count = nv as u32;
+            mesh.vertices = self.vertices[3 * v0..].as_ptr();
+            mesh.face_count = nf as u32;
+            mesh.face_vertex_counts = self.face_vertex_counts[f0..].as_ptr();
+            mesh.face_materials = self.face_materials[f0..].as_ptr();
+            mesh.face_indices = self.face_indices[i0..].as_ptr();
+            mesh.face_indices_len = ni;
+            if !self.matrices.is_empty() {
+                mesh.matrix = self.matrices[16 * o..].as_ptr();
+            }
+            let mut index = u32::MAX;
+            let st = unsafe { gr_scene_builder_add_mesh(b, &mesh, &mut index) };
+            if st != GrStatus::Ok {
+                return fail(st);
+            }
+            assert_eq!(index, o as u32);
+            (v0, f0, i0) = (v0 + nv, f0 + nf, i0 + ni);
+        }
+        if let Some(light) = light {
+            let st = unsafe { gr_scene_builder_add_light(b, light) };
+            if st != GrStatus::Ok {
+                return fail(st);
+            }
+        }
+        let sentinel = 0x5e57 as *mut GrSession;
+        let mut out = sentinel;
+        match unsafe { gr_scene_builder_build(b, &mut out) } {
+            GrStatus::Ok => Ok(out),
+            st => {
+                assert_eq!(out, sentinel, "out written on failure");
+                fail(st)
+            }
+        }
+    }
+}
+
+/// Frees a builder at the end of the scope.
+struct Freed(*mut GrSceneBuilder);
+impl Drop for Freed {
+    fn drop(&mut self) {
+        unsafe { gr_scene_builder_free(self.0) };
+    }
+}
+
 fn last_error() -> String {
     let n = unsafe { gr_last_error(null_mut(), 0) };
     let mut buf = vec![0u8; n + 1];
@@ -255,7 +352,7 @@ impl Shared {
 
 #[test]
 fn versions_and_defaults() {
-    assert_eq!(gr_abi_version(), 1);
+    assert_eq!(gr_abi_version(), 2);
     let v = unsafe { CStr::from_ptr(gr_version_string()) };
     assert_eq!(v.to_str().unwrap(), env!("CARGO_PKG_VERSION"));
     let s = defaults();
@@ -268,6 +365,105 @@ fn versions_and_defaults() {
     assert_eq!(s.threads as usize, d.threads);
     assert_eq!(s.method, GrMethod::Incremental);
     assert_eq!(s.corner_gather, u32::from(d.corner_gather));
+}
+
+/// Issue 22, item 1: the scene builder makes the session `gr_session_new` makes (bit for bit),
+/// with lights added up front; every misuse is a status with a message.
+#[test]
+fn the_scene_builder_builds_what_gr_session_new_builds() {
+    let mut settings = defaults();
+    settings.threads = 1;
+    let room = Flat::from_scene(&scenes::cornell_box(3, Settings::default()));
+    let solve = |s: *mut GrSession| {
+        assert_eq!(
+            unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) },
+            GrStatus::Ok,
+            "{}",
+            last_error()
+        );
+        let values: Vec<Vec<f32>> =
+            (0..room.vertex_counts.len() as u32).map(|o| face_radiosity(s, o).unwrap()).collect();
+        unsafe { gr_session_free(s) };
+        values
+    };
+    let positional = solve(room.new_session(&settings).unwrap());
+    let built = solve(room.build(&settings, None).unwrap());
+    assert_eq!(positional, built);
+    assert!(built.iter().flatten().any(|&x| x > 0.0));
+
+    // A light added to the builder equals the same light set on the session.
+    let mut sun = unsafe { std::mem::zeroed::<GrLight>() };
+    assert_eq!(unsafe { gr_light_default(&mut sun) }, GrStatus::Ok);
+    sun.kind = GrLightKind::GrLightPoint as u32;
+    sun.matrix[3] = 0.2; // row-major: the translation
+    sun.matrix[7] = 0.1;
+    sun.matrix[11] = 0.5;
+    let with_light = solve(room.build(&settings, Some(&sun)).unwrap());
+    let set_later = {
+        let s = room.new_session(&settings).unwrap();
+        assert_eq!(unsafe { gr_session_set_lights(s, &sun, 1) }, GrStatus::Ok, "{}", last_error());
+        solve(s)
+    };
+    assert_eq!(with_light, set_later);
+    assert_ne!(with_light, built);
+
+    // Misuse: each a status and a message, nothing written.
+    let mut newer = settings;
+    newer.struct_size += 8;
+    let (st, m) = room.build(&newer, None).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidArgument);
+    assert!(m.contains("settings.struct_size is 56 but this library's struct has 48 bytes"), "{m}");
+    let mut older = settings;
+    older.struct_size = 40;
+    let (st, m) = room.new_session(&older).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidArgument);
+    assert!(m.contains("below the 48 bytes of its first version (fill it with gr_settings_default)"), "{m}");
+    let mut bad_light = sun;
+    bad_light.struct_size = 8;
+    let (st, m) = room.build(&settings, Some(&bad_light)).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidArgument);
+    assert!(m.contains("lights[0].struct_size is 8"), "{m}");
+    let mut wrong_material = room.clone();
+    wrong_material.face_materials[0] = 9;
+    let (st, m) = wrong_material.build(&settings, None).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidScene);
+    assert!(m.contains("object 0"), "{m}");
+
+    let mut b = null_mut();
+    assert_eq!(unsafe { gr_scene_builder_new(&mut b) }, GrStatus::Ok);
+    let _free = Freed(b);
+    let mut mesh = unsafe { std::mem::zeroed::<GrMesh>() };
+    assert_eq!(unsafe { gr_mesh_default(&mut mesh) }, GrStatus::Ok);
+    assert_eq!(mesh.struct_size as usize, size_of::<GrMesh>());
+    let counts = [4u32];
+    let indices = [0u32, 1, 2];
+    mesh.face_count = 1;
+    mesh.face_vertex_counts = counts.as_ptr();
+    mesh.face_materials = counts.as_ptr();
+    mesh.face_indices = indices.as_ptr();
+    mesh.face_indices_len = 3;
+    assert_eq!(unsafe { gr_scene_builder_add_mesh(b, &mesh, null_mut()) }, GrStatus::InvalidArgument);
+    assert!(last_error().contains("mesh.face_indices_len is 3 but mesh.face_vertex_counts sum to 4"));
+    mesh.struct_size = 4;
+    assert_eq!(unsafe { gr_scene_builder_add_mesh(b, &mesh, null_mut()) }, GrStatus::InvalidArgument);
+    assert!(last_error().contains("mesh.struct_size is 4"), "{}", last_error());
+    assert_eq!(unsafe { gr_scene_builder_add_mesh(b, null(), null_mut()) }, GrStatus::NullPointer);
+    assert_eq!(unsafe { gr_scene_builder_add_mesh(null_mut(), &mesh, null_mut()) }, GrStatus::NullPointer);
+    assert_eq!(unsafe { gr_scene_builder_add_light(b, null()) }, GrStatus::NullPointer);
+    assert_eq!(
+        unsafe { gr_scene_builder_add_material(b, null(), null(), null_mut()) },
+        GrStatus::NullPointer
+    );
+    assert_eq!(unsafe { gr_scene_builder_set_settings(b, null()) }, GrStatus::NullPointer);
+    assert_eq!(unsafe { gr_scene_builder_build(b, null_mut()) }, GrStatus::NullPointer);
+    assert_eq!(unsafe { gr_scene_builder_new(null_mut()) }, GrStatus::NullPointer);
+    // Nothing was added by the failed calls: the builder makes an empty session.
+    let mut out = null_mut();
+    assert_eq!(unsafe { gr_scene_builder_build(b, &mut out) }, GrStatus::Ok);
+    let mut n = u32::MAX;
+    assert_eq!(unsafe { gr_session_object_count(out, &mut n) }, GrStatus::Ok);
+    assert_eq!(n, 0);
+    unsafe { gr_session_free(out) };
 }
 
 #[test]

@@ -26,14 +26,15 @@ use proptest::test_runner::{Config, TestRunner};
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 struct RawSettings {
+    struct_size: u32,
     basis_order: u32,
     quadrature_order: u32,
-    tolerance: f64,
     visibility: u32,
     visibility_samples: u32,
     threads: u32,
     method: u32,
     corner_gather: u32,
+    tolerance: f64,
     memory_budget_mb: u64,
 }
 
@@ -119,6 +120,7 @@ fn settings() -> impl Strategy<Value = RawSettings> {
     let enough_points = prop_oneof![7 => Just(true), 1 => Just(false)];
     (numbers, 0u32..=2, 0u32..=1, enough_points).prop_map(|((b, q, t, v, vs, th), m, g, enough)| {
         RawSettings {
+            struct_size: size_of::<GrSettings>() as u32,
             basis_order: b,
             quadrature_order: if enough && q <= b { b + q } else { q },
             tolerance: t,

@@ -5,6 +5,11 @@ and renderers read (the Geometry Nodes switch overwrites it with the current fra
 Colours go either on the object's own mesh ("mesh" storage: its evaluated polygons and corners
 match the original mesh's) or on a bake-time copy ("copy" storage: display subdivision, or
 modifiers that change the topology); see ``switch.py``.
+
+A bake writes under staging names and on staging copies (``write_staged``, ``build_copy(...,
+staging=True)``) beside the previous bake, which stays playable; ``promote_frames`` and
+``promote_copy`` swap the new bake in, ``remove_staged`` and ``remove_copy(..., staging=True)``
+drop it.
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ from ..core import frames as core_frames
 from ..core.grids import Grid
 
 COPY_PREFIX = "Radiosity Copy: "
+STAGING_COPY_PREFIX = "Radiosity Copy (baking): "
 
 
 def write(mesh, name: str, rgb: np.ndarray) -> None:
@@ -51,9 +57,36 @@ def read_frame(mesh, frame: int) -> np.ndarray | None:
     return read(mesh, core_frames.attribute_name(frame))
 
 
-def baked_frames(mesh) -> list[int]:
-    found = (core_frames.frame_of_attribute(a.name) for a in mesh.color_attributes)
+def write_staged(mesh, frame: int, rgb: np.ndarray) -> None:
+    write(mesh, core_frames.staging_name(frame), rgb)
+
+
+def baked_frames(mesh, prefix: str = core_frames.ATTRIBUTE_PREFIX) -> list[int]:
+    found = (core_frames.frame_of_attribute(a.name, prefix) for a in mesh.color_attributes)
     return sorted(f for f in found if f is not None)
+
+
+def staged_frames(mesh) -> list[int]:
+    return baked_frames(mesh, core_frames.STAGING_PREFIX)
+
+
+def remove_staged(mesh) -> int:
+    """Removes the ``RadNew_NNNN`` attributes (a bake that ended without keeping them)."""
+    names = [core_frames.staging_name(f) for f in staged_frames(mesh)]
+    for name in names:
+        mesh.color_attributes.remove(mesh.color_attributes[name])
+    return len(names)
+
+
+def promote_frames(mesh, keep_live=lambda frame: False) -> list[int]:
+    """Swaps the staged frames in: removes every ``Rad_`` frame that is staged too or that
+    `keep_live` rejects, then renames each ``RadNew_NNNN`` to ``Rad_NNNN``. Returns the frames
+    now stored, sorted."""
+    staged = set(staged_frames(mesh))
+    remove_frames(mesh, keep=lambda f: f not in staged and keep_live(f))
+    for f in sorted(staged):
+        mesh.color_attributes[core_frames.staging_name(f)].name = core_frames.attribute_name(f)
+    return baked_frames(mesh)
 
 
 def remove_frames(mesh, keep=lambda frame: False) -> int:
@@ -83,11 +116,16 @@ def remove_result(mesh) -> None:
         mesh.color_attributes.remove(attr)
 
 
+def copy_name(name: str, staging: bool = False) -> str:
+    return (STAGING_COPY_PREFIX if staging else COPY_PREFIX) + name
+
+
 def build_copy(bpy, name: str, grid: Grid, polygon_material: np.ndarray, polygon_smooth: np.ndarray,
-               materials: list):
+               materials: list, staging: bool = False):
     """A mesh (and an unlinked object holding it, for the switch's Object Info) with the display
-    grid's faces; each grid face takes its source polygon's material index and smoothing."""
-    mesh_name = COPY_PREFIX + name
+    grid's faces; each grid face takes its source polygon's material index and smoothing. With
+    `staging`, under the name a bake builds it under until it ends (``promote_copy``)."""
+    mesh_name = copy_name(name, staging)
     mesh = bpy.data.meshes.get(mesh_name)
     if mesh is None:
         mesh = bpy.data.meshes.new(mesh_name)
@@ -116,10 +154,19 @@ def build_copy(bpy, name: str, grid: Grid, polygon_material: np.ndarray, polygon
     return obj, mesh
 
 
-def remove_copy(bpy, name: str) -> None:
-    obj = bpy.data.objects.get(COPY_PREFIX + name)
+def remove_copy(bpy, name: str, staging: bool = False) -> None:
+    obj = bpy.data.objects.get(copy_name(name, staging))
     if obj is not None:
         bpy.data.objects.remove(obj)
-    mesh = bpy.data.meshes.get(COPY_PREFIX + name)
+    mesh = bpy.data.meshes.get(copy_name(name, staging))
     if mesh is not None:
         bpy.data.meshes.remove(mesh)
+
+
+def promote_copy(bpy, name: str):
+    """Replaces the copy of object `name` with its staging copy (renamed); returns (obj, mesh)."""
+    remove_copy(bpy, name)  # first, or the renamed ones would get a ".001" suffix
+    obj = bpy.data.objects[copy_name(name, staging=True)]
+    mesh = obj.data
+    obj.name = mesh.name = copy_name(name)
+    return obj, mesh

@@ -6,9 +6,12 @@ session), ``solve()`` (any thread: the long native call, which releases the GIL)
 (main thread: write the frame's colours), then ``finish()``. ``run()`` does it all synchronously
 (headless, or an operator without an event loop).
 
-Colours are written only when a frame has completed; ``finish()`` removes frames that are not
-complete (left over from an older bake) and points the switch at the complete range, so a
-cancelled or failed bake leaves complete frames only.
+Colours are written only when a frame has completed, and under staging names (``RadNew_0001``,
+staging copies) beside the previous bake, which stays as it was while the bake runs. ``finish()``
+either swaps the new frames in (the bake succeeded, or it was stopped but only added frames past
+the previous bake's last one: a first bake, a longer range, a headless chunk) and removes what is
+stale, or, when a cancelled or failed bake would have replaced frames of the previous bake,
+drops what it wrote: the previous bake is left exactly as it was, playable.
 
 The session is kept for the Blender session (``held()``), keyed by file and scene: a re-bake, or
 the live preview, continues from its last solution when the scene's key still matches.
@@ -28,7 +31,7 @@ from ..core.grids import Grid, subdivide
 from ..core.marshal import with_object_names
 from ..core.materials import radiance_from_radiosity
 from ..core.record import BakeRecord, FrameState, first_changed
-from ..core.settings import BakeSettings, SettingsError
+from ..core.settings import BakeSettings, SettingsError, in_panel_words
 from . import attributes, switch, world
 from .export import TopologyChanged, collect, export, sample
 
@@ -94,7 +97,7 @@ def drop_held(scene=None) -> None:
 
 def session_key(settings: BakeSettings, exp) -> str:
     """Sessions are reused while this stays the same: solve settings, objects, topology, reflectances."""
-    return exp.scene_key(settings.solve_signature())
+    return exp.scene_key(settings.session_signature())
 
 
 def new_session(settings: BakeSettings, exp, state: FrameState, scene_key: str) -> Held:
@@ -106,7 +109,7 @@ def new_session(settings: BakeSettings, exp, state: FrameState, scene_key: str) 
             session.set_lights(exp.lights)
         world.apply(session, exp.world, exp.two_sided)
     except b.RadiosityError as e:
-        raise BakeError(str(e)) from e
+        raise BakeError(in_panel_words(str(e))) from e
     return Held(session, scene_key, state, None, exp)
 
 
@@ -141,6 +144,8 @@ class Target:
     grid: Grid | None = None
     level: int = 0
 
+    staged_copy: bool = False  # copy mode: `copy` and `mesh` are this bake's staging copy
+
     def values(self, session, split) -> np.ndarray:
         """This frame's B / pi at the target's corners, (n,3) float32."""
         if self.mode == "mesh":
@@ -163,8 +168,10 @@ def clear_object(obj, stored: dict | None = None) -> int:
     switch.remove(obj)
     if obj.type == "MESH" and obj.data is not None and obj.data.library is None:
         n += attributes.remove_frames(obj.data)
+        attributes.remove_staged(obj.data)
         attributes.remove_result(obj.data)
     attributes.remove_copy(bpy, obj.name)
+    attributes.remove_copy(bpy, obj.name, staging=True)
     return n
 
 
@@ -184,6 +191,8 @@ class BakeJob:
         self.warnings: list[str] = []
         self.cancel_event = threading.Event()
         self.cancelled = False
+        self.failed = False  # set by whoever catches a failure before calling finish()
+        self.restored = False  # finish() dropped this bake's frames and kept the previous bake
         self.finished = False
         self.fraction = 0.0
         self.stage = ""
@@ -298,12 +307,23 @@ class BakeJob:
                 t.mesh = existing
                 t.copy = bpy.data.objects.get(attributes.COPY_PREFIX + t.obj.name)
             if reusable and (t.mesh is None or t.copy is None):
-                self._build_copy(t)  # nothing of an older bake to lose
+                t.mesh = t.copy = None  # built (as a staging copy) when the first frame commits
                 k = 0
+        for t in self.targets:
+            if t.mesh is not None:
+                attributes.remove_staged(t.mesh)  # of a bake that never finished (Blender quit)
         for t in self.targets if reusable else ():
+            if t.mesh is None:
+                continue
             have = set(attributes.baked_frames(t.mesh))
             k = next((i for i, f in enumerate(self.frames[:k]) if f not in have), k)
         self.previous = record  # for objects that left the bake
+        self.reusable = reusable
+        # Whether stopping this bake must restore the previous one: it would replace some of its
+        # frames (a fresh bake, or solved frames up to its last one were not all kept).
+        self.previous_complete = record.complete if record is not None else None
+        last = self.previous_complete[1] if self.previous_complete else None
+        self.replaces_previous = last is not None and not (reusable and k and self.frames[k - 1] >= last)
         if reusable:
             self.record = record
             self.record.solved = {f: v for f, v in record.solved.items() if f in self.frames[:k]}
@@ -314,9 +334,6 @@ class BakeJob:
         self.seconds_saved = sum(v["seconds"] for v in self.record.solved.values())
         self.queue = list(self.frames[k:])
         self.total = len(self.queue)
-        # A fresh bake clears the old one (and builds its copies) when its first frame commits,
-        # so a bake cancelled before that leaves the file as it was.
-        self.cleared = reusable
         # Frame values of the last kept solved frame, for interpolation.
         self.prev = None
         if self.kept:
@@ -331,10 +348,13 @@ class BakeJob:
         self.held = h
 
     def _build_copy(self, t: Target) -> None:
+        """This bake's copy, under the staging name until the bake ends."""
         o = self.rest.objects[t.index]
         smooth = o.polygon_smooth[o.data.split.source_face]
         slots = self._polygon_slots(o)[o.data.split.source_face]
-        t.copy, t.mesh = attributes.build_copy(bpy, t.obj.name, t.grid, slots, smooth, o.slot_materials)
+        t.copy, t.mesh = attributes.build_copy(bpy, t.obj.name, t.grid, slots, smooth, o.slot_materials,
+                                               staging=True)
+        t.staged_copy = True
 
     def _polygon_slots(self, o) -> np.ndarray:
         """Material slot index per library face of an exported object (for the copy)."""
@@ -431,18 +451,18 @@ class BakeJob:
     def commit(self) -> None:
         f, state = self.current
         h = self.held
-        if not self.cleared:
-            self._clear_previous()
         values = []
         for t in self.targets:
+            if t.mesh is None:
+                self._build_copy(t)
             rgb = t.values(h.session, self.rest.objects[t.index].data.split)
-            attributes.write_frame(t.mesh, f, rgb)
+            attributes.write_staged(t.mesh, f, rgb)
             values.append(rgb)
         if self.prev is not None:
             f0, v0 = self.prev
             for g, w in core_frames.between(f0, f):
                 for t, a, b in zip(self.targets, v0, values, strict=True):
-                    attributes.write_frame(t.mesh, g, (1.0 - w) * a + w * b)
+                    attributes.write_staged(t.mesh, g, (1.0 - w) * a + w * b)
         self.prev = (f, values)
         self.record.solved[f] = {"state": state, "seconds": self.frame_seconds}
         self.record.complete = (self.frames[0], f)
@@ -456,19 +476,17 @@ class BakeJob:
             if fn(event) is False:
                 self.cancel_event.set()
 
-    def _clear_previous(self) -> None:
-        """A fresh bake: remove what an older bake left on these and on departed objects."""
-        self.cleared = True
+    def _remove_previous_storage(self) -> None:
+        """A fresh bake swapped in: remove what the previous bake stored where this one does not
+        (the other storage mode of each object) and on objects that left the bake. Runs over all
+        targets before any promotion: linked duplicates share one mesh."""
         names = set(self.names)
         for t in self.targets:
             if t.mode == "mesh":
-                attributes.remove_frames(t.mesh)
                 attributes.remove_copy(bpy, t.obj.name)
-            else:
-                if t.obj.data.library is None:
-                    attributes.remove_frames(t.obj.data)
-                    attributes.remove_result(t.obj.data)
-                self._build_copy(t)
+            elif t.obj.data.library is None:
+                attributes.remove_frames(t.obj.data)
+                attributes.remove_result(t.obj.data)
         if self.previous is not None:
             for name in self.previous.objects:
                 obj = bpy.data.objects.get(name)
@@ -507,51 +525,75 @@ class BakeJob:
             live.update(self.scene)
         return self.summary
 
+    def _stopped(self) -> bool:
+        return self.failed or self.cancelled or self.cancel_event.is_set()
+
     def _finish(self) -> None:
+        if self._stopped() and self.replaces_previous or self.record.complete is None:
+            self._drop_staged()
+        else:
+            self._swap_in()
+        self.summary = "Radiosity: " + "; ".join(self._summary_parts())
+
+    def _drop_staged(self) -> None:
+        """Nothing of this bake is kept: the file is as it was before it started."""
+        self.restored = self.replaces_previous
+        for t in self.targets:
+            if t.mesh is not None:
+                attributes.remove_staged(t.mesh)
+            if t.staged_copy:
+                attributes.remove_copy(bpy, t.obj.name, staging=True)
+
+    def _swap_in(self) -> None:
         s = self.settings
-        complete = self.record.complete
+        first, last = self.record.complete
         preview = None
-        if s.preview_material and complete:
+        if s.preview_material:
             from .preview import preview_material
 
             preview = preview_material(bpy)
+        if not self.reusable:
+            self._remove_previous_storage()
+        # A re-bake keeps the solved frames before its first change (all inside the complete
+        # range); a fresh bake keeps none of the previous bake's.
+        keep_live = (lambda f: first <= f <= last) if self.reusable else (lambda f: False)
         for t in self.targets:
-            if complete is None:
-                if not self.kept and not self.cleared:
-                    continue  # nothing of this bake was written
-                attributes.remove_frames(t.mesh)
-                switch.remove(t.obj)
-                if t.mode == "copy":
-                    attributes.remove_copy(bpy, t.obj.name)
-                continue
-            first, last = complete
-            attributes.remove_frames(t.mesh, keep=lambda fr, a=first, b=last: a <= fr <= b)
+            if t.staged_copy:
+                t.copy, t.mesh = attributes.promote_copy(bpy, t.obj.name)
+                t.staged_copy = False
+            attributes.promote_frames(t.mesh, keep_live=keep_live)
+            attributes.remove_frames(t.mesh, keep=lambda f: first <= f <= last)
             current = min(max(self.original_frame, first), last)
             attributes.ensure_result(t.mesh, attributes.read_frame(t.mesh, current))
             switch.install(bpy, t.obj, first, last, copy=t.copy if t.mode == "copy" else None,
                            preview_material=preview)
             self.muted.pop(t.obj.name, None)
-        if complete:
-            self.record.stored = {t.obj.name: {"mode": t.mode, "mesh": t.mesh.name} for t in self.targets}
-            self.scene[RECORD_PROPERTY] = self.record.dumps()
-        elif RECORD_PROPERTY in self.scene and self.cleared:
-            del self.scene[RECORD_PROPERTY]
+        self.record.stored = {t.obj.name: {"mode": t.mode, "mesh": t.mesh.name} for t in self.targets}
+        self.scene[RECORD_PROPERTY] = self.record.dumps()
+
+    def _summary_parts(self) -> list[str]:
         elapsed = time.perf_counter() - self.t0
+        complete = None if self.restored else self.record.complete
         parts = []
         if self.done:
             parts.append(f"solved {self.done} frame(s) in {elapsed:.1f} s")
+        if self.restored:
+            kept = self.previous_complete
+            parts.append(f"kept the previous bake (frames {kept[0]}-{kept[1]}) unchanged")
         if complete:
             parts.append(f"colours for frames {complete[0]}-{complete[1]}")
-        if self.kept:
+        if self.kept and not self.restored:
             parts.append(f"kept {self.kept} unchanged solved frame(s), "
                          f"saving about {self.seconds_saved:.1f} s")
         if self.rebuilt:
             parts.append(f"rebuilt the session on {self.rebuilt} deformed frame(s)")
-        if self.cancelled or self.cancel_event.is_set():
+        if self.failed:
+            parts.insert(0, "failed")
+        elif self.cancelled or self.cancel_event.is_set():
             parts.insert(0, "cancelled")
-        if not self.done and not self.kept:
+        if not complete and not self.restored:
             parts.append("nothing written")
-        self.summary = "Radiosity: " + "; ".join(parts)
+        return parts
 
     # -- synchronous ----------------------------------------------------------------------------
 
@@ -568,9 +610,11 @@ class BakeJob:
                     break
                 self.commit()
         except b.RadiosityError as e:
+            self.failed = True
             self.finish()
-            raise BakeError(str(e)) from e
+            raise BakeError(in_panel_words(str(e))) from e
         except BaseException:
+            self.failed = True
             self.finish()
             raise
         if self.cancel_event.is_set():
@@ -595,6 +639,7 @@ def settings_from_scene(scene) -> BakeSettings:
         frame_step=p.frame_step,
         display_subdivision=p.display_subdivision,
         preview_material=p.preview_material,
+        memory_limit_mb=p.memory_limit_mb,
     )
 
 
@@ -631,6 +676,13 @@ def _remove_leftovers() -> None:
     for mesh in [m for m in bpy.data.meshes if m.name.startswith(prefix)]:
         if mesh.users == 0 and mesh.name[len(prefix):] not in baked:
             bpy.data.meshes.remove(mesh)
+    # Staging copies exist only while a bake runs (a Clear cannot run then): these are left
+    # over from a bake that never finished.
+    staging = attributes.STAGING_COPY_PREFIX
+    for obj in [o for o in bpy.data.objects if o.name.startswith(staging)]:
+        bpy.data.objects.remove(obj)
+    for mesh in [m for m in bpy.data.meshes if m.name.startswith(staging) and m.users == 0]:
+        bpy.data.meshes.remove(mesh)
     mat = bpy.data.materials.get(PREVIEW)
     if mat is not None and mat.get("radiosity_preview") == 1 and not baked:
         bpy.data.materials.remove(mat)

@@ -4,11 +4,14 @@ With a frame step ``k`` the frames ``start, start+k, ...`` are solved, and ``end
 frame in between gets the linear interpolation of the corner colours of its two solved
 neighbours. Attribute names are ``Rad_`` + the frame zero-padded to 4 digits, which the Geometry
 Nodes switch rebuilds as ``"Rad_" + slice(str(frame + 10000), 1, 4)``: frames must lie in 0..9999.
+A bake writes its frames under staging names (``RadNew_0001``...), which the switch never reads,
+and renames them to ``Rad_`` names only when it ends with something to keep (``bake.py``).
 """
 
 from __future__ import annotations
 
 ATTRIBUTE_PREFIX = "Rad_"
+STAGING_PREFIX = "RadNew_"
 RESULT_ATTRIBUTE = "Radiosity"
 MIN_FRAME = 0
 MAX_FRAME = 9999
@@ -29,10 +32,16 @@ def attribute_name(frame: int) -> str:
     return f"{ATTRIBUTE_PREFIX}{frame:04d}"
 
 
-def frame_of_attribute(name: str) -> int | None:
-    """The frame of a ``Rad_NNNN`` name, None for any other name."""
-    if len(name) == len(ATTRIBUTE_PREFIX) + 4 and name.startswith(ATTRIBUTE_PREFIX):
-        digits = name[len(ATTRIBUTE_PREFIX):]
+def staging_name(frame: int) -> str:
+    check_frame(frame)
+    return f"{STAGING_PREFIX}{frame:04d}"
+
+
+def frame_of_attribute(name: str, prefix: str = ATTRIBUTE_PREFIX) -> int | None:
+    """The frame of a ``Rad_NNNN`` name (``RadNew_NNNN`` with ``prefix=STAGING_PREFIX``), None
+    for any other name."""
+    if len(name) == len(prefix) + 4 and name.startswith(prefix):
+        digits = name[len(prefix):]
         if digits.isdigit():
             return int(digits)
     return None

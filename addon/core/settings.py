@@ -42,6 +42,7 @@ class BakeSettings:
     frame_step: int = 1
     display_subdivision: int = 0
     preview_material: bool = False
+    memory_limit_mb: int = 0  # 0: automatic (80% of the memory available when the bake starts)
 
     def validate(self) -> BakeSettings:
         if not 0 <= self.basis_order <= 3:
@@ -64,6 +65,8 @@ class BakeSettings:
             raise SettingsError(
                 f"display subdivision {self.display_subdivision} is outside 0..{MAX_DISPLAY_SUBDIVISION}"
             )
+        if not 0 <= self.memory_limit_mb < 2**63:
+            raise SettingsError(f"memory limit {self.memory_limit_mb} MB must be 0 (automatic) or more")
         return self
 
     def native(self) -> dict:
@@ -82,16 +85,42 @@ class BakeSettings:
             "corner_gather": self.corner_gather,
             "threads": self.threads,
             "method": self.method,
+            "memory_budget_mb": self.memory_limit_mb,
         }
 
     def solve_signature(self) -> dict:
-        """What changes the solution of a frame (threads do not)."""
+        """What changes the solution of a frame (threads and the memory limit do not)."""
         native = self.native()
         native.pop("threads")
+        native.pop("memory_budget_mb")
         return native
+
+    def session_signature(self) -> dict:
+        """What a held session was made with: the solve signature and the memory limit (checked
+        when a session is made, so a changed limit makes a new one)."""
+        return {**self.solve_signature(), "memory_budget_mb": self.memory_limit_mb}
 
     def baked_frames(self) -> list[int]:
         return _frames.baked_frames(self.frame_start, self.frame_end, self.frame_step)
 
     def replace(self, **changes) -> BakeSettings:
         return dataclasses.replace(self, **changes)
+
+
+# The library's names in its messages, and what the Radiosity panel calls them.
+PANEL_NAMES = (
+    ("settings.memory_budget_mb", "Memory Limit (MB)"),
+    ("memory_budget_mb", "Memory Limit (MB)"),
+    ("settings.basis_order", "Detail"),
+    ("basis_order", "Detail"),
+    ("a lower basis order", "a lower Detail"),  # the out-of-memory message
+    ("turn corner_gather off", "turn Sharp Corners off"),
+    ("bake fewer frames at once, ", ""),  # the add-on writes each frame as it is solved
+)
+
+
+def in_panel_words(message: str) -> str:
+    """A library message with its setting names as the panel shows them."""
+    for library, panel in PANEL_NAMES:
+        message = message.replace(library, panel)
+    return message

@@ -35,10 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-ABI_VERSION = 1
+ABI_VERSION = 2
 ENV = "GALERKIN_RADIOSITY_LIB"
 
-# GrStatus
+# GrStatus (tests/python/test_binding.py checks these against include/galerkin_radiosity.h)
 OK = 0
 NULL_POINTER = 1
 INVALID_ARGUMENT = 2
@@ -46,6 +46,7 @@ INVALID_SCENE = 3
 CANCELLED = 4
 NOT_SOLVED = 5
 INTERNAL = 6
+OUT_OF_MEMORY = 7
 #: Not a GrStatus: the library could not be found or loaded.
 NOT_LOADED = -1
 
@@ -71,15 +72,19 @@ class Cancelled(RadiosityError):
 
 
 class _Settings(Structure):
+    """``GrSettings``; ``gr_settings_default`` sets ``struct_size`` (tests/python/test_binding.py
+    checks the fields against the header)."""
+
     _fields_ = [
+        ("struct_size", c_uint32),
         ("basis_order", c_uint32),
         ("quadrature_order", c_uint32),
-        ("tolerance", c_double),
         ("visibility", c_uint32),
         ("visibility_samples", c_uint32),
         ("threads", c_uint32),
         ("method", c_uint32),
         ("corner_gather", c_uint32),
+        ("tolerance", c_double),
         ("memory_budget_mb", c_uint64),
     ]
 
@@ -102,6 +107,22 @@ class _Light(Structure):
     ]
 
 
+class _Mesh(Structure):
+    """``GrMesh`` (src/ffi/builder.rs): one object for ``gr_scene_builder_add_mesh``."""
+
+    _fields_ = [
+        ("struct_size", c_uint32),
+        ("vertex_count", c_uint32),
+        ("vertices", POINTER(c_float)),
+        ("face_count", c_uint32),
+        ("face_vertex_counts", POINTER(c_uint32)),
+        ("face_materials", POINTER(c_uint32)),
+        ("face_indices", POINTER(c_uint32)),
+        ("face_indices_len", c_size_t),
+        ("matrix", POINTER(c_float)),
+    ]
+
+
 #: ``GrLightKind`` and ``GrLightShape`` values by Blender's names.
 LIGHT_KINDS = {"POINT": 0, "SPOT": 1, "SUN": 2, "AREA": 3}
 LIGHT_SHAPES = {"SQUARE": 0, "RECTANGLE": 1, "DISK": 2, "ELLIPSE": 3}
@@ -110,6 +131,7 @@ _PROGRESS = CFUNCTYPE(c_int32, c_double, c_char_p, c_void_p)
 _F32 = POINTER(c_float)
 _U32 = POINTER(c_uint32)
 _SESSION = c_void_p
+_BUILDER = c_void_p
 
 
 def _library_name() -> str:
@@ -145,6 +167,14 @@ def _declare(lib: ctypes.CDLL) -> None:
              _F32, c_size_t, c_size_t, POINTER(_SESSION)],
             c_uint32,
         ),
+        "gr_scene_builder_new": ([POINTER(_BUILDER)], c_uint32),
+        "gr_scene_builder_set_settings": ([_BUILDER, POINTER(_Settings)], c_uint32),
+        "gr_scene_builder_add_material": ([_BUILDER, _F32, _F32, _U32], c_uint32),
+        "gr_mesh_default": ([POINTER(_Mesh)], c_uint32),
+        "gr_scene_builder_add_mesh": ([_BUILDER, POINTER(_Mesh), _U32], c_uint32),
+        "gr_scene_builder_add_light": ([_BUILDER, POINTER(_Light)], c_uint32),
+        "gr_scene_builder_build": ([_BUILDER, POINTER(_SESSION)], c_uint32),
+        "gr_scene_builder_free": ([_BUILDER], None),
         "gr_session_set_object_matrix": ([_SESSION, c_uint32, _F32], c_uint32),
         "gr_session_set_material_emission": ([_SESSION, c_uint32, _F32], c_uint32),
         "gr_light_default": ([POINTER(_Light)], c_uint32),
@@ -327,8 +357,7 @@ class Session:
         s = _settings(lib, settings)
         rho = _floats(reflectance, (-1, 3), "reflectance")
         em = _floats(emission, (rho.shape[0], 3), "emission")
-        verts, sizes, idx, mats, matrices = [], [], [], [], []
-        any_matrix = False
+        meshes, sizes = [], []
         for i, o in enumerate(objects):
             try:
                 v = _floats(o["vertices"], (-1, 3), f"object {i} vertices")
@@ -338,32 +367,32 @@ class Session:
             except KeyError as e:
                 raise _invalid(f"object {i}: missing key {e}") from e
             m = o.get("matrix")
-            if m is None:
-                m = np.eye(4, dtype=np.float32)
-            else:
-                any_matrix = True
-                m = _matrix(m, f"object {i} matrix")
-            verts.append(v)
+            m = None if m is None else _matrix(m, f"object {i} matrix")
+            meshes.append((v, fs, fi, fm, m))  # kept alive until the build has copied them
             sizes.append(fs)
-            idx.append(fi)
-            mats.append(fm)
-            matrices.append(m)
-        n = len(objects)
-        vertex_counts = np.array([len(v) for v in verts], np.uint32)
-        face_counts = np.array([len(f) for f in sizes], np.uint32)
-        vertices = np.concatenate(verts).reshape(-1) if n else np.zeros(0, np.float32)
-        face_sizes = np.concatenate(sizes) if n else np.zeros(0, np.uint32)
-        face_indices = np.concatenate(idx) if n else np.zeros(0, np.uint32)
-        face_materials = np.concatenate(mats) if n else np.zeros(0, np.uint32)
-        mat = np.ascontiguousarray(np.stack(matrices), np.float32).reshape(-1) if any_matrix else None
+        # The scene builder (ABI version 2): one call per material and object.
+        builder = _BUILDER()
+        _check(lib, lib.gr_scene_builder_new(ctypes.byref(builder)))
         out = _SESSION()
-        status = lib.gr_session_new(
-            ctypes.byref(s), rho.shape[0], _ptr(rho, _F32), _ptr(em, _F32),
-            n, _ptr(vertex_counts, _U32), _ptr(vertices, _F32),
-            _ptr(face_counts, _U32), _ptr(face_sizes, _U32), _ptr(face_indices, _U32),
-            _ptr(face_materials, _U32), None if mat is None else _ptr(mat, _F32),
-            vertices.size, face_indices.size, ctypes.byref(out),
-        )
+        try:
+            _check(lib, lib.gr_scene_builder_set_settings(builder, ctypes.byref(s)))
+            for k in range(rho.shape[0]):
+                _check(lib, lib.gr_scene_builder_add_material(builder, _ptr(rho[k], _F32),
+                                                              _ptr(em[k], _F32), None))
+            for v, fs, fi, fm, m in meshes:
+                mesh = _Mesh()
+                _check(lib, lib.gr_mesh_default(ctypes.byref(mesh)))
+                mesh.vertex_count, mesh.vertices = len(v), _ptr(v, _F32)
+                mesh.face_count, mesh.face_vertex_counts = len(fs), _ptr(fs, _U32)
+                mesh.face_materials, mesh.face_indices = _ptr(fm, _U32), _ptr(fi, _U32)
+                mesh.face_indices_len = fi.size
+                if m is not None:
+                    mesh.matrix = _ptr(m, _F32)
+                _check(lib, lib.gr_scene_builder_add_mesh(builder, ctypes.byref(mesh), None))
+            status = lib.gr_scene_builder_build(builder, ctypes.byref(out))
+        finally:
+            lib.gr_scene_builder_free(builder)
+        face_counts = np.array([len(f) for f in sizes], np.uint32)
         _check(lib, status)
         self._ptr = out.value
         self._faces = face_counts

@@ -32,6 +32,11 @@ pub enum GrStatus {
     NotSolved = 5,
     /// A bug: a panic (or other internal failure) caught at the boundary; the message says what.
     Internal = 6,
+    /// A big allocation failed (the link rows or the link store) although the scene's estimate
+    /// was within the memory budget: the machine had less than it reported, or something else
+    /// took it meanwhile. The message ("out of memory while building ...") says how much was
+    /// asked for; the session keeps its last completed frame, as after `GR_STATUS_CANCELLED`.
+    OutOfMemory = 7,
 }
 
 /// A failed call: its status and the message stored for `gr_last_error`.
@@ -68,6 +73,7 @@ impl From<crate::Error> for Failure {
             Error::Input(_) | Error::InvalidArgument(_) => GrStatus::InvalidArgument,
             Error::InvalidScene(_) | Error::OverBudget(_) => GrStatus::InvalidScene,
             Error::Cancelled => GrStatus::Cancelled,
+            Error::OutOfMemory(_) => GrStatus::OutOfMemory,
             Error::Internal(_) => GrStatus::Internal,
         };
         Self::new(status, e.to_string())

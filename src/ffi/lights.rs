@@ -89,7 +89,7 @@ pub unsafe extern "C" fn gr_light_default(out: *mut GrLight) -> GrStatus {
     })
 }
 
-fn light_of(i: usize, g: &GrLight) -> Result<Light, Failure> {
+pub(super) fn light_of(i: usize, g: &GrLight) -> Result<Light, Failure> {
     if g.struct_size as usize != size_of::<GrLight>() {
         return Err(Failure::invalid(format!(
             "lights[{i}].struct_size is {}, this library's GrLight has {} bytes (fill it with gr_light_default)",

@@ -8,15 +8,24 @@
 //! - [`settings`]: `GrSettings`, `GrMethod`.
 //! - [`session`]: `GrSession` and its functions.
 //! - [`lights`]: `GrLight` and `gr_session_set_lights` (Blender Light objects).
+//! - [`builder`]: `GrSceneBuilder` and `GrMesh`, the scene one call at a time (ABI version 2).
+//! - `sized`: the `struct_size` rule by which structs grow without breaking.
 
+pub mod builder;
 pub mod error;
 pub mod lights;
 pub mod panic;
 pub mod session;
 pub mod settings;
+mod sized;
 
 use std::ffi::{CStr, c_char};
 
+pub use builder::{
+    GrMesh, GrSceneBuilder, gr_mesh_default, gr_scene_builder_add_light, gr_scene_builder_add_material,
+    gr_scene_builder_add_mesh, gr_scene_builder_build, gr_scene_builder_free, gr_scene_builder_new,
+    gr_scene_builder_set_settings,
+};
 pub use error::{GrStatus, gr_last_error};
 pub use lights::{
     GrLight, GrLightKind, GrLightShape, gr_light_default, gr_session_set_lights, gr_session_set_two_sided,
@@ -33,15 +42,19 @@ pub use session::{
 pub use settings::{GrMethod, GrSettings, gr_settings_default};
 
 /// The version of this C ABI. It changes only when a declaration in this header changes
-/// incompatibly; check it after loading the library.
-pub const GR_ABI_VERSION: u32 = 1;
+/// incompatibly; check it after loading the library. Version 2: `GrSettings` begins with
+/// `struct_size` (its layout changed), the scene builder and `GrMesh`, `GR_STATUS_OUT_OF_MEMORY`.
+/// From version 2 on the ABI grows without breaking: new functions, new fields at the end of the
+/// sized structs (read only when the caller's `struct_size` covers them) and new status codes
+/// (treat an unknown one as an error) leave the version as it is.
+pub const GR_ABI_VERSION: u32 = 2;
 
 const VERSION: &CStr = match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {
     Ok(v) => v,
     Err(_) => panic!("the crate version contains a NUL"),
 };
 
-/// Returns the ABI version, `GR_ABI_VERSION` (1).
+/// Returns the ABI version, `GR_ABI_VERSION` (2).
 #[unsafe(no_mangle)]
 pub extern "C" fn gr_abi_version() -> u32 {
     GR_ABI_VERSION

@@ -153,7 +153,7 @@ unsafe fn write_out<T: Copy>(out: *mut T, len: usize, values: &[T], what: &str) 
 }
 
 /// A row-major 4x4 of f32 as a world-from-object matrix.
-fn matrix_from_row_major(m: &[f32]) -> DMat4 {
+pub(super) fn matrix_from_row_major(m: &[f32]) -> DMat4 {
     let mut a = [0.0f64; 16];
     for (d, s) in a.iter_mut().zip(m) {
         *d = f64::from(*s);
@@ -161,7 +161,7 @@ fn matrix_from_row_major(m: &[f32]) -> DMat4 {
     DMat4::from_cols_array(&a).transpose()
 }
 
-fn rgb(v: &[f32]) -> [f64; 3] {
+pub(super) fn rgb(v: &[f32]) -> [f64; 3] {
     [f64::from(v[0]), f64::from(v[1]), f64::from(v[2])]
 }
 
@@ -219,6 +219,11 @@ impl Mesh<'_> {
 }
 
 /// Creates a session from a scene given as flat arrays and writes it to `*out`.
+///
+/// **Deprecated** since ABI version 2: use the scene builder (`gr_scene_builder_new`,
+/// `gr_scene_builder_add_material`, `gr_scene_builder_add_mesh`, `gr_scene_builder_add_light`,
+/// `gr_scene_builder_set_settings`, `gr_scene_builder_build`), which can take new kinds of input
+/// without changing a signature. This function keeps working as documented here.
 ///
 /// - `settings`: see `GrSettings`.
 /// - `material_count` materials: `reflectance` and `emission` hold 3 floats (RGB) per material.
@@ -328,30 +333,46 @@ pub unsafe extern "C" fn gr_session_new(
             matrices,
         };
         let objects = mesh.objects();
-        let faces = face_counts.to_vec();
-        let mut corners = Vec::with_capacity(no);
-        let mut f0 = 0usize;
-        for (o, &n) in face_counts.iter().enumerate() {
-            let c = total(&fvc[f0..f0 + n as usize]);
-            corners.push(
-                u32::try_from(c).map_err(|_| {
-                    Failure::invalid(format!("object {o} has {c} face corners, above 2^32 - 1"))
-                })?,
-            );
-            f0 += n as usize;
-        }
-        let scene = Scene::new(settings, (1, 1), materials, vec![Vec::new(); nm], objects)?;
-        let session = Session::new(scene, method)?;
-        let boxed = Box::new(GrSession {
-            state: RwLock::new(State { session, stats: None, results: OnceLock::new() }),
-            cancel: Arc::new(AtomicBool::new(false)),
-            faces,
-            corners,
-        });
+        let boxed = GrSession::create(settings, method, materials, objects, Vec::new())?;
         // SAFETY: out is non-null, aligned and writable.
         unsafe { out.write(Box::into_raw(boxed)) };
         Ok(())
     })
+}
+
+impl GrSession {
+    /// Validates the scene and makes the session behind a handle (`gr_session_new` and
+    /// `gr_scene_builder_build`).
+    pub(super) fn create(
+        settings: crate::scene::Settings,
+        method: crate::session::Method,
+        materials: Vec<Material>,
+        objects: Vec<Object>,
+        lights: Vec<crate::lights::Light>,
+    ) -> Result<Box<GrSession>, Failure> {
+        let count = |o: usize, n: usize, what: &str| {
+            u32::try_from(n)
+                .map_err(|_| Failure::invalid(format!("object {o} has {n} {what}, above 2^32 - 1")))
+        };
+        let mut faces = Vec::with_capacity(objects.len());
+        let mut corners = Vec::with_capacity(objects.len());
+        for (o, object) in objects.iter().enumerate() {
+            faces.push(count(o, object.faces.len(), "faces")?);
+            corners.push(count(o, object.faces.iter().map(Vec::len).sum(), "face corners")?);
+        }
+        let nm = materials.len();
+        let scene = Scene::new(settings, (1, 1), materials, vec![Vec::new(); nm], objects)?;
+        let mut session = Session::new(scene, method)?;
+        if !lights.is_empty() {
+            session.set_lights(lights)?;
+        }
+        Ok(Box::new(GrSession {
+            state: RwLock::new(State { session, stats: None, results: OnceLock::new() }),
+            cancel: Arc::new(AtomicBool::new(false)),
+            faces,
+            corners,
+        }))
+    }
 }
 
 /// Overrides object `object`'s world-from-object matrix (16 floats, row-major) from the next

@@ -19,17 +19,21 @@ pub enum GrMethod {
 }
 
 /// Solver settings. Fill with `gr_settings_default`, then change what you need.
+///
+/// The struct grows at its end only: a library that adds fields reads those past
+/// `struct_size` as their defaults, so a host built against an older header keeps working
+/// (ABI version 2 on). A `struct_size` larger than the library's `GrSettings` (a host built
+/// against a newer header) or smaller than version 2's is `GR_STATUS_INVALID_ARGUMENT`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GrSettings {
+    /// `sizeof(GrSettings)` of the header the host was built with; set by `gr_settings_default`.
+    pub struct_size: u32,
     /// Legendre degree per axis, 0..=3 (0: classic constant radiosity). Default 2.
     pub basis_order: u32,
     /// Gauss-Legendre points per axis for a well-separated pair of patches, 1..=16, more than
     /// `basis_order` (fewer cannot integrate the basis products). Default 4.
     pub quadrature_order: u32,
-    /// Progressive refinement stops when the unshot coefficients would deliver less than this
-    /// fraction of the emitted power in one bounce, in (0,1). Default 1e-4.
-    pub tolerance: f64,
     /// 1: ray-cast visibility; 0: everything sees everything. Other values are invalid.
     /// Default 1.
     pub visibility: u32,
@@ -43,8 +47,12 @@ pub struct GrSettings {
     /// contact shadows, corners hidden under objects go dark; costs about one kernel build per
     /// frame); 0: the face polynomial at the corner. Other values are invalid. Default 1.
     pub corner_gather: u32,
+    /// Progressive refinement stops when the unshot coefficients would deliver less than this
+    /// fraction of the emitted power in one bounce, in (0,1). Default 1e-4.
+    pub tolerance: f64,
     /// The memory a session may plan to use, in MiB: a scene whose estimate is over it is
-    /// refused by `gr_session_new` with `GR_STATUS_INVALID_SCENE` ("over the memory budget"),
+    /// refused by `gr_session_new` and `gr_scene_builder_build` with `GR_STATUS_INVALID_SCENE`
+    /// ("over the memory budget"),
     /// at once. 0: 80% of the memory available (`MemAvailable`) when the session is made.
     /// Default 0.
     pub memory_budget_mb: u64,
@@ -55,6 +63,7 @@ impl GrSettings {
     pub fn new() -> Self {
         let d = Settings::default();
         Self {
+            struct_size: size_of::<GrSettings>() as u32,
             basis_order: d.basis_order as u32,
             quadrature_order: d.quadrature_order as u32,
             tolerance: d.tolerance,
@@ -74,6 +83,11 @@ impl Default for GrSettings {
     }
 }
 
+/// `sizeof(GrSettings)` of ABI version 2, the first with `struct_size`: every field since is
+/// read only when `struct_size` covers it (none yet).
+const SETTINGS_V2_SIZE: usize = 48;
+const _: () = assert!(size_of::<GrSettings>() == SETTINGS_V2_SIZE);
+
 /// Reads settings written by C, where `method` and `visibility` may hold any 32-bit value.
 /// Range checks of the numbers are the scene's (`GR_STATUS_INVALID_SCENE`).
 ///
@@ -86,6 +100,9 @@ pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Me
     if !p.is_aligned() {
         return Err(Failure::invalid("settings is not aligned for GrSettings"));
     }
+    // SAFETY: p is non-null, aligned and readable: its first field is there in every version.
+    let size = unsafe { (&raw const (*p).struct_size).read() };
+    super::sized::check("settings", size, SETTINGS_V2_SIZE, size_of::<GrSettings>(), "gr_settings_default")?;
     // SAFETY: p is non-null, aligned and readable. `method` is read as the u32 it is in C, never
     // as a `GrMethod`, so an unknown value is not undefined behaviour.
     let (

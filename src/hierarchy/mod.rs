@@ -122,7 +122,7 @@ pub fn solve_frame(
     let total_area: f64 = faces.iter().map(|e| e.area).sum();
     let start = Instant::now();
     let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
-    let lights = DirectLight::new(&scene.lights, frame, &patches);
+    let lights = DirectLight::new(scene, frame, &faces);
     let tree = Tree::new(faces, reflectance, basis);
     let mut state = State::new(&tree);
     state.add_sources(&tree, &emission, lights.as_ref());

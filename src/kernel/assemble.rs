@@ -7,6 +7,8 @@ use glam::DVec3;
 
 use super::pair::{FAR, MID, PairCoefficients, PairContext, integrate_pair_into};
 use super::samples::Samples;
+use crate::budget;
+use crate::error::{Error, Result};
 use crate::geometry::{FrontPlane, Patch, Rect};
 use crate::links::{LinkRow, LinkStore};
 use crate::quadrature::GaussLegendre;
@@ -239,60 +241,80 @@ pub fn integrate_visible_into(
 /// elements, most often a strip of one face's grid.
 const VISIBILITY_GROUP: usize = 8;
 
+/// What the link rows are called in an out-of-memory message.
+const ROWS: &str = "the links (kernel rows)";
+
+/// Room in `row` for one more pair of `2 n2` coefficients, or the allocator's refusal.
+fn reserve_pair(row: &mut LinkRow, n2: usize) -> Result<()> {
+    budget::try_reserve(&mut row.coeffs, 2 * n2, ROWS)?;
+    budget::try_reserve(&mut row.sources, 1, ROWS)?;
+    budget::try_reserve(&mut row.visibility, 1, ROWS)
+}
+
 /// Builds the link store of all interacting pairs. `progress(done, total)` is called from worker
-/// threads now and then and returns false to cancel (then `None` is returned).
+/// threads now and then and returns false to cancel (then [`Error::Cancelled`]). The rows and
+/// the store are the bake's big allocations: when the allocator refuses one, the other rows stop
+/// and [`Error::OutOfMemory`] is returned.
 pub fn assemble(
     ctx: &PairContext,
     geom: &ElementGeometry,
     occluders: Option<&Occluders>,
     progress: &(dyn Fn(usize, usize) -> bool + Sync),
-) -> Option<LinkStore> {
+) -> Result<LinkStore> {
     let n = geom.patches.len();
     let nb = ctx.basis.len();
     let done = std::sync::atomic::AtomicUsize::new(0);
     let cancelled = std::sync::atomic::AtomicBool::new(false);
+    let failure: std::sync::Mutex<Option<Error>> = std::sync::Mutex::new(None);
     // One task per receiver row i, pairs (i, j > i); rows are uneven, rayon balances them.
-    let rows: Vec<LinkRow> = (0..n)
-        .into_par_iter()
-        .map(|i| {
-            let mut row = LinkRow { a: i as u32, ..Default::default() };
-            if cancelled.load(std::sync::atomic::Ordering::Relaxed) {
-                return row;
+    let mut rows: Vec<LinkRow> = budget::try_vec(n, ROWS)?;
+    let rows_iter = (0..n).into_par_iter().map(|i| {
+        let mut row = LinkRow { a: i as u32, ..Default::default() };
+        if cancelled.load(std::sync::atomic::Ordering::Relaxed) {
+            return row;
+        }
+        let (mut ij, mut ji) = ([0.0f64; 256], [0.0f64; 256]);
+        let (ij, ji) = (&mut ij[..nb * nb], &mut ji[..nb * nb]);
+        let pi = &geom.patches[i];
+        let mut group: Vec<(usize, &Patch)> = Vec::with_capacity(VISIBILITY_GROUP);
+        let mut vis: Vec<Visibility> = Vec::with_capacity(VISIBILITY_GROUP);
+        for start in ((i + 1)..n).step_by(VISIBILITY_GROUP) {
+            group.clear();
+            vis.clear();
+            let facing = (start..n.min(start + VISIBILITY_GROUP)).filter(|&j| geom.face_each_other(i, j));
+            group.extend(facing.map(|j| (j, &geom.patches[j])));
+            match occluders {
+                Some(o) => o.group_visibility(i, pi, &group, &mut vis),
+                None => vis.extend(group.iter().map(|_| Visibility::Full)),
             }
-            let (mut ij, mut ji) = ([0.0f64; 256], [0.0f64; 256]);
-            let (ij, ji) = (&mut ij[..nb * nb], &mut ji[..nb * nb]);
-            let pi = &geom.patches[i];
-            let mut group: Vec<(usize, &Patch)> = Vec::with_capacity(VISIBILITY_GROUP);
-            let mut vis: Vec<Visibility> = Vec::with_capacity(VISIBILITY_GROUP);
-            for start in ((i + 1)..n).step_by(VISIBILITY_GROUP) {
-                group.clear();
-                vis.clear();
-                let facing = (start..n.min(start + VISIBILITY_GROUP)).filter(|&j| geom.face_each_other(i, j));
-                group.extend(facing.map(|j| (j, &geom.patches[j])));
-                match occluders {
-                    Some(o) => o.group_visibility(i, pi, &group, &mut vis),
-                    None => vis.extend(group.iter().map(|_| Visibility::Full)),
-                }
-                for (&(j, _), v) in group.iter().zip(vis.drain(..)) {
-                    if integrate_visible_into(ctx, geom, i, j, &v, ij, ji) {
-                        geom.weigh(i, j, ij, ji);
-                        row.sources.push(j as u32);
-                        row.coeffs.extend(ij.iter().chain(ji.iter()).map(|&x| x as f32));
-                        row.visibility.push(v);
+            for (&(j, _), v) in group.iter().zip(vis.drain(..)) {
+                if integrate_visible_into(ctx, geom, i, j, &v, ij, ji) {
+                    geom.weigh(i, j, ij, ji);
+                    if let Err(e) = reserve_pair(&mut row, nb * nb) {
+                        cancelled.store(true, std::sync::atomic::Ordering::Relaxed);
+                        failure.lock().unwrap_or_else(|p| p.into_inner()).get_or_insert(e);
+                        return LinkRow::default();
                     }
+                    row.sources.push(j as u32);
+                    row.coeffs.extend(ij.iter().chain(ji.iter()).map(|&x| x as f32));
+                    row.visibility.push(v);
                 }
             }
-            let d = done.fetch_add(n - 1 - i, std::sync::atomic::Ordering::Relaxed) + n - 1 - i;
-            if !progress(d, n * (n - 1) / 2) {
-                cancelled.store(true, std::sync::atomic::Ordering::Relaxed);
-            }
-            row
-        })
-        .collect();
+        }
+        let d = done.fetch_add(n - 1 - i, std::sync::atomic::Ordering::Relaxed) + n - 1 - i;
+        if !progress(d, n * (n - 1) / 2) {
+            cancelled.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+        row
+    });
+    rows.par_extend(rows_iter);
+    if let Some(e) = failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
+        return Err(e);
+    }
     if cancelled.load(std::sync::atomic::Ordering::Relaxed) {
-        return None;
+        return Err(Error::Cancelled);
     }
     let mut store = LinkStore::new(n, nb);
-    store.extend_rows(rows);
-    Some(store)
+    store.extend_rows(rows)?;
+    Ok(store)
 }

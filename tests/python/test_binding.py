@@ -4,6 +4,7 @@ The binding is loaded from its file so that the add-on package (which imports bp
 Needs the library: `cargo build --release` (or `cargo build`), or GALERKIN_RADIOSITY_LIB.
 """
 
+import ctypes
 import importlib.util
 import re
 import sys
@@ -92,9 +93,47 @@ def closed_box(n):
 
 
 def test_versions(b):
-    assert b.abi_version() == 1
+    assert b.abi_version() == b.ABI_VERSION == 2
     cargo = (REPO / "Cargo.toml").read_text()
     assert b.version() == re.search(r'(?m)^version = "([^"]+)"', cargo).group(1)
+
+
+HEADER = REPO / "include" / "galerkin_radiosity.h"
+
+
+def _strip_comments(c_text):
+    return re.sub(r"/\*.*?\*/|//[^\n]*", "", c_text, flags=re.S)
+
+
+def test_the_binding_agrees_with_the_header():
+    """Issue 22, item 1: the status codes, the ABI version and the settings and light structs
+    the binding declares are the header's, so that they cannot drift apart."""
+    binding = _load_binding()
+    header = _strip_comments(HEADER.read_text())
+    statuses = {m[1]: int(m[2]) for m in re.finditer(r"\bGR_STATUS_(\w+)\s*=\s*(\d+)", header)}
+    assert statuses and "OUT_OF_MEMORY" in statuses
+    for name, value in statuses.items():
+        assert getattr(binding, name, None) == value, f"binding.{name} is not GR_STATUS_{name} = {value}"
+    assert int(re.search(r"#define GR_ABI_VERSION (\d+)", header)[1]) == binding.ABI_VERSION
+
+    def fields(struct):
+        """(type, name, "[n]" or "") of each field of the header's `struct`."""
+        body = re.search(r"typedef struct " + struct + r" \{(.*?)\} " + struct + ";", header, re.S)[1]
+        return [(m[1], m[2], m[3] or "") for m in re.finditer(r"\b(\w+) (\w+)(\[\d+\])?;", body)]
+
+    c_types = {ctypes.c_uint32: "uint32_t", ctypes.c_uint64: "uint64_t", ctypes.c_double: "double"}
+    for struct, declared in (("GrSettings", binding._Settings), ("GrLight", binding._Light)):
+        got = []
+        for name, t in declared._fields_:
+            array = hasattr(t, "_length_")
+            c_type = c_types[t._type_ if array else t]
+            got.append((c_type, name, f"[{t._length_}]" if array else ""))
+        # GrMethod is a uint32_t enum in C.
+        want = [("uint32_t" if ty == "GrMethod" else ty, n, a) for ty, n, a in fields(struct)]
+        assert got == want, f"{declared.__name__} differs from the header's {struct}"
+    # GrMesh holds pointers: its field names in order.
+    body = re.search(r"typedef struct GrMesh \{(.*?)\} GrMesh;", header, re.S)[1]
+    assert [n for n, _ in binding._Mesh._fields_] == re.findall(r"(\w+);", body)
 
 
 def test_two_patches_value_and_shapes(b):

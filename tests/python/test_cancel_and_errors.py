@@ -1,4 +1,5 @@
-"""Cancelling keeps complete frames only; bad scenes give clear messages."""
+"""Cancelling keeps complete frames only, and never a frame of the previous bake; bad scenes
+give clear messages."""
 
 import numpy as np
 import pytest
@@ -42,29 +43,182 @@ def test_cancel_from_progress_keeps_complete_frames_only(blender):
     np.testing.assert_array_equal(got, scenes.stored(objs["Floor"].data, 2))
 
 
-def test_cancelled_rebake_removes_stale_frames(blender):
+def _snapshot(bpy, objs):
+    """Everything a bake leaves: each mesh's Rad_ frames and values, its other attribute names,
+    each object's switch range, the copies, and the record."""
+    from addon.blender import bake
+
+    meshes = {}
+    for obj in objs.values():
+        me = obj.data
+        meshes[obj.name] = {
+            "attributes": sorted(a.name for a in me.color_attributes),
+            "frames": {f: scenes.stored(me, f) for f in scenes.rad_frames(me)},
+            "switch": _switch_range(obj) if obj.modifiers else None,
+        }
+    copies = sorted(o.name for o in bpy.data.objects if o.name.startswith("Radiosity Copy"))
+    return meshes, copies, bpy.context.scene.get(bake.RECORD_PROPERTY)
+
+
+def _assert_same(before, after):
+    (m0, c0, r0), (m1, c1, r1) = before, after
+    assert c1 == c0 and r1 == r0
+    for name, b in m0.items():
+        a = m1[name]
+        assert a["attributes"] == b["attributes"], name  # no RadNew_ staging attribute is left
+        assert a["switch"] == b["switch"], name
+        assert sorted(a["frames"]) == sorted(b["frames"]), name
+        for f, values in b["frames"].items():
+            np.testing.assert_array_equal(a["frames"][f], values, err_msg=f"{name} frame {f}")
+
+
+def _move_light_from_frame_2(objs):
+    light = objs["Light"]
+    light.animation_data_clear()
+    for frame, x in ((1, -0.5), (2, -0.4), (4, 0.9)):
+        light.location.x = x
+        light.keyframe_insert("location", index=0, frame=frame)
+
+
+def test_cancelled_rebake_keeps_the_previous_bake(blender):
+    """Frames 2-4 change; the re-bake completes frame 2 and is cancelled inside frame 3: every
+    frame of the previous bake is still there with its values, and it plays back."""
     bpy = blender
     from addon.blender import bake
 
     objs = scenes.cornell_box(bpy, light_frames=(1, 4), box=False)
     scenes.bake(bpy, basis_order=0)
-    floor = objs["Floor"].data
-    frame1 = scenes.stored(floor, 1)
-    # Move the light from frame 2 on, then cancel inside the second recomputed frame.
-    light = objs["Light"]
-    light.animation_data_clear()
-    light.location.x = -0.5
-    light.keyframe_insert("location", index=0, frame=1)
-    light.location.x = -0.4
-    light.keyframe_insert("location", index=0, frame=2)
-    light.location.x = 0.9
-    light.keyframe_insert("location", index=0, frame=4)
+    before = _snapshot(bpy, objs)
+    assert sorted(before[0]["Floor"]["frames"]) == [1, 2, 3, 4]
+    _move_light_from_frame_2(objs)
+    solved = []
+    bake.listeners.append(lambda e: solved.append(e["frame"]) if e["kind"] == "frame" else None)
     _cancel_at(bake, 1)
+    job = bake.BakeJob(bpy.context, bake.settings_from_scene(bpy.context.scene))
+    summary = job.run()
+    assert solved == [2]  # frame 2 was recomputed (and differs), then thrown away
+    assert "cancelled" in summary and "kept the previous bake (frames 1-4) unchanged" in summary
+    _assert_same(before, _snapshot(bpy, objs))
+    sc = bpy.context.scene
+    for f in (2, 4):
+        sc.frame_set(f)
+        got = scenes.corner_colors(objs["Floor"], bpy.context.evaluated_depsgraph_get())
+        np.testing.assert_array_equal(got, before[0]["Floor"]["frames"][f])
+    # The next re-bake still finds the previous bake's frame 1 unchanged and keeps it.
+    bake.listeners.clear()
+    job = bake.BakeJob(bpy.context, bake.settings_from_scene(bpy.context.scene))
+    job.run()
+    assert job.kept == 1 and scenes.rad_frames(objs["Floor"].data) == [1, 2, 3, 4]
+    assert not np.array_equal(scenes.stored(objs["Floor"].data, 2), before[0]["Floor"]["frames"][2])
+
+
+def test_failed_rebake_keeps_the_previous_bake(blender):
+    """A re-bake that recomputes frame 2 and then fails at frame 3 (the floor's subdivision is
+    keyed to change its topology there) leaves the previous bake as it was."""
+    bpy = blender
+    objs = scenes.cornell_box(bpy, light_frames=(1, 4), box=False)
     scenes.bake(bpy, basis_order=0)
-    assert scenes.rad_frames(floor) == [1, 2]
-    np.testing.assert_array_equal(scenes.stored(floor, 1), frame1)  # kept, not recomputed
-    assert _switch_range(objs["Floor"]) == (1, 2)
+    before = _snapshot(bpy, objs)
+    _move_light_from_frame_2(objs)
+    floor = objs["Floor"]
+    mod = floor.modifiers.new("Subdiv", "SUBSURF")
+    mod.subdivision_type = "SIMPLE"
+    floor.modifiers.move(len(floor.modifiers) - 1, 0)  # before the switch, as an artist adds it
+    for frame, levels in ((1, 0), (2, 0), (3, 1)):
+        mod.levels = levels
+        floor.keyframe_insert('modifiers["Subdiv"].levels', frame=frame)
+    with pytest.raises(RuntimeError, match="changes its number of vertices or corners at frame 3"):
+        bpy.ops.radiosity.bake()
+    floor.modifiers.remove(mod)
+    _assert_same(before, _snapshot(bpy, objs))
+
+
+def test_cancelled_fresh_bake_over_a_previous_one_keeps_it(blender):
+    """New settings (display subdivision 1: a bake-time copy) re-bake every frame; cancelled
+    inside the second, the previous bake on the meshes is intact and no copy is left."""
+    bpy = blender
+    from addon.blender import bake
+
+    objs = scenes.cornell_box(bpy, n=2, light_frames=(1, 3), box=False)
+    scenes.bake(bpy, basis_order=0)
+    before = _snapshot(bpy, objs)
+    _cancel_at(bake, 1)
+    scenes.bake(bpy, basis_order=0, display_subdivision=1)
+    _assert_same(before, _snapshot(bpy, objs))
+    assert not [m.name for m in bpy.data.meshes if m.name.startswith("Radiosity Copy")]
+    # Uncancelled, the same bake moves the colours to the copies and off the meshes.
+    bake.listeners.clear()
+    scenes.bake(bpy, basis_order=0, display_subdivision=1)
+    copy = bpy.data.meshes["Radiosity Copy: Floor"]
+    assert scenes.rad_frames(copy) == [1, 2, 3] and scenes.rad_frames(objs["Floor"].data) == []
+    assert not [o.name for o in bpy.data.objects if o.name.startswith("Radiosity Copy (baking)")]
+    assert _switch_range(objs["Floor"]) == (1, 3)
+
+
+def test_cancelled_longer_range_keeps_the_frames_it_added(blender):
+    """A re-bake that keeps every frame of the previous bake and only adds frames after it (a
+    longer range; headless chunks) replaces nothing, so its complete frames are kept."""
+    bpy = blender
+    from addon.blender import bake
+
+    objs = scenes.cornell_box(bpy, light_frames=(1, 4), box=False)
+    sc = bpy.context.scene
+    sc.frame_end = 2
+    scenes.bake(bpy, basis_order=0)
+    before = {f: scenes.stored(objs["Floor"].data, f) for f in (1, 2)}
+    sc.frame_end = 4
+    _cancel_at(bake, 1)  # inside frame 4, after frame 3 completed
+    scenes.bake(bpy, basis_order=0)
+    assert scenes.rad_frames(objs["Floor"].data) == [1, 2, 3]
+    for f in (1, 2):
+        np.testing.assert_array_equal(scenes.stored(objs["Floor"].data, f), before[f])
+    assert _switch_range(objs["Floor"]) == (1, 3)
+    assert bake.read_record(sc).complete == (1, 3)
+
+
+def test_successful_rebake_of_a_shorter_range_removes_the_frames_past_it(blender):
+    bpy = blender
+    from addon.blender import bake
+
+    objs = scenes.cornell_box(bpy, light_frames=(1, 4), box=False)
+    scenes.bake(bpy, basis_order=0)
+    before = {f: scenes.stored(objs["Floor"].data, f) for f in (1, 2)}
+    bpy.context.scene.frame_end = 2
+    job = bake.BakeJob(bpy.context, bake.settings_from_scene(bpy.context.scene))
+    job.run()
+    assert job.kept == 2 and job.done == 0
+    for obj in objs.values():
+        assert scenes.rad_frames(obj.data) == [1, 2]
+        assert _switch_range(obj) == (1, 2)
+    for f in (1, 2):
+        np.testing.assert_array_equal(scenes.stored(objs["Floor"].data, f), before[f])
     assert bake.read_record(bpy.context.scene).complete == (1, 2)
+
+
+def test_a_memory_limit_below_the_estimate_is_refused_in_one_line_and_changes_nothing(blender):
+    """Memory Limit (MB) = 1 on a 217-face room that a bake estimates at several MB: the operator
+    reports one line in the panel's words, and the previous bake is untouched; 0 (automatic)
+    bakes it again."""
+    bpy = blender
+    objs = scenes.cornell_box(bpy, n=6, light_frames=(1, 2), box=False)
+    assert scenes.bake(bpy, basis_order=0) == {"FINISHED"}
+    before = _snapshot(bpy, objs)
+    sc = bpy.context.scene
+    sc.radiosity.memory_limit_mb = 1
+    with pytest.raises(RuntimeError) as info:
+        bpy.ops.radiosity.bake()
+    line = str(info.value).strip()
+    print(line)
+    assert "\n" not in line
+    assert "over the memory budget: this bake needs up to" in line
+    assert "but the budget is 1 MB (Memory Limit (MB))" in line
+    assert "a lower Detail" in line and "raise Memory Limit (MB)" in line
+    assert "memory_budget_mb" not in line and "basis_order" not in line
+    _assert_same(before, _snapshot(bpy, objs))
+    sc.radiosity.memory_limit_mb = 0
+    sc.radiosity.basis_order = 1
+    assert bpy.ops.radiosity.bake() == {"FINISHED"}
+    assert scenes.rad_frames(objs["Floor"].data) == [1, 2]
 
 
 def test_cancel_before_any_frame_leaves_the_file_as_it_was(blender):

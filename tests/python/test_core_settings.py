@@ -46,6 +46,10 @@ def test_baked_frames_and_interpolation():
     assert frames.attribute_name(7) == "Rad_0007"
     assert frames.frame_of_attribute("Rad_0123") == 123
     assert frames.frame_of_attribute("Radiosity") is None
+    # Staging names are never read as frames (the switch and re-bakes ignore them).
+    assert frames.staging_name(7) == "RadNew_0007"
+    assert frames.frame_of_attribute("RadNew_0007") is None
+    assert frames.frame_of_attribute("RadNew_0007", frames.STAGING_PREFIX) == 7
 
 
 def test_material_maths():
@@ -74,3 +78,18 @@ def test_record_round_trip_and_first_change():
     assert record.first_changed(r2, [1, 2, 3], lambda f: st(f"m{f}")) == 3
     assert record.first_changed(r2, [1, 2, 3], lambda f: st("moved" if f == 2 else f"m{f}")) == 1
     assert record.BakeRecord.loads("not json") is None
+
+
+def test_the_memory_limit_goes_to_the_session_but_does_not_change_the_solution():
+    from addon.core.settings import BakeSettings, SettingsError, in_panel_words
+
+    s = BakeSettings(memory_limit_mb=512)
+    assert s.native()["memory_budget_mb"] == 512
+    assert "memory_budget_mb" not in s.solve_signature()  # kept frames stay reusable
+    assert s.session_signature() != BakeSettings().session_signature()  # a new session checks it
+    assert BakeSettings().native()["memory_budget_mb"] == 0
+    with pytest.raises(SettingsError, match="memory limit -1 MB"):
+        BakeSettings(memory_limit_mb=-1).validate()
+    assert in_panel_words("a lower settings.basis_order, or raise memory_budget_mb") == (
+        "a lower Detail, or raise Memory Limit (MB)")
+    assert "a lower Detail" in in_panel_words("use fewer faces or a lower basis order (a lower ...)")
