@@ -19,7 +19,7 @@
  *   gr_scene_builder_add_material, gr_scene_builder_add_mesh (a GrMesh per object) and
  *   gr_scene_builder_add_light in any order, then gr_scene_builder_build (and
  *   gr_scene_builder_free). gr_session_new (positional arrays) is deprecated but kept working.
- * - Growth without breaking (ABI version 2 on): GrSettings, GrMesh and GrLight begin with
+ * - Growth without breaking (ABI version 2 on; version 3 added GrSettings.accuracy and GR_METHOD_HIERARCHICAL): GrSettings, GrMesh and GrLight begin with
  *   struct_size; fill them with gr_settings_default, gr_mesh_default, gr_light_default. New
  *   fields only ever go at a struct's end and are read only when the caller's struct_size
  *   covers them; a struct_size above the library's is refused (the host's header is newer).
@@ -45,7 +45,7 @@
  * sized structs (read only when the caller's `struct_size` covers them) and new status codes
  * (treat an unknown one as an error) leave the version as it is.
  */
-#define GR_ABI_VERSION 2
+#define GR_ABI_VERSION 3
 
 /**
  * What a call did. Every fallible function returns one; the codes are stable and never reused.
@@ -129,6 +129,12 @@ enum GrMethod
    * Every frame from scratch.
    */
   GR_METHOD_FULL = 2,
+  /**
+   * Every frame from scratch on the hierarchy of clusters and elements below faces, for
+   * scenes of 10^4 faces and more; `accuracy` is its knob. Corners are the leaves'
+   * polynomials (no corner gather yet).
+   */
+  GR_METHOD_HIERARCHICAL = 3,
 };
 #ifndef __cplusplus
 #if __STDC_VERSION__ >= 202311L
@@ -208,6 +214,12 @@ typedef struct GrSettings {
    * Default 0.
    */
   uint64_t memory_budget_mb;
+  /**
+   * `GR_METHOD_HIERARCHICAL`'s accuracy: the largest share of the emitted power a link may
+   * carry unrefined, in (0,1); smaller is finer and slower. Default 1e-3. (Since ABI
+   * version 3: read only when `struct_size` covers it.)
+   */
+  double accuracy;
 } GrSettings;
 
 /**
@@ -309,7 +321,7 @@ extern "C" {
 #endif // __cplusplus
 
 /**
- * Returns the ABI version, `GR_ABI_VERSION` (2).
+ * Returns the ABI version, `GR_ABI_VERSION` (3).
  */
 uint32_t gr_abi_version(void);
 

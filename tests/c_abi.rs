@@ -352,7 +352,7 @@ impl Shared {
 
 #[test]
 fn versions_and_defaults() {
-    assert_eq!(gr_abi_version(), 2);
+    assert_eq!(gr_abi_version(), 3);
     let v = unsafe { CStr::from_ptr(gr_version_string()) };
     assert_eq!(v.to_str().unwrap(), env!("CARGO_PKG_VERSION"));
     let s = defaults();
@@ -412,12 +412,17 @@ fn the_scene_builder_builds_what_gr_session_new_builds() {
     newer.struct_size += 8;
     let (st, m) = room.build(&newer, None).unwrap_err();
     assert_eq!(st, GrStatus::InvalidArgument);
-    assert!(m.contains("settings.struct_size is 56 but this library's struct has 48 bytes"), "{m}");
+    assert!(m.contains("settings.struct_size is 64 but this library's struct has 56 bytes"), "{m}");
     let mut older = settings;
     older.struct_size = 40;
     let (st, m) = room.new_session(&older).unwrap_err();
     assert_eq!(st, GrStatus::InvalidArgument);
     assert!(m.contains("below the 48 bytes of its first version (fill it with gr_settings_default)"), "{m}");
+    // A host built against version 2's header (48 bytes, no `accuracy`) still builds: the
+    // fields past its size take the library's defaults.
+    let mut v2 = settings;
+    v2.struct_size = 48;
+    assert!(room.build(&v2, None).is_ok(), "a version-2 GrSettings is refused");
     let mut bad_light = sun;
     bad_light.struct_size = 8;
     let (st, m) = room.build(&settings, Some(&bad_light)).unwrap_err();

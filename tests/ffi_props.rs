@@ -36,6 +36,7 @@ struct RawSettings {
     corner_gather: u32,
     tolerance: f64,
     memory_budget_mb: u64,
+    accuracy: f64,
 }
 
 const _: () = assert!(size_of::<RawSettings>() == size_of::<GrSettings>());
@@ -130,6 +131,7 @@ fn settings() -> impl Strategy<Value = RawSettings> {
             method: m,
             corner_gather: g,
             memory_budget_mb: 0,
+            accuracy: 1e-3,
         }
     })
 }

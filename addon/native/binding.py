@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-ABI_VERSION = 2
+ABI_VERSION = 3
 ENV = "GALERKIN_RADIOSITY_LIB"
 
 # GrStatus (tests/python/test_binding.py checks these against include/galerkin_radiosity.h)
@@ -50,7 +50,7 @@ OUT_OF_MEMORY = 7
 #: Not a GrStatus: the library could not be found or loaded.
 NOT_LOADED = -1
 
-METHODS = {"incremental": 0, "exact": 1, "full": 2}
+METHODS = {"incremental": 0, "exact": 1, "full": 2, "hierarchical": 3}
 
 _ADDON = Path(__file__).resolve().parent.parent
 _REPO = _ADDON.parent
@@ -86,6 +86,7 @@ class _Settings(Structure):
         ("corner_gather", c_uint32),
         ("tolerance", c_double),
         ("memory_budget_mb", c_uint64),
+        ("accuracy", c_double),
     ]
 
 
@@ -321,8 +322,8 @@ def _settings(lib: ctypes.CDLL, settings: dict) -> _Settings:
             if value not in METHODS:
                 raise _invalid(f"settings.method {value!r} is not one of {', '.join(METHODS)}")
             s.method = METHODS[value]
-        elif key == "tolerance":
-            s.tolerance = float(value)
+        elif key in ("tolerance", "accuracy"):
+            setattr(s, key, float(value))
         elif key in ("visibility", "corner_gather"):
             setattr(s, key, _u32(value, f"settings.{key}"))  # True/False or 1/0
         elif key in ("basis_order", "quadrature_order", "visibility_samples", "threads"):
@@ -340,7 +341,8 @@ class Session:
     """A baking session: the scene, its thread pool and the last solved frame.
 
     ``settings``: optional keys basis_order, quadrature_order, tolerance, visibility,
-    visibility_samples, threads, method ('incremental' | 'exact' | 'full'), corner_gather,
+    visibility_samples, threads, method ('incremental' | 'exact' | 'full' | 'hierarchical'),
+    accuracy (the hierarchical method's), corner_gather,
     memory_budget_mb (0: 80% of the available memory; a scene estimated over it is refused).
     ``reflectance``, ``emission``: (M, 3) per material. ``objects``: dicts with ``vertices``
     (N, 3), ``face_sizes`` (F,) of 3 or 4, ``face_indices`` (sum of face_sizes,) local to the

@@ -47,14 +47,14 @@ pub use settings::{GrMethod, GrSettings, gr_settings_default};
 /// From version 2 on the ABI grows without breaking: new functions, new fields at the end of the
 /// sized structs (read only when the caller's `struct_size` covers them) and new status codes
 /// (treat an unknown one as an error) leave the version as it is.
-pub const GR_ABI_VERSION: u32 = 2;
+pub const GR_ABI_VERSION: u32 = 3;
 
 const VERSION: &CStr = match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {
     Ok(v) => v,
     Err(_) => panic!("the crate version contains a NUL"),
 };
 
-/// Returns the ABI version, `GR_ABI_VERSION` (2).
+/// Returns the ABI version, `GR_ABI_VERSION` (3).
 #[unsafe(no_mangle)]
 pub extern "C" fn gr_abi_version() -> u32 {
     GR_ABI_VERSION

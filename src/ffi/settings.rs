@@ -16,6 +16,10 @@ pub enum GrMethod {
     Exact = 1,
     /// Every frame from scratch.
     Full = 2,
+    /// Every frame from scratch on the hierarchy of clusters and elements below faces, for
+    /// scenes of 10^4 faces and more; `accuracy` is its knob. Corners are the leaves'
+    /// polynomials (no corner gather yet).
+    Hierarchical = 3,
 }
 
 /// Solver settings. Fill with `gr_settings_default`, then change what you need.
@@ -56,6 +60,10 @@ pub struct GrSettings {
     /// at once. 0: 80% of the memory available (`MemAvailable`) when the session is made.
     /// Default 0.
     pub memory_budget_mb: u64,
+    /// `GR_METHOD_HIERARCHICAL`'s accuracy: the largest share of the emitted power a link may
+    /// carry unrefined, in (0,1); smaller is finer and slower. Default 1e-3. (Since ABI
+    /// version 3: read only when `struct_size` covers it.)
+    pub accuracy: f64,
 }
 
 impl GrSettings {
@@ -73,6 +81,7 @@ impl GrSettings {
             method: GrMethod::Incremental,
             corner_gather: u32::from(d.corner_gather),
             memory_budget_mb: d.memory_budget_mb,
+            accuracy: d.accuracy,
         }
     }
 }
@@ -84,9 +93,9 @@ impl Default for GrSettings {
 }
 
 /// `sizeof(GrSettings)` of ABI version 2, the first with `struct_size`: every field since is
-/// read only when `struct_size` covers it (none yet).
+/// read only when `struct_size` covers it (`accuracy`, version 3).
 const SETTINGS_V2_SIZE: usize = 48;
-const _: () = assert!(size_of::<GrSettings>() == SETTINGS_V2_SIZE);
+const _: () = assert!(std::mem::offset_of!(GrSettings, accuracy) == SETTINGS_V2_SIZE);
 
 /// Reads settings written by C, where `method` and `visibility` may hold any 32-bit value.
 /// Range checks of the numbers are the scene's (`GR_STATUS_INVALID_SCENE`).
@@ -128,12 +137,19 @@ pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Me
             (&raw const (*p).memory_budget_mb).read(),
         )
     };
+    // SAFETY: as above; `accuracy` lies inside the caller's struct when `size` covers it.
+    let accuracy = if size as usize >= std::mem::offset_of!(GrSettings, accuracy) + size_of::<f64>() {
+        unsafe { (&raw const (*p).accuracy).read() }
+    } else {
+        Settings::default().accuracy
+    };
     let method = match method {
         0 => Method::Incremental,
         1 => Method::Exact,
         2 => Method::Full,
+        3 => Method::Hierarchical,
         m => {
-            return Err(Failure::invalid(format!("settings.method {m} is not a GrMethod (0, 1 or 2)")));
+            return Err(Failure::invalid(format!("settings.method {m} is not a GrMethod (0 to 3)")));
         }
     };
     let visibility = match visibility {
@@ -159,6 +175,7 @@ pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Me
         threads: threads as usize,
         corner_gather,
         memory_budget_mb: budget,
+        accuracy,
         // Settings the C struct does not carry keep the library's defaults.
         ..Settings::default()
     };

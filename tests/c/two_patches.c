@@ -68,8 +68,8 @@ int main(void) {
     static const uint32_t bad_indices[8] = {0, 1, 2, 3, 0, 1, 7, 3};
     const double expected = 0.5 * 0.199825;
 
-    CHECK(gr_abi_version() == 2);
-    CHECK(GR_ABI_VERSION == 2);
+    CHECK(gr_abi_version() == 3);
+    CHECK(GR_ABI_VERSION == 3);
     CHECK(gr_version_string() != NULL && strlen(gr_version_string()) > 0);
 
     GrSettings settings;

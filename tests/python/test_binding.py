@@ -93,7 +93,7 @@ def closed_box(n):
 
 
 def test_versions(b):
-    assert b.abi_version() == b.ABI_VERSION == 2
+    assert b.abi_version() == b.ABI_VERSION == 3
     cargo = (REPO / "Cargo.toml").read_text()
     assert b.version() == re.search(r'(?m)^version = "([^"]+)"', cargo).group(1)
 
