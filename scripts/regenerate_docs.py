@@ -64,7 +64,7 @@ TABLES: dict[str, Table | None] = {
     "validation": Table(f"{PY} -m tools.validate_cycles --subdiv 12 --samples 4096 --pictures "
                         "&& cp out/validation/validation.json docs/validation.json", 0,
                         f"{PY} -m tools.validate_cycles --subdiv 3 --samples 64 --orders 0 1 --frames 4 "
-                        "--anim-frame 2 --out out/validation-quick", "about 15 min (Cycles)",
+                        "--anim-frame 2 --out out/validation-quick", "about 10 min (Cycles)",
                         stored=f"{PY} -m tools.validate_cycles --table-from docs/validation.json"),
 }
 
