@@ -5,8 +5,12 @@ In Blender:
 With the bpy module (pip install bpy):
     python addon/headless.py --blend scene.blend --frames 1-100 --order 2 --save out.blend
 
-Prints progress lines; on failure prints one line ``galerkin-radiosity: error: ...`` on stderr
-and exits 1 (2 for a usage error). Options not given keep the file's Radiosity settings.
+Prints progress on stdout, flushed line by line: inside a frame a line at most every second
+(``--progress-interval``; stage, the frame's and the bake's percentage, time spent and left), after each frame
+``Radiosity: frame F done (i/n) in T s; bake P%, S spent, about L left``, and last a summary
+line ``Radiosity: summary: solved i of n frame(s) in T, M s a frame``. On failure prints one
+line ``galerkin-radiosity: error: ...`` on stderr and exits 1 (2 for a usage error). Options not
+given keep the file's Radiosity settings.
 
 SIGINT (Ctrl-C) or SIGTERM stops the bake within one progress poll of the library (<= 50 ms
 inside a frame), keeps every complete frame, saves them to ``--save`` and exits 130 or 143. With
@@ -51,9 +55,13 @@ def parse(argv):
     p.add_argument("--save", help="save the result to this .blend (default: nothing is saved)")
     p.add_argument("--checkpoint", type=int, default=DEFAULT_CHECKPOINT, metavar="N",
                    help=f"with --save, save every N solved frames (default {DEFAULT_CHECKPOINT})")
+    p.add_argument("--progress-interval", type=float, default=1.0, metavar="SECONDS",
+                   help="inside a frame, a progress line at most this often (default 1; 0: every report)")
     p.add_argument("--resume", action="store_true",
                    help="open the --save file if it exists and continue from its last complete frame")
     args = p.parse_args(argv)
+    if not args.progress_interval >= 0:
+        p.error(f"--progress-interval {args.progress_interval}: must be at least 0")
     if args.checkpoint < 1:
         p.error(f"--checkpoint {args.checkpoint}: must be at least 1")
     if args.resume and not args.save:
@@ -131,6 +139,10 @@ def frames_arg(text):
 
 def main(argv=None):
     args = parse(script_args(sys.argv if argv is None else argv))
+    try:
+        sys.stdout.reconfigure(line_buffering=True)  # each line out at once, also into a pipe
+    except (AttributeError, ValueError):
+        pass
     import bpy
 
     if args.resume and Path(args.save).exists():
@@ -148,6 +160,7 @@ def main(argv=None):
 
 def _main(args, bpy, pkg):
     bake = importlib.import_module(pkg.__name__ + ".blender.bake")
+    progress = importlib.import_module(pkg.__name__ + ".core.progress")
     scene = bpy.data.scenes.get(args.scene) if args.scene else bpy.context.scene
     if scene is None:
         return fail(f"no scene named {args.scene!r}")
@@ -177,6 +190,7 @@ def _main(args, bpy, pkg):
     if args.no_corner_gather:
         p.corner_gather = False
     view_layer = scene.view_layers[0] if bpy.context.scene != scene else bpy.context.view_layer
+    lines = None
     with bpy.context.temp_override(scene=scene, view_layer=view_layer):
         ctx = bpy.context
         if args.clear:
@@ -185,9 +199,12 @@ def _main(args, bpy, pkg):
         else:
             interrupt = Interrupt()
             interrupt.install()
+            lines = progress.Lines(0, args.progress_interval)  # the frame count comes with the first job
+            bake.listeners.append(lines.listen)
             try:
-                code = _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt)
+                code = _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt, lines)
             finally:
+                bake.listeners.remove(lines.listen)
                 interrupt.uninstall()
             if code is not None:
                 return code
@@ -195,9 +212,12 @@ def _main(args, bpy, pkg):
                 name = signal.Signals(interrupt.signum).name
                 where = f"; run again with --resume --save {args.save} to continue" if args.save else ""
                 print(f"Radiosity: interrupted by {name}, complete frames kept{where}")
+                print(lines.summary())
                 return 128 + interrupt.signum
     if args.save:
         _save(bpy, args.save)
+    if lines is not None:
+        print(lines.summary())
     return 0
 
 
@@ -206,12 +226,13 @@ def _save(bpy, path):
     print(f"Radiosity: saved {path}")
 
 
-def _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt):
+def _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt, lines):
     """Bakes the range as re-bakes of a growing range, ``--checkpoint`` solved frames at a time,
     saving ``--save`` after each (without ``--save``, in one go). Each re-bake keeps the frames
     solved before (the record's digests are unchanged) and goes on in the held session, so the
-    chunks cost what one bake costs, plus sampling the kept frames again. Returns an exit code
-    on failure, else None."""
+    chunks cost what one bake costs, plus sampling the kept frames again. ``lines`` prints the
+    progress across the chunks (told how many frames are left as each chunk starts). Returns an
+    exit code on failure, else None."""
     p = scene.radiosity
     settings = bake.settings_from_scene(scene)
     frames = settings.baked_frames()
@@ -234,8 +255,10 @@ def _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt):
             p.use_scene_range = False
             p.frame_start, p.frame_end = settings.frame_start, frames[min(k, len(frames)) - 1]
             try:
-                job = bake.BakeJob(ctx, bake.settings_from_scene(scene), p.collection, verbose=True)
+                job = bake.BakeJob(ctx, bake.settings_from_scene(scene), p.collection)
                 interrupt.job = job
+                # Frames left: this chunk's (known once it started) and the chunks after it.
+                lines.expect(job, len(frames) - min(k, len(frames)))
                 job.run()
             except bake.BakeError as e:
                 return fail(str(e))
@@ -246,6 +269,7 @@ def _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt):
                 raise
             finally:
                 interrupt.job = None
+            lines.job_ended()
             for line in job.warnings:
                 print(f"Radiosity: warning: {line}")
             print(job.summary)

@@ -4,8 +4,37 @@ clear. Heavy modules are imported inside the methods."""
 from __future__ import annotations
 
 import threading
+import time
+import weakref
 
 import bpy
+
+# Each running modal bake's progress meter (core/progress.Meter), fed at every timer tick.
+_meters: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _show_progress(context, job) -> None:
+    """The window's progress (per mille of the bake), the status bar and the header of the area
+    the bake was started from: frame, stage, the frame's and the bake's percentage, the time spent
+    and an estimate of the time left. The job's raw (fraction, stage) falls back at every stage
+    and frame; the meter maps it onto the bake, monotone."""
+    from .core.progress import Meter, status_text
+
+    now = time.perf_counter()
+    meter = _meters.get(job)
+    if meter is None:
+        meter = _meters[job] = Meter(job.total, now)
+    while meter.done < job.done:
+        meter.frame_done(now)
+    # After the last commit the job's fraction is the finished frame's: nothing more to report.
+    r = meter.report(job.fraction, job.stage, now) if job.done < job.total else meter.reading(now)
+    context.window_manager.progress_update(int(1000 * r.bake_fraction))
+    frame = job.current[0] if getattr(job, "current", None) else ""
+    text = status_text(frame, min(job.done + 1, job.total), job.total, job.stage, r)
+    context.workspace.status_text_set(text)
+    area = getattr(context, "area", None)
+    if area is not None:
+        area.header_text_set(text)
 
 
 class RADIOSITY_OT_bake(bpy.types.Operator):
@@ -39,8 +68,12 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
 
     def execute(self, context):
         from .blender import bake
+        from .core.progress import Lines
 
-        job = self._make_job(context, verbose=True)
+        job = self._make_job(context, verbose=False)
+        lines = Lines(0)  # monotone progress lines with the time left, on stdout
+        lines.expect(job)
+        bake.listeners.append(lines.listen)
         try:
             job.run()
         except bake.BakeError as e:
@@ -48,6 +81,8 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
                 self.report({"WARNING"}, line)
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
+        finally:
+            bake.listeners.remove(lines.listen)
         self._report_end(job)
         print(job.summary)
         return {"FINISHED"}
@@ -105,13 +140,8 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
             return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"RUNNING_MODAL"}  # the UI is blocked while baking (the viewport still redraws)
-        total = max(job.total, 1)
-        done = job.done + job.fraction
-        context.window_manager.progress_update(int(1000 * done / total))
+        _show_progress(context, job)
         frame = job.current[0] if getattr(job, "current", None) else ""
-        context.workspace.status_text_set(
-            f"Radiosity: frame {frame} ({job.done + 1}/{job.total}) {job.stage} "
-            f"{100 * job.fraction:.0f}%  Esc: cancel")
         if self._thread is not None and self._thread.is_alive():
             return {"RUNNING_MODAL"}
         from .blender import bake
@@ -145,9 +175,14 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
         if self._timer is not None:
             wm.event_timer_remove(self._timer)
             self._timer = None
+        _show_progress(context, self._job)  # the last frame's commit: 100% when all are done
         wm.progress_end()
         context.workspace.status_text_set(None)
         self._job.failed = failed  # a failed bake, like a cancelled one, keeps the previous bake
+        area = getattr(context, "area", None)
+        if area is not None:
+            area.header_text_set(None)
+        _meters.pop(self._job, None)
         self._job.finish()
         # FINISHED whenever frames were written, so that the undo step covers them.
         result = {"FINISHED"} if self._job.done else {"CANCELLED"}

@@ -53,6 +53,12 @@ fn main() {
             "",
         ),
     ];
+    // The caption, then the table: docs/benchmarks.md's "animation" block (scripts/regenerate_docs.py).
+    println!(
+        "The seed's scenes and the moving-light box: {frames} frames, order 2, visibility on, corner gather \
+         off, the three methods one after the other, means over frames 2..{frames}, {} threads:\n",
+        rayon::current_num_threads()
+    );
     println!(
         "| scene | patches | first frame s | series s/frame | exact s/frame | full s/frame | saving vs full | x full | x exact | links/frame by series / recomputed | paper's saving |"
     );
@@ -75,8 +81,4 @@ fn main() {
             inc.recomputed,
         );
     }
-    println!(
-        "\n{frames} frames each; means over frames 2..{frames}; 2 threads (`rayon::current_num_threads()` = {}).",
-        rayon::current_num_threads()
-    );
 }

@@ -1,7 +1,11 @@
 #!/usr/bin/env bash
-# Reruns the benches / tools named and rewrites their tables in docs/benchmarks.md (between the
-# `<!-- BEGIN generated: NAME -->` markers). `bash scripts/regenerate-docs.sh --list` lists them.
-# Long (minutes per bench) and load-sensitive: run on a quiet machine.
+# Reruns the benches / tools that measure docs/benchmarks.md's tables and rewrites their blocks
+# (between the `<!-- BEGIN generated: NAME -->` markers):
+#   bash scripts/regenerate-docs.sh --list                       the sections, commands and costs
+#   bash scripts/regenerate-docs.sh --section NAME [--section ...] rerun and rewrite those
+#   bash scripts/regenerate-docs.sh --quick --section NAME       a reduced case, printed, not written
+#   bash scripts/regenerate-docs.sh --stored --section validation  from the last run's saved report
+# The full runs are long (minutes per bench) and load-sensitive: run them on a quiet machine.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 exec python3 scripts/regenerate_docs.py "$@"

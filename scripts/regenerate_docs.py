@@ -1,6 +1,9 @@
-"""Rewrites the generated tables of docs/benchmarks.md from the commands that print them.
+"""Rewrites the generated tables of docs/benchmarks.md from the commands that measure them.
 
-    python3 scripts/regenerate_docs.py [--list] [--dry-run] NAME...
+    python3 scripts/regenerate_docs.py --list
+    python3 scripts/regenerate_docs.py --section NAME [--section NAME ...] [--dry-run]
+    python3 scripts/regenerate_docs.py --quick --section NAME     # the plumbing, on a reduced case
+    python3 scripts/regenerate_docs.py --stored --section validation  # from the last run's report
 
 docs/benchmarks.md holds blocks
 
@@ -8,55 +11,91 @@ docs/benchmarks.md holds blocks
     ...
     <!-- END generated: NAME -->
 
-and TABLES below says which command prints each NAME's table (the benches and tools print
-markdown tables themselves). Each command named runs once, its stdout is kept, and every block
-of that command is replaced by its table with a line saying what made it, when, at which commit.
-Nothing outside the markers is touched: the history sections are kept as they were written.
-The benches are long (minutes each) and their timings depend on the machine's load: run them
-on a quiet machine.
+and TABLES below says which command prints each NAME's table: the benches and tools print their
+tables in markdown themselves, each after a one-line caption. Each command named runs once, its
+stdout is kept, and every block of that command is replaced by its caption and table, with a
+line saying what made it, when, at which commit and under what load. Nothing outside the markers
+is touched: the history around the blocks stays as it was written.
+
+The benches take minutes and their timings depend on the machine's load: run them on a quiet
+machine. ``--quick`` runs each section's reduced case instead (seconds) and, unless ``--doc``
+names another file, only prints the blocks it would write: it checks that the command still
+prints the table the block wants, without putting a reduced case's numbers into the document.
 """
+
+from __future__ import annotations
 
 import argparse
 import datetime
+import os
 import re
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 DOC = REPO / "docs" / "benchmarks.md"
 PY = ".venv/bin/python"
 
-# NAME -> (command, which markdown table of its output: 0 = the first, ...)
-TABLES = {
+
+@dataclass(frozen=True)
+class Table:
+    command: str      # prints the table (and others)
+    index: int        # which markdown table of its output: 0 = the first
+    quick: str        # the same tables on a reduced case, to check the plumbing
+    cost: str         # what a full run takes, for --list
+    stored: str = ""  # prints the table of the last full run's saved report, measuring nothing
+
+
+TABLES: dict[str, Table | None] = {
     "accuracy": None,  # assertions of the test suite, kept by hand (see the section)
-    "scaling-static": ("cargo bench --bench scaling", 0),
-    "scaling-demo": ("cargo bench --bench scaling", 1),
-    "animation": ("cargo bench --bench animation", 0),
-    "ab-moving-light": (f"{PY} -m tools.ab HEAD --exact HEAD --runs 5 --gather", 0),
-    "tolerance": (f"{PY} -m tools.tolerance_sweep", 0),
-    "validation": (f"{PY} -m tools.validate_cycles --subdiv 12 --samples 4096 --pictures", 0),
+    "scaling-static": Table("cargo bench --bench scaling", 0, "cargo bench --bench scaling -- --quick",
+                            "about 1 min"),
+    "scaling-demo": Table("cargo bench --bench scaling", 1, "cargo bench --bench scaling -- --quick",
+                          "(the same run)"),
+    "animation": Table("cargo bench --bench animation", 0, "cargo bench --bench animation -- --quick",
+                       "about 5 min"),
+    "ab-moving-light": Table(f"{PY} -m tools.ab HEAD --exact HEAD --runs 5 --gather", 0,
+                             f"{PY} -m tools.ab WORK --exact WORK --runs 1 --frames 4 --gather",
+                             "a build of the revision, then about 3 min"),
+    "tolerance": Table(f"{PY} -m tools.tolerance_sweep", 0,
+                       f"{PY} -m tools.tolerance_sweep --frames 4 --subdiv 6", "about 1.5 min"),
+    "validation": Table(f"{PY} -m tools.validate_cycles --subdiv 12 --samples 4096 --pictures "
+                        "&& cp out/validation/validation.json docs/validation.json", 0,
+                        f"{PY} -m tools.validate_cycles --subdiv 3 --samples 64 --orders 0 1 --frames 4 "
+                        "--anim-frame 2 --out out/validation-quick", "about 10 min (Cycles)",
+                        stored=f"{PY} -m tools.validate_cycles --table-from docs/validation.json"),
 }
 
 BLOCK = re.compile(
     r"(<!-- BEGIN generated: (?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- END generated: (?P=name) -->)", re.S)
 
+# Lines of cargo's and the tools' own chatter, never a caption.
+NOT_CAPTIONS = ("run ", "Compiling", "Finished", "Running", "Cycles", "order ", "animated ", "moving light",
+                "picture", "warning", "Radiosity:")
+
 
 def tables(text: str) -> list[str]:
     """The markdown tables of a command's output, each with the non-blank line just above it
-    when that line is a caption (the validation tool prints one)."""
+    as its caption (a markdown heading's marks dropped), when there is one."""
     out, cur, caption = [], [], ""
+
+    def close():
+        out.append("\n".join(([caption, ""] if caption else []) + cur))
+
     for line in text.splitlines():
         if line.startswith("|"):
             cur.append(line)
             continue
         if cur:
-            out.append("\n".join(([caption, ""] if caption else []) + cur))
+            close()
             cur, caption = [], ""
         if line.strip():
-            caption = line.strip() if not line.startswith(("run ", "Compiling", "Finished")) else ""
+            text_ = line.strip().lstrip("#").strip()
+            caption = "" if text_.startswith(NOT_CAPTIONS) else text_
     if cur:
-        out.append("\n".join(([caption, ""] if caption else []) + cur))
+        close()
     return out
 
 
@@ -71,57 +110,93 @@ def revision() -> str:
         return "unknown"
 
 
-def regenerate(names: list[str], doc: Path = DOC, run=None, dry_run: bool = False) -> str:
-    run = run or (lambda cmd: subprocess.run(cmd, shell=True, cwd=REPO, capture_output=True, text=True,
-                                             check=True).stdout)
+def load() -> str:
+    try:
+        return f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
+    except OSError:
+        return f"{os.cpu_count()} cores"
+
+
+def run_command(cmd: str) -> str:
+    proc = subprocess.run(cmd, shell=True, cwd=REPO, capture_output=True, text=True)
+    if proc.returncode != 0:
+        tail = " | ".join(proc.stderr.strip().splitlines()[-3:])
+        raise SystemExit(f"regenerate_docs: error: `{cmd}` exited {proc.returncode}: {tail}")
+    return proc.stdout
+
+
+def regenerate(names: list[str], doc: Path = DOC, run=None, quick: bool = False,
+               stored: bool = False) -> tuple[str, dict]:
+    """The document with the blocks `names` rewritten, and the new bodies by name. Every command
+    runs before anything is written: a failing one leaves the document as it was. `quick`: the
+    reduced cases; `stored`: the tables of the saved reports of the last full runs."""
+    run = run or run_command
     text = doc.read_text()
     present = {m["name"] for m in BLOCK.finditer(text)}
     for name in names:
         if name not in TABLES:
-            raise SystemExit(f"regenerate_docs: error: unknown table {name!r}; known: {', '.join(TABLES)}")
+            raise SystemExit(f"regenerate_docs: error: unknown section {name!r}; known: {', '.join(TABLES)}")
         if TABLES[name] is None:
             raise SystemExit(f"regenerate_docs: error: {name!r} is written by hand (see its section)")
         if name not in present:
             raise SystemExit(f"regenerate_docs: error: no block '{name}' in {doc}")
+        if stored and not TABLES[name].stored:
+            raise SystemExit(f"regenerate_docs: error: '{name}' keeps no report to print "
+                             "(run it, or --quick)")
     outputs: dict[str, str] = {}
-    stamp = f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC, commit {revision()}"
-
-    def replace(m):
-        name = m["name"]
-        if name not in names:
-            return m.group(0)
-        cmd, index = TABLES[name]
+    when = f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC, commit {revision()}"
+    stamp = f"{when}, {load()}"
+    bodies: dict[str, str] = {}
+    for name in names:
+        t = TABLES[name]
+        cmd = t.quick if quick else t.stored if stored else t.command
         if cmd not in outputs:
             print(f"running: {cmd}", file=sys.stderr, flush=True)
             outputs[cmd] = run(cmd)
         found = tables(outputs[cmd])
-        if index >= len(found):
+        if t.index >= len(found):
             raise SystemExit(f"regenerate_docs: error: `{cmd}` printed {len(found)} table(s), "
-                             f"block '{name}' wants number {index + 1}")
-        body = f"_Generated by `{cmd}` ({stamp})._\n\n{found[index]}\n"
-        return m.group(1) + body + m.group(4)
+                             f"block '{name}' wants number {t.index + 1}")
+        what = ("reduced case, not for the document" if quick else
+                f"from the report of the last full run, `{t.command}`; printed {when}" if stored else stamp)
+        bodies[name] = f"_Generated by `{cmd}` ({what})._\n\n{found[t.index]}\n"
 
-    new = BLOCK.sub(replace, text)
-    if not dry_run:
-        doc.write_text(new)
-    return new
+    def replace(m):
+        name = m["name"]
+        return m.group(1) + bodies[name] + m.group(4) if name in bodies else m.group(0)
+
+    return BLOCK.sub(replace, text), bodies
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("names", nargs="*", help="tables to regenerate (default: --list)")
-    p.add_argument("--list", action="store_true", help="list the tables and their commands")
-    p.add_argument("--dry-run", action="store_true", help="print the new document instead of writing it")
+    p.add_argument("names", nargs="*", help="sections to regenerate (as --section)")
+    p.add_argument("--section", action="append", default=[], metavar="NAME",
+                   help="a section to regenerate (repeatable); --list names them")
+    p.add_argument("--list", action="store_true", help="list the sections, their commands and costs")
+    p.add_argument("--dry-run", action="store_true", help="print the regenerated blocks, write nothing")
+    p.add_argument("--quick", action="store_true",
+                   help="run the reduced cases; prints the blocks unless --doc names a file to write")
+    p.add_argument("--stored", action="store_true",
+                   help="print the tables from the last full runs' saved reports "
+                        "(validation: docs/validation.json)")
+    p.add_argument("--doc", type=Path, help=f"the document to rewrite (default {DOC.relative_to(REPO)})")
     args = p.parse_args(argv)
-    if args.list or not args.names:
-        for name, spec in TABLES.items():
-            print(f"{name:16} {spec[0] if spec else '(by hand)'}")
+    names = list(dict.fromkeys(args.names + args.section))
+    if args.list or not names:
+        for name, t in TABLES.items():
+            print(f"{name:16} {f'{t.command}   [{t.cost}]' if t else '(by hand)'}")
         return 0
-    new = regenerate(args.names, dry_run=args.dry_run)
-    if args.dry_run:
-        print(new)
-    else:
-        print(f"rewrote {', '.join(args.names)} in {DOC.relative_to(REPO)}", file=sys.stderr)
+    doc = args.doc or DOC
+    if args.quick and args.stored:
+        p.error("--quick and --stored exclude each other")
+    new, bodies = regenerate(names, doc=doc, quick=args.quick, stored=args.stored)
+    if args.dry_run or (args.quick and args.doc is None):
+        for name, body in bodies.items():
+            print(f"<!-- BEGIN generated: {name} -->\n{body}<!-- END generated: {name} -->\n")
+        return 0
+    doc.write_text(new)
+    print(f"rewrote {', '.join(names)} in {doc}", file=sys.stderr)
     return 0
 
 

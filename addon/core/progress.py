@@ -1,0 +1,189 @@
+"""Progress a person can read, for the add-on: the Python twin of ``src/progress.rs``.
+
+The library reports ``(fraction, stage)`` per stage ("kernel", "kernel update", "solve",
+"corner gather"), each from 0 to 1, so the raw fraction falls back at every stage change. A
+``Meter`` maps each stage onto its share of a frame (the same shares as the CLI's), keeps the
+largest value seen in the frame, and estimates the time left: within a frame by the frame's own
+rate, for the bake by the finished frames' mean (the first frame's estimate while none is done).
+
+``Lines`` turns the events of a bake into the lines the headless script prints: one at most every
+``interval`` seconds inside a frame, one per finished frame, each with the time spent and left,
+and a closing summary.
+Both are called from the library's worker threads (one call at a time, but not the main thread):
+a lock guards the state, and nothing here touches bpy.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from dataclasses import dataclass
+
+
+def share(stage: str) -> tuple[float, float]:
+    """Where ``stage`` starts in a frame and how much of it it spans (``src/progress.rs``)."""
+    if stage in ("kernel", "kernel update"):
+        return 0.0, 0.45
+    if stage == "solve":
+        return 0.45, 0.1
+    if stage == "corner gather":
+        return 0.55, 0.45
+    return 0.0, 1.0
+
+
+@dataclass
+class Reading:
+    frame_fraction: float      # of the current frame, never less than the frame's last reading
+    bake_fraction: float       # of the whole bake
+    elapsed: float             # seconds since the meter started
+    frame_left: float | None   # seconds; None until something is known
+    bake_left: float | None
+
+
+class Meter:
+    """The progress of a bake of ``frames`` frames (times in seconds of ``time.perf_counter``)."""
+
+    def __init__(self, frames: int, now: float | None = None):
+        now = time.perf_counter() if now is None else now
+        self.frames = max(int(frames), 1)
+        self.done = 0
+        self.start = self.frame_start = now
+        self.fraction = 0.0
+        self.finished = 0.0   # the finished frames' total time
+
+    def report(self, fraction: float, stage: str, now: float) -> Reading:
+        start, span = share(stage)
+        f = min(max(start + span * min(max(fraction, 0.0), 1.0), 0.0), 1.0)
+        self.fraction = max(self.fraction, f)
+        return self.reading(now)
+
+    def frame_done(self, now: float) -> None:
+        self.finished += max(now - self.frame_start, 0.0)
+        self.done += 1
+        self.frame_start = now
+        self.fraction = 0.0
+
+    def reading(self, now: float) -> Reading:
+        in_frame = max(now - self.frame_start, 0.0)
+        frame_left = in_frame * (1.0 - self.fraction) / self.fraction if self.fraction > 0 else None
+        if self.done:
+            per_frame = self.finished / self.done
+        else:
+            per_frame = None if frame_left is None else in_frame + frame_left
+        rest = max(self.frames - self.done - 1, 0)
+        if per_frame is None:
+            bake_left = None
+        elif frame_left is None:
+            bake_left = (1 + rest) * per_frame if self.done < self.frames else 0.0
+        else:
+            bake_left = frame_left + rest * per_frame
+        return Reading(
+            frame_fraction=self.fraction,
+            bake_fraction=min((self.done + self.fraction) / self.frames, 1.0),
+            elapsed=max(now - self.start, 0.0),
+            frame_left=frame_left,
+            bake_left=bake_left,
+        )
+
+
+def human(seconds: float | None) -> str:
+    """``1 h 02 m``, ``3 m 07 s``, ``12.3 s``; ``?`` for unknown."""
+    if seconds is None:
+        return "?"
+    s = max(seconds, 0.0)
+    if s >= 3600:
+        return f"{int(s // 3600)} h {int(s % 3600 // 60):02d} m"
+    if s >= 60:
+        return f"{int(s // 60)} m {int(s % 60):02d} s"
+    return f"{s:.1f} s"
+
+
+def status_text(frame, index: int, total: int, stage: str, r: Reading) -> str:
+    """The status bar / header line of a bake in the UI."""
+    return (f"Radiosity: frame {frame} ({index}/{total}): {stage or 'preparing'}, "
+            f"frame {100 * r.frame_fraction:.0f}%, {human(r.frame_left)} left | "
+            f"bake {100 * r.bake_fraction:.0f}%, {human(r.elapsed)} spent, "
+            f"{human(r.bake_left)} left | Esc: cancel")
+
+
+class Lines:
+    """Progress lines of a bake for a terminal, from the bake's listener events.
+
+    Inside a frame, a line at most every ``interval`` seconds (the library calls back every few
+    milliseconds); after each frame, ``Radiosity: frame F done (i/n) in T s; bake P%, S spent,
+    about L left``; ``summary()`` gives the closing line. A bake in several jobs (the headless
+    checkpoints) announces each with ``expect``, which keeps ``i/n`` counting across them.
+    """
+
+    def __init__(self, frames: int, interval: float = 1.0, out=None, clock=time.perf_counter):
+        self.clock = clock
+        self.meter = Meter(frames, clock())
+        self.interval = interval
+        self.out = out
+        self.last_line = self.meter.start
+        self.lock = threading.Lock()
+        self.frame_seconds: list[float] = []
+        self.job = None
+        self.beyond = 0
+        self.kept = None   # frames the first job kept from an earlier bake
+        self._job_seen = True
+
+    def expect(self, job, beyond: int = 0) -> None:
+        """The events to come are ``job``'s, and ``beyond`` frames follow it in later jobs. The
+        job's own count is known once it started, so the total is set at its first event."""
+        with self.lock:
+            self.job, self.beyond = job, beyond
+            self._job_seen = False
+
+    def job_ended(self) -> None:
+        """The expected job returned (its counts count even when it solved nothing)."""
+        with self.lock:
+            self._see_job()
+
+    def _see_job(self) -> None:
+        if not self._job_seen:
+            self._job_seen = True
+            self.meter.frames = max(self.meter.done + int(self.job.total) + self.beyond, 1)
+            if self.kept is None:
+                self.kept = int(self.job.kept)
+
+    def listen(self, event: dict) -> None:
+        """A listener of ``addon.blender.bake``: never cancels, never raises."""
+        with self.lock:
+            now = self.clock()
+            m = self.meter
+            self._see_job()
+            if event.get("kind") == "progress":
+                r = m.report(float(event["fraction"]), str(event["stage"]), now)
+                if now - self.last_line >= self.interval:
+                    self.last_line = now
+                    self._print(f"Radiosity: frame {event['frame']} ({m.done + 1}/{m.frames}): "
+                                f"{event['stage']}, frame {100 * r.frame_fraction:.0f}%, "
+                                f"{human(r.frame_left)} left; bake {100 * r.bake_fraction:.0f}%, "
+                                f"{human(r.elapsed)} spent, about {human(r.bake_left)} left")
+            elif event.get("kind") == "frame":
+                m.frame_done(now)
+                self.frame_seconds.append(float(event["seconds"]))
+                r = m.reading(now)
+                self.last_line = now
+                self._print(f"Radiosity: frame {event['frame']} done ({m.done}/{m.frames}) in "
+                            f"{event['seconds']:.2f} s; bake {100 * r.bake_fraction:.0f}%, "
+                            f"{human(r.elapsed)} spent, about {human(r.bake_left)} left")
+        return None
+
+    def summary(self) -> str:
+        with self.lock:
+            kept = self.kept or 0
+            n = len(self.frame_seconds)
+            elapsed = self.clock() - self.meter.start
+            mean = f", {sum(self.frame_seconds) / n:.2f} s a frame" if n else ""
+            more = f"; {kept} frame(s) kept from before" if kept else ""
+            return (f"Radiosity: summary: solved {n} of {self.meter.frames} frame(s) in "
+                    f"{human(elapsed)}{mean}{more}")
+
+    def _print(self, line: str) -> None:
+        try:
+            print(line, file=self.out or sys.stdout, flush=True)
+        except (OSError, ValueError):
+            pass  # a closed terminal must not cancel the bake

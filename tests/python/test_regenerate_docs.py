@@ -1,0 +1,60 @@
+"""docs/benchmarks.md's generated blocks come from the commands that measure them
+(scripts/regenerate_docs.py): run for real on the cheap cases, against a copy of the document."""
+
+import importlib.util
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+spec = importlib.util.spec_from_file_location("regenerate_docs", REPO / "scripts" / "regenerate_docs.py")
+regen = importlib.util.module_from_spec(spec)
+sys.modules["regenerate_docs"] = regen  # dataclasses look their module up there
+spec.loader.exec_module(regen)
+
+
+def _blocks(text):
+    return {m["name"]: m["body"] for m in regen.BLOCK.finditer(text)}
+
+
+def _header(body):
+    return next(line for line in body.splitlines() if line.startswith("|"))
+
+
+def test_every_block_has_a_command_and_every_command_a_block():
+    blocks = _blocks(regen.DOC.read_text())
+    assert set(blocks) == {name for name, t in regen.TABLES.items() if t is not None}
+
+
+def test_the_validation_block_is_the_tools_table_of_the_stored_report(tmp_path):
+    doc = tmp_path / "benchmarks.md"
+    shutil.copy(regen.DOC, doc)
+    new, bodies = regen.regenerate(["validation"], doc=doc, stored=True)
+    table = subprocess.run([sys.executable, "-m", "tools.validate_cycles", "--table-from",
+                            str(REPO / "docs" / "validation.json")], cwd=REPO, capture_output=True,
+                           text=True, check=True).stdout.strip()
+    assert bodies["validation"].strip().endswith(table)
+    assert _blocks(new)["validation"] == bodies["validation"]
+    # Only that block changed.
+    before, after = regen.BLOCK.sub("", doc.read_text()), regen.BLOCK.sub("", new)
+    assert before == after
+    # The document's block prints the same table (it was regenerated from this report).
+    assert _blocks(regen.DOC.read_text())["validation"].strip().endswith(table)
+
+
+@pytest.mark.skipif(not (REPO / "target" / "release" / "galerkin-radiosity").exists(),
+                    reason="needs the CLI: cargo build --release")
+def test_the_tolerance_sweep_still_prints_the_table_its_block_wants(tmp_path):
+    doc = tmp_path / "benchmarks.md"
+    shutil.copy(regen.DOC, doc)
+    _, bodies = regen.regenerate(["tolerance"], doc=doc, quick=True)
+    body = bodies["tolerance"]
+    assert "reduced case" in body
+    assert _header(body) == _header(_blocks(regen.DOC.read_text())["tolerance"])
+    rows = [line for line in body.splitlines() if line.startswith("| 1e-4") or line.startswith("| 3e-4")
+            or line.startswith("| 1e-3")]
+    assert len(rows) == 3
+
