@@ -8,12 +8,14 @@
 //! - [`settings`]: `GrSettings`, `GrMethod`.
 //! - [`session`]: `GrSession` and its functions.
 //! - [`lights`]: `GrLight` and `gr_session_set_lights` (Blender Light objects).
+//! - [`surface`]: `gr_session_set_object_surface` (smooth-shading normals, per-face reflectance).
 
 pub mod error;
 pub mod lights;
 pub mod panic;
 pub mod session;
 pub mod settings;
+pub mod surface;
 
 use std::ffi::{CStr, c_char};
 
@@ -28,6 +30,7 @@ pub use session::{
     gr_session_solve_frame,
 };
 pub use settings::{GrMethod, GrSettings, gr_settings_default};
+pub use surface::gr_session_set_object_surface;
 
 /// The version of this C ABI. It changes only when a declaration in this header changes
 /// incompatibly; check it after loading the library.

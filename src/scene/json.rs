@@ -174,6 +174,12 @@ struct ObjectFile {
     matrix: Option<[f64; 16]>,
     #[serde(default)]
     animation: Vec<KeyFile>,
+    /// Shading normal per face corner (smooth shading; `[0,0,0]`: the face's own), object space.
+    #[serde(default)]
+    corner_normals: Vec<[f64; 3]>,
+    /// Reflectance per face, overriding the face's material's (a texture's mean over the face).
+    #[serde(default)]
+    face_reflectance: Vec<[f64; 3]>,
 }
 
 #[derive(Deserialize)]
@@ -236,7 +242,12 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
     }
     let n_materials = materials.len();
     let mut objects = Vec::new();
+    let mut surfaces = Vec::new();
     for (o, obj) in file.objects.into_iter().enumerate() {
+        surfaces.push(super::Surface {
+            corner_normals: obj.corner_normals.iter().map(|n| DVec3::from_array(*n)).collect(),
+            face_reflectance: obj.face_reflectance.clone(),
+        });
         let name = obj.name.unwrap_or_else(|| format!("object {o}"));
         let place = format!("object \"{name}\"");
         let vertices: Vec<DVec3> = obj.vertices.iter().map(|v| DVec3::from_array(*v)).collect();
@@ -295,7 +306,9 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
     };
     let lights =
         file.lights.into_iter().enumerate().map(|(l, f)| parse_light(l, f)).collect::<Result<_>>()?;
-    Scene::new(settings, frames, materials, emission_keys, objects)?.with_lights(lights)
+    Scene::new(settings, frames, materials, emission_keys, objects)?
+        .with_lights(lights)?
+        .with_surfaces(surfaces)
 }
 
 /// Reads and parses a scene file.
@@ -327,6 +340,18 @@ pub struct ResultFile {
     pub stats: serde_json::Value,
 }
 
+/// An object's `corner_normals` and `face_reflectance`, where it has them.
+fn surface_to_json(object: &mut serde_json::Value, surface: Option<&super::Surface>) {
+    let Some(s) = surface else { return };
+    if !s.corner_normals.is_empty() {
+        object["corner_normals"] =
+            serde_json::json!(s.corner_normals.iter().map(|n| n.to_array()).collect::<Vec<_>>());
+    }
+    if !s.face_reflectance.is_empty() {
+        object["face_reflectance"] = serde_json::json!(s.face_reflectance);
+    }
+}
+
 /// Writes a scene as a version-1 scene file (placement keys included).
 pub fn scene_to_json(scene: &Scene) -> String {
     use serde_json::json;
@@ -344,7 +369,8 @@ pub fn scene_to_json(scene: &Scene) -> String {
     let objects: Vec<_> = scene
         .objects
         .iter()
-        .map(|o| {
+        .enumerate()
+        .map(|(i, o)| {
             let animation: Vec<_> = o
                 .animation
                 .iter()
@@ -355,14 +381,16 @@ pub fn scene_to_json(scene: &Scene) -> String {
                     KeyTransform::Matrix(m) => json!({"frame": k.frame, "matrix": row_major(m)}),
                 })
                 .collect();
-            json!({
+            let mut object = json!({
                 "name": o.name,
                 "vertices": o.vertices.iter().map(|v| v.to_array()).collect::<Vec<_>>(),
                 "faces": o.faces,
                 "face_materials": o.face_materials,
                 "matrix": row_major(&o.matrix),
                 "animation": animation,
-            })
+            });
+            surface_to_json(&mut object, scene.surfaces.get(i));
+            object
         })
         .collect();
     let lights: Vec<_> = scene
