@@ -135,3 +135,34 @@ def test_flat_meshes_export_no_normals_and_smooth_ones_their_corner_normals(blen
     custom = export.export(bpy.context.evaluated_depsgraph_get(), [model]).objects[0].data
     np.testing.assert_allclose(custom.corner_normals, np.tile([0.0, 0.0, 1.0], (len(model.data.loops), 1)),
                                atol=1e-3)  # custom normals are stored compressed
+
+
+def test_a_mirrored_smooth_copy_is_lit_like_its_mirror_image(blender):
+    """Item 5 with smooth shading: the shading normals of a negative-scale copy are placed by the
+    inverse transpose (Blender's normal matrix), so a smooth sphere and its mirror image under a
+    light on the mirror plane read the same values corner for corner."""
+    bpy = blender
+    white = _diffuse(bpy, "White", (0.7, 0.7, 0.7))
+    verts, faces = grid_quad((-2, -2, 0), (4, 0, 0), (0, 4, 0), 8)
+    mesh_object(bpy, "Floor", verts, faces, white)
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=12, ring_count=6, radius=0.3, location=(-0.6, 0, 0.4))
+    left = bpy.context.active_object
+    left.data.materials.append(white)
+    _shade(left, True)
+    right = bpy.data.objects.new("Right", left.data.copy())   # its own mesh, its own colours
+    right.location = (0.6, 0.0, 0.4)
+    right.scale = (-1.0, 1.0, 1.0)
+    bpy.context.scene.collection.objects.link(right)
+    data = bpy.data.lights.new("Lamp", "POINT")
+    data.energy = 200.0
+    data.shadow_soft_size = 0.0
+    lamp = bpy.data.objects.new("Lamp", data)
+    lamp.location = (0.0, -0.4, 1.8)
+    bpy.context.scene.collection.objects.link(lamp)
+    sc = bpy.context.scene
+    sc.frame_start = sc.frame_end = 1
+    assert bake(bpy, method="FULL") == {"FINISHED"}
+    # Copies of one mesh: corner k of the right sphere is the mirror image of the left one's.
+    a, b = stored(left.data, 1), stored(right.data, 1)
+    assert a.mean() > 0.02 and _vertex_spread(right.data, b) < 1e-5
+    np.testing.assert_allclose(b, a, rtol=5e-3, atol=5e-3 * a.max())
