@@ -721,6 +721,31 @@ void gr_session_free(struct GrSession *s);
  */
 GrStatus gr_settings_default(struct GrSettings *out);
 
+/**
+ * Sets object `object`'s shading normals and per-face reflectance; the next solved frame is
+ * built afresh with them (set them before the first frame).
+ *
+ * - `corner_normals`: 3 floats per face corner (faces in order, corners in face order as given
+ *   to `gr_session_new`), object space, a zero vector for "the face's own normal"; or NULL with
+ *   `corner_normals_len` 0 for flat faces everywhere. A corner with a normal is gathered with it
+ *   (smooth shading: the faces of a smooth vertex get one value).
+ * - `face_reflectance`: 3 floats (RGB, each in [0,1)) per face, overriding the face's
+ *   material's reflectance; or NULL with `face_reflectance_len` 0 for the materials'.
+ *
+ * The lengths are in floats. Returns `GR_STATUS_INVALID_ARGUMENT` for an object out of range
+ * or a length that is not 3 x the corners or faces, `GR_STATUS_INVALID_SCENE` for a value out
+ * of range; on error nothing changes.
+ *
+ * # Safety
+ * `s` is NULL or a live session; each non-NULL pointer points to its length of readable floats.
+ */
+GrStatus gr_session_set_object_surface(struct GrSession *s,
+                                       uint32_t object,
+                                       const float *corner_normals,
+                                       size_t corner_normals_len,
+                                       const float *face_reflectance,
+                                       size_t face_reflectance_len);
+
 #ifdef __cplusplus
 }  // extern "C"
 #endif  // __cplusplus

@@ -823,7 +823,7 @@ pub fn advance(
             .into_par_iter()
             .filter(|&r| first[r] < first[r + 1])
             .filter_map(|r| {
-                let rho = next.materials[new_elements[r].material as usize].reflectance;
+                let rho = new_elements[r].reflectance(next);
                 let bounded = hemisphere::bounded_reflectance(&sys_ref.links, r as u32, rho);
                 (bounded != sys_ref.reflectance[r]).then_some((r, bounded))
             })
@@ -875,8 +875,7 @@ pub fn advance(
     // The transfers were moved with the previous areas; a scaled element reweighs them all.
     sys.links.set_receiver_areas(&sys.areas());
     sys.emission = emission;
-    let surface: Vec<[f64; 3]> =
-        sys.elements.iter().map(|e| next.materials[e.material as usize].reflectance).collect();
+    let surface: Vec<[f64; 3]> = sys.elements.iter().map(|e| e.reflectance(next)).collect();
     if surface != sys.surface_reflectance {
         // A material changed: Delta K is not formed for that (as before the bound), the bound
         // is taken afresh.

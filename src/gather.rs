@@ -51,6 +51,7 @@ use crate::kernel::samples::Samples;
 use crate::links::ElementId;
 use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
+use crate::scene::surface::world_normal;
 use crate::solids::Solids;
 use crate::system::{Progress, System, corner_params};
 use crate::visibility::shaft::Shaft;
@@ -189,12 +190,16 @@ pub struct GatherStats {
 }
 
 /// A corner point: faces of one object meeting at a vertex with the same normal and material see
-/// the same light there (4 faces per vertex of a grid), gathered once.
+/// the same light there (4 faces per vertex of a grid), gathered once. A smooth-shaded corner
+/// has the mesh's interpolated normal ([`crate::scene::Surface::corner_normals`]), so the faces
+/// of a smooth vertex share one point and one value: no facets, as Cycles bakes them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct CornerPoint {
     /// The element covering it and the local point (inset), or `None` for a skipped face.
     at: Option<(usize, f64, f64)>,
     material: u32,
+    /// The world-space shading normal, where it is not the face's own.
+    normal: Option<DVec3>,
 }
 
 /// One point's sources, sorted by element, with how their visibility was decided and their
@@ -286,7 +291,7 @@ impl CornerGather {
         let is_emitter: Vec<bool> =
             (0..patches.len()).map(|e| sys.emission[e * nb].iter().any(|&x| x > 0.0)).collect();
         let emitters: Vec<usize> = (0..patches.len()).filter(|&e| is_emitter[e]).collect();
-        let (points, point_of_corner, corners_per_object) = corner_points(sys, scene);
+        let (points, point_of_corner, corners_per_object) = corner_points(sys, scene, frame);
 
         // What moved since `previous`, by object: each object's old and new bounds.
         let previous = previous.filter(|p| p.points == points && p.patches.len() == patches.len());
@@ -428,7 +433,7 @@ impl CornerGather {
                     .iter()
                     .zip(kept)
                     .map(|(point, kept)| match point.at {
-                        Some((e, s, t)) => gather.row(e, s, t, kept, true),
+                        Some((e, s, t)) => gather.row(e, s, t, point.normal, kept, true),
                         None => (Row::default(), 0),
                     })
                     .collect();
@@ -452,7 +457,7 @@ impl CornerGather {
                         values[k] = radiosity(sys, e, &rows[k].0);
                     }
                 }
-                sys.add_direct_light(points.iter().map(|p| p.at), &mut values);
+                sys.add_direct_light(points.iter().map(|p| p.at.map(|at| (at, p.normal))), &mut values);
                 rows.into_iter().zip(values).map(|((row, n), v)| Ok((row, n, v))).collect()
             })
             .collect::<Result<_>>()?;
@@ -503,15 +508,18 @@ impl CornerGather {
 
 /// The distinct corner points of the scene's faces, the point of each face corner, and the
 /// number of face corners per object.
-fn corner_points(sys: &System, scene: &Scene) -> (Vec<CornerPoint>, Vec<usize>, Vec<usize>) {
+fn corner_points(sys: &System, scene: &Scene, frame: f64) -> (Vec<CornerPoint>, Vec<usize>, Vec<usize>) {
     let mut points = Vec::new();
     let mut point_of_corner = Vec::new();
     let mut per_object = Vec::with_capacity(scene.objects.len());
     let mut shared = std::collections::HashMap::new();
     for (o, obj) in scene.objects.iter().enumerate() {
         let before = point_of_corner.len();
+        let shading = scene.corner_normals(o);
+        let world_from_object = obj.world_from_object(frame);
         for (f, face) in obj.faces.iter().enumerate() {
-            for (&v, (s, t)) in face.iter().zip(corner_params(face.len())) {
+            let first = point_of_corner.len() - before;
+            for (k, (&v, (s, t))) in face.iter().zip(corner_params(face.len())).enumerate() {
                 // A triangle's apex is the collapsed edge t = 1: the inset corner (1, 1) would lie
                 // on the edge P1 P2 (INSET^2 inside), seeing the neighbour across it edge-on;
                 // halfway along the collapsed edge it lies INSET inside along the median.
@@ -519,14 +527,20 @@ fn corner_points(sys: &System, scene: &Scene) -> (Vec<CornerPoint>, Vec<usize>, 
                 let (si, ti) = (s.clamp(INSET, 1.0 - INSET), t.clamp(INSET, 1.0 - INSET));
                 let at = sys.element_of_face(o, f, si, ti);
                 let material = obj.face_materials[f];
+                let normal = shading.get(first + k).and_then(|&n| world_normal(&world_from_object, n));
+                // Faces with their own reflectance (a texture's means) share a point only with
+                // faces of the same one, as faces of one material do.
+                let rho = scene.surfaces.get(o).and_then(|s| s.face_reflectance.get(f));
+                let rho = rho.map(|r| r.map(f64::to_bits));
                 let key = at.map(|(e, s, t)| {
-                    let n = sys.elements[e].patch.area_vector(s, t).normalize_or_zero();
-                    (o, v, material, (n * 1e6).round().as_i64vec3().to_array())
+                    let n =
+                        normal.unwrap_or_else(|| sys.elements[e].patch.area_vector(s, t).normalize_or_zero());
+                    (o, v, material, rho, (n * 1e6).round().as_i64vec3().to_array())
                 });
                 let k = match key.and_then(|k| shared.get(&k)) {
                     Some(&k) => k,
                     None => {
-                        points.push(CornerPoint { at, material });
+                        points.push(CornerPoint { at, material, normal });
                         if let Some(key) = key {
                             shared.insert(key, points.len() - 1);
                         }
@@ -539,6 +553,23 @@ fn corner_points(sys: &System, scene: &Scene) -> (Vec<CornerPoint>, Vec<usize>, 
         per_object.push(point_of_corner.len() - before);
     }
     (points, point_of_corner, per_object)
+}
+
+/// A smooth-shaded point is lifted this far (times its element's bounding radius) along its
+/// shading normal: the inset point lies below the planes of the other faces at a convex vertex
+/// by about `INSET` of their size, and a shadow ray towards a light the shading normal faces but
+/// the face does not would leave under them (measured on Suzanne under a Point light: dark
+/// corners on the lit side, 0.33 relative RMSE against Cycles' smooth bake without the lift).
+pub const SMOOTH_LIFT: f64 = 4.0 * INSET;
+
+/// The point at `(s,t)` of `patch` and the normal it is gathered with: the face's own, or the
+/// shading normal `normal` with the point lifted by [`SMOOTH_LIFT`] along it.
+pub fn shading_point(patch: &Patch, s: f64, t: f64, normal: Option<DVec3>) -> (DVec3, DVec3) {
+    let x = patch.point(s, t);
+    match normal {
+        Some(n) => (x + SMOOTH_LIFT * patch.bounding_sphere().1 * n, n),
+        None => (x, patch.area_vector(s, t).normalize_or_zero()),
+    }
 }
 
 /// The touch of a source at `foot` (on its plane) when the foot falls on the source.
@@ -619,7 +650,10 @@ fn finish(sys: &System, i: usize, row: &Row, mut irradiance: [f64; 3]) -> [f64; 
     let nb = sys.basis.len();
     for foot in &row.feet {
         let mut b = [radiosity(sys, foot.element as usize, &foot.row)];
-        sys.add_direct_light(std::iter::once(Some((foot.element as usize, foot.at.0, foot.at.1))), &mut b);
+        sys.add_direct_light(
+            std::iter::once(Some(((foot.element as usize, foot.at.0, foot.at.1), None))),
+            &mut b,
+        );
         let [b] = b;
         let w = foot.weight as f64 * sys.source_weights[foot.element as usize];
         for c in 0..3 {
@@ -746,11 +780,19 @@ struct Receiver {
 impl Gather<'_> {
     /// The sources and moments of the point at local `(s,t)` of element `i`, reusing `previous`
     /// (this point's row of the kept gather) where allowed; also how many moments were computed.
-    fn row(&self, i: usize, s: f64, t: f64, previous: Option<Row>, feet: bool) -> (Row, usize) {
+    /// `normal`: the point's shading normal where it is not the element's own.
+    fn row(
+        &self,
+        i: usize,
+        s: f64,
+        t: f64,
+        normal: Option<DVec3>,
+        previous: Option<Row>,
+        feet: bool,
+    ) -> (Row, usize) {
         let sys = self.sys;
         let patch = &self.patches[i];
-        let n = patch.area_vector(s, t).normalize_or_zero();
-        let x = patch.point(s, t);
+        let (x, n) = shading_point(patch, s, t, normal);
         let previous = previous.filter(|_| !self.moved[i]);
         // Whether an occluder comes near changes only where a moved triangle, old or new, can
         // enter the query box (`Occluders::any_near`): else the kept row's answer holds.
@@ -1080,7 +1122,7 @@ impl Gather<'_> {
         }
         let mut computed = 1;
         if let (Some(t), true) = (touch, weight > 0.0) {
-            let (row, n) = self.row(j as usize, t.s, t.t, old_foot.map(|f| f.row), false);
+            let (row, n) = self.row(j as usize, t.s, t.t, None, old_foot.map(|f| f.row), false);
             computed += n;
             feet.push(Foot { element: j, weight: weight as f32, row, at: (t.s, t.t) });
         }
@@ -1091,7 +1133,7 @@ impl Gather<'_> {
     /// own row updates itself; returns how many moments that computed.
     fn keep_foot(&self, j: u32, touch: Option<Touch>, old_foot: Option<Foot>, feet: &mut Vec<Foot>) -> usize {
         let (Some(t), Some(foot)) = (touch, old_foot) else { return 0 };
-        let (row, computed) = self.row(j as usize, t.s, t.t, Some(foot.row), false);
+        let (row, computed) = self.row(j as usize, t.s, t.t, None, Some(foot.row), false);
         feet.push(Foot { row, at: (t.s, t.t), ..foot });
         computed
     }

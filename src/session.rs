@@ -308,6 +308,15 @@ impl Session {
         Ok(Some(refinement))
     }
 
+    /// Replaces object `o`'s shading normals and per-face reflectance
+    /// ([`crate::scene::Surface`]); the next solved frame is built afresh with them. On error
+    /// nothing changes.
+    pub fn set_surface(&mut self, o: usize, surface: crate::scene::Surface) -> Result<()> {
+        self.scene.set_surface(o, surface)?;
+        self.stale = true;
+        Ok(())
+    }
+
     /// Replaces the scene's lights from the next solved frame on (a host sampling its own
     /// animation sets them each frame); validated as a scene's are.
     pub fn set_lights(&mut self, lights: Vec<crate::lights::Light>) -> Result<()> {

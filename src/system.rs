@@ -46,6 +46,13 @@ pub struct Element {
     pub mirrored: bool,
 }
 
+impl Element {
+    /// The surface's reflectance over the element: its face's ([`Scene::reflectance_of`]).
+    pub fn reflectance(&self, scene: &Scene) -> [f64; 3] {
+        scene.reflectance_of(self.object as usize, self.face as usize, self.material)
+    }
+}
+
 /// World-space elements of a scene at a frame: one per non-degenerate face.
 pub fn build_elements(scene: &Scene, frame: f64, basis: Basis) -> Vec<Element> {
     build_elements_reusing(scene, frame, basis, &[])
@@ -200,8 +207,7 @@ impl System {
         links.set_receiver_areas(&elements.iter().map(|e| e.area).collect::<Vec<_>>());
         let kernel_seconds = start.elapsed().as_secs_f64();
         let nb = basis.len();
-        let surface_reflectance: Vec<[f64; 3]> =
-            elements.iter().map(|e| scene.materials[e.material as usize].reflectance).collect();
+        let surface_reflectance: Vec<[f64; 3]> = elements.iter().map(|e| e.reflectance(scene)).collect();
         let reflectance = bounded_reflectances(&links, &surface_reflectance);
         let (emission, direct, lights) = frame_sources(scene, frame, &elements, basis);
         let stats = SystemStats {
@@ -279,19 +285,19 @@ impl System {
             .collect()
     }
 
-    /// Adds `rho E_d(x)` of the lights to `values` at face points `at` (element, local `s`, `t`),
-    /// each with its own shadow rays: the corner gather's direct light.
+    /// Adds `rho E_d(x)` of the lights to `values` at face points `at` (element, local `s`, `t`;
+    /// and a shading normal where it is not the element's own), each with its own shadow rays:
+    /// the corner gather's direct light.
     pub fn add_direct_light(
         &self,
-        at: impl Iterator<Item = Option<(usize, f64, f64)>>,
+        at: impl Iterator<Item = Option<((usize, f64, f64), Option<DVec3>)>>,
         values: &mut [[f64; 3]],
     ) {
         let Some(lights) = &self.lights else { return };
         for (v, at) in values.iter_mut().zip(at) {
-            if let Some((e, s, t)) = at {
-                let p = &self.elements[e].patch;
-                let n = p.area_vector(s, t).normalize_or_zero();
-                let irr = lights.irradiance(p.point(s, t), n, e as u32);
+            if let Some(((e, s, t), normal)) = at {
+                let (x, n) = crate::gather::shading_point(&self.elements[e].patch, s, t, normal);
+                let irr = lights.irradiance(x, n, e as u32);
                 for c in 0..3 {
                     v[c] += self.surface_reflectance[e][c] * irr[c];
                 }
@@ -453,8 +459,7 @@ pub fn frame_sources(scene: &Scene, frame: f64, elements: &[Element], basis: Bas
     let Some(lights) = DirectLight::new(scene, frame, elements) else {
         return (emission, Vec::new(), None);
     };
-    let rho: Vec<[f64; 3]> =
-        elements.iter().map(|e| scene.materials[e.material as usize].reflectance).collect();
+    let rho: Vec<[f64; 3]> = elements.iter().map(|e| e.reflectance(scene)).collect();
     let direct = lights.project(&patches, &rho, basis);
     (emission, direct, Some(std::sync::Arc::new(lights)))
 }

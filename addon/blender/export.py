@@ -23,6 +23,7 @@ import numpy as np
 from ..core import materials as core_materials
 from ..core.marshal import ObjectData, digest, emission_key
 from ..core.record import FrameState
+from . import textures
 from .materials import read_material
 from .world import WorldState, two_sided, world_state
 
@@ -105,6 +106,19 @@ def read_mesh(mesh):
     return co.reshape(-1, 3), sizes, loops, mats, smooth
 
 
+def read_normals(mesh):
+    """(loop normals (L,3), polygon normals (P,3)) of a mesh with smooth or custom-normal
+    corners (Blender's ``corner_normals``, 4.1+), or None when every face is flat."""
+    if getattr(mesh, "normals_domain", "CORNER") == "FACE" or not hasattr(mesh, "corner_normals"):
+        return None
+    n_l, n_p = len(mesh.loops), len(mesh.polygons)
+    loops = np.empty(n_l * 3, np.float32)
+    mesh.corner_normals.foreach_get("vector", loops)
+    polys = np.empty(n_p * 3, np.float32)
+    mesh.polygon_normals.foreach_get("vector", polys)
+    return loops.reshape(-1, 3), polys.reshape(-1, 3)
+
+
 def light_state(obj, depsgraph) -> dict:
     """A Light object as ``binding.Session.set_lights`` takes it, evaluated at the current frame
     (keyframes and drivers on the object and on its light data count)."""
@@ -182,12 +196,15 @@ def export(depsgraph, objects, light_objects=()) -> Export:
     table = core_materials.MaterialTable()
     sources = []
     out = []
+    table_problems = table.texture_problems
     for obj in objects:
         ev = obj.evaluated_get(depsgraph)
         mesh = ev.to_mesh()
         try:
             co, sizes, loops, mats, smooth = read_mesh(mesh)
+            normals = read_normals(mesh)
             slots = [s.material for s in ev.material_slots]
+            textured = textures.polygon_reflectance(mesh, slots, mats, table_problems)
         finally:
             ev.to_mesh_clear()
         mult = emitter_multiplier(obj)
@@ -203,6 +220,10 @@ def export(depsgraph, objects, light_objects=()) -> Export:
         lib = np.asarray(lib, np.int64)
         poly_lib = lib[np.clip(mats, 0, len(lib) - 1)] if len(mats) else np.zeros(0, np.int64)
         data = ObjectData.from_mesh(obj.name, co, sizes, loops, poly_lib, np.array(ev.matrix_world))
+        if normals is not None:
+            data.set_loop_normals(*normals)
+        if textured is not None:
+            data.set_polygon_reflectance(textured)
         orig = obj.data
         same = len(orig.polygons) == len(sizes) and len(orig.loops) == len(loops)
         if same and len(sizes):

@@ -2,9 +2,11 @@
 
 Readable: the shader plugged into the active Material Output's Surface (through reroutes) is a
 Principled BSDF (Base Color; Emission Color x Emission Strength), a Diffuse BSDF (Color) or an
-Emission shader (Color x Strength, reflectance 0). A linked input (a texture, a node chain) cannot
-be read: Base Color falls back to the default grey and a linked emission to none, and the spec
-says why. Any other shader, or no material at all, gives the default (grey 0.8, no emission).
+Emission shader (Color x Strength, reflectance 0). A texture on Base Color (Color) whose node
+chain ``textures`` can sample is read per face by ``textures.polygon_reflectance`` (the material's
+own reflectance stays the default, unused where the faces are read); any other linked input falls
+back to the default grey, a linked emission to none, and the spec says why (naming the node).
+Any other shader, or no material at all, gives the default (grey 0.8, no emission).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import bpy
 
 from ..core import materials as core
+from . import textures
 
 NODES_ALWAYS = bpy.app.version >= (5, 0, 0)  # Material.use_nodes is deprecated in 5.0
 
@@ -36,15 +39,32 @@ def _surface_node(mat):
     return node
 
 
-def _value(node, name, problems, what):
+def _value(node, name, problems, what, textured: bool = False):
+    """An unlinked input's value; None (and why, in `problems`) for a linked one, except a
+    readable texture where `textured` (read per face instead)."""
     sock = node.inputs.get(name)
     if sock is None:
         problems.append(f"{what}: no input {name!r}")
         return None
     if sock.is_linked:
-        problems.append(f"{name} is linked")
+        bad = textures.is_readable(sock) if textured else None
+        fed = sock.links[0].from_node
+        if textured and bad is None:
+            return None
+        problems.append(f"{name} is linked to {bad or fed.bl_label or fed.bl_idname}, not read")
         return None
     return sock.default_value
+
+
+def reflectance_socket(mat):
+    """The input socket that holds `mat`'s diffuse colour (Principled Base Color, Diffuse
+    Color), or None."""
+    use_nodes = True if NODES_ALWAYS else mat.use_nodes
+    node = _surface_node(mat) if use_nodes else None
+    if node is None:
+        return None
+    name = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}.get(node.bl_idname)
+    return node.inputs.get(name) if name else None
 
 
 def read_material(mat, multiplier: float = 1.0, owner: str = "") -> core.MaterialSpec:
@@ -63,7 +83,7 @@ def read_material(mat, multiplier: float = 1.0, owner: str = "") -> core.Materia
     emission = (0.0, 0.0, 0.0)
     kind = node.bl_idname
     if kind == "ShaderNodeBsdfPrincipled":
-        base = _value(node, "Base Color", problems, "Principled BSDF")
+        base = _value(node, "Base Color", problems, "Principled BSDF", textured=True)
         if base is not None:
             rho = core.reflectance(base)
         color = _value(node, "Emission Color", problems, "Principled BSDF")
@@ -71,7 +91,7 @@ def read_material(mat, multiplier: float = 1.0, owner: str = "") -> core.Materia
         if color is not None and strength is not None:
             emission = core.exitance(color, strength, multiplier)
     elif kind == "ShaderNodeBsdfDiffuse":
-        base = _value(node, "Color", problems, "Diffuse BSDF")
+        base = _value(node, "Color", problems, "Diffuse BSDF", textured=True)
         if base is not None:
             rho = core.reflectance(base)
     elif kind == "ShaderNodeEmission":

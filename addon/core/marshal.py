@@ -41,6 +41,8 @@ class ObjectData:
     matrix: np.ndarray          # (4,4) float64, world-from-object, row-major
     polygon_count: int
     degenerate: np.ndarray      # library faces of zero area
+    corner_normals: np.ndarray | None = None     # (C', 3) float32 per library corner; zero: flat
+    face_reflectance: np.ndarray | None = None   # (F', 3) float32 per library face (textures)
 
     @classmethod
     def from_mesh(cls, name, vertices, polygon_sizes, loop_vertices, polygon_materials, matrix) -> ObjectData:
@@ -60,6 +62,28 @@ class ObjectData:
             degenerate=degenerate_faces(vertices, split.face_sizes, split.face_indices),
         )
 
+    def set_loop_normals(self, loop_normals, polygon_normals) -> None:
+        """Smooth shading: the mesh's normal per loop (``Mesh.corner_normals``, custom split
+        normals included) as the library's corner normals. A corner whose normal is its polygon's
+        (a flat face) gets the zero vector, the library's "the face's own normal", so flat faces
+        are gathered exactly as without normals; none at all when every corner is flat."""
+        loop_normals = np.asarray(loop_normals, np.float32).reshape(-1, 3)
+        polygon_normals = np.asarray(polygon_normals, np.float32).reshape(-1, 3)
+        corner = loop_normals[self.split.corner_loop]
+        face = polygon_normals[self.split.source_face]
+        per_corner_face = np.repeat(face, self.split.face_sizes.astype(np.int64), axis=0)
+        flat = np.all(np.abs(corner - per_corner_face) <= 1e-6, axis=1)
+        if flat.all():
+            self.corner_normals = None
+            return
+        corner = corner.copy()
+        corner[flat] = 0.0
+        self.corner_normals = corner
+
+    def set_polygon_reflectance(self, polygon_rho) -> None:
+        """Reflectance per mesh polygon (a texture's mean over it) as the library's per face."""
+        self.face_reflectance = np.asarray(polygon_rho, np.float32).reshape(-1, 3)[self.split.source_face]
+
     @property
     def loop_count(self) -> int:
         return self.split.n_loops
@@ -72,11 +96,14 @@ class ObjectData:
             "face_indices": self.split.face_indices,
             "face_materials": self.face_materials,
             "matrix": self.matrix,
+            "corner_normals": self.corner_normals,
+            "face_reflectance": self.face_reflectance,
         }
 
     def topology_key(self) -> str:
         """Changes when faces, corners or materials change (not when vertices move)."""
-        return digest(self.split.face_sizes, self.split.face_indices, self.face_materials)
+        extra = [a for a in (self.corner_normals, self.face_reflectance) if a is not None]
+        return digest(self.split.face_sizes, self.split.face_indices, self.face_materials, *extra, decimals=6)
 
     def geometry_key(self) -> str:
         """Changes when the object-space vertices move (deformation)."""

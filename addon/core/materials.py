@@ -5,9 +5,11 @@
 - Blender's Emission Color x Emission Strength is a radiance L (W/m^2/sr); a Lambertian emitter's
   radiant exitance is E = pi x L, which is what the library takes.
 - The per-object emitter multiplier scales E.
-- What cannot be read (a texture linked to Base Color, a shader other than Principled BSDF,
-  Diffuse BSDF or Emission, no material) uses ``DEFAULT_REFLECTANCE`` and no emission, and the
-  bake reports it once.
+- A texture on Base Color (or a Diffuse BSDF's Color) is read per face as its mean over the
+  face (``addon/blender/textures.py``) where its node chain is readable.
+- What cannot be read (an unreadable node chain on Base Color, a linked emission, a shader other
+  than Principled BSDF, Diffuse BSDF or Emission, no material) uses ``DEFAULT_REFLECTANCE`` and no
+  emission, and the bake reports it once.
 
 Results go back the other way: the attribute holds outgoing radiance B / pi (scene-linear), so
 an emitter shows L and a white wall under it shows rho x E / pi.
@@ -63,6 +65,8 @@ class MaterialTable:
 
     specs: list[MaterialSpec] = field(default_factory=list)
     index: dict = field(default_factory=dict)
+    # Textures that could not be sampled on some object ("Mat (reason)"), each once.
+    texture_problems: list[str] = field(default_factory=list)
 
     def add(self, key, spec_factory) -> int:
         if key not in self.index:
@@ -79,4 +83,4 @@ class MaterialTable:
         return rho, e
 
     def problems(self) -> list[str]:
-        return [f"{s.name} ({s.problem})" for s in self.specs if s.problem]
+        return [f"{s.name} ({s.problem})" for s in self.specs if s.problem] + list(self.texture_problems)

@@ -182,6 +182,7 @@ def _declare(lib: ctypes.CDLL) -> None:
         "gr_session_set_lights": ([_SESSION, POINTER(_Light), c_size_t], c_uint32),
         "gr_session_set_world": ([_SESSION, POINTER(c_double), c_double, _F32, c_uint32, c_uint32], c_uint32),
         "gr_session_set_two_sided": ([_SESSION, c_uint32, c_uint32], c_uint32),
+        "gr_session_set_object_surface": ([_SESSION, c_uint32, _F32, c_size_t, _F32, c_size_t], c_uint32),
         "gr_session_solve_frame": ([_SESSION, c_double, _PROGRESS, c_void_p], c_uint32),
         "gr_session_set_preview": ([_SESSION, c_uint32], c_uint32),
         "gr_session_refine": ([_SESSION, _PROGRESS, c_void_p, _U32], c_uint32),
@@ -347,7 +348,8 @@ class Session:
     ``reflectance``, ``emission``: (M, 3) per material. ``objects``: dicts with ``vertices``
     (N, 3), ``face_sizes`` (F,) of 3 or 4, ``face_indices`` (sum of face_sizes,) local to the
     object, ``face_materials`` (F,), and optionally ``matrix`` (4, 4) row-major world-from-object
-    (Blender's ``np.array(obj.matrix_world)``).
+    (Blender's ``np.array(obj.matrix_world)``), ``corner_normals`` and ``face_reflectance``
+    (see ``set_object_surface``).
     """
 
     def __init__(self, settings: dict, reflectance, emission, objects: list[dict]):
@@ -399,6 +401,13 @@ class Session:
         self._ptr = out.value
         self._faces = face_counts
         self._corners = np.array([int(f.sum()) for f in sizes], np.int64)
+        try:
+            for i, o in enumerate(objects):
+                if o.get("corner_normals") is not None or o.get("face_reflectance") is not None:
+                    self.set_object_surface(i, o.get("corner_normals"), o.get("face_reflectance"))
+        except RadiosityError:
+            self.close()
+            raise
 
     # -- lifetime -------------------------------------------------------------------------------
 
@@ -464,6 +473,15 @@ class Session:
         """Material ``index``'s emission (RGB, W/m^2) from the next frame on."""
         e = _floats(rgb, (3,), "rgb")
         self._call("gr_session_set_material_emission", _u32(index, "material"), _ptr(e, _F32))
+
+    def set_object_surface(self, index: int, corner_normals=None, face_reflectance=None) -> None:
+        """Object ``index``'s shading normals, (sum of face sizes, 3) object space (a zero row:
+        the face's own normal), and reflectance per face, (F, 3) in [0,1); None for neither."""
+        n = _floats(np.zeros((0, 3)) if corner_normals is None else corner_normals, (-1, 3), "corner_normals")
+        r = _floats(np.zeros((0, 3)) if face_reflectance is None else face_reflectance, (-1, 3),
+                    "face_reflectance")
+        self._call("gr_session_set_object_surface", _u32(index, "object"),
+                   _ptr(n, _F32) if n.size else None, n.size, _ptr(r, _F32) if r.size else None, r.size)
 
     def set_lights(self, lights) -> None:
         """Replaces the lights from the next frame on. ``lights``: dicts with ``type`` (POINT, SPOT,

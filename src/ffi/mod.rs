@@ -10,6 +10,7 @@
 //! - [`lights`]: `GrLight` and `gr_session_set_lights` (Blender Light objects).
 //! - [`builder`]: `GrSceneBuilder` and `GrMesh`, the scene one call at a time (ABI version 2).
 //! - `sized`: the `struct_size` rule by which structs grow without breaking.
+//! - [`surface`]: `gr_session_set_object_surface` (smooth-shading normals, per-face reflectance).
 
 pub mod builder;
 pub mod error;
@@ -18,6 +19,7 @@ pub mod panic;
 pub mod session;
 pub mod settings;
 mod sized;
+pub mod surface;
 
 use std::ffi::{CStr, c_char};
 
@@ -40,6 +42,7 @@ pub use session::{
     gr_session_solve_frame,
 };
 pub use settings::{GrMethod, GrSettings, gr_settings_default};
+pub use surface::gr_session_set_object_surface;
 
 /// The version of this C ABI. It changes only when a declaration in this header changes
 /// incompatibly; check it after loading the library. Version 2: `GrSettings` begins with

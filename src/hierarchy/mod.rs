@@ -116,7 +116,7 @@ pub fn solve_frame(
     }
     let patches: Vec<Patch> = faces.iter().map(|e| e.patch).collect();
     let reflectance: Vec<[f64; 3]> =
-        faces.iter().map(|e| scene.materials[e.material as usize].reflectance).collect();
+        faces.iter().map(|e| scene.reflectance_of(e.object as usize, e.face as usize, e.material)).collect();
     let emission: Vec<[f64; 3]> =
         faces.iter().map(|e| scene.emission_at(e.material as usize, frame)).collect();
     let total_area: f64 = faces.iter().map(|e| e.area).sum();

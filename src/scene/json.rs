@@ -220,6 +220,12 @@ struct ObjectFile {
     /// Its emitting faces emit from both sides ([`Scene::two_sided`]).
     #[serde(default)]
     two_sided: bool,
+    /// Shading normal per face corner (smooth shading; `[0,0,0]`: the face's own), object space.
+    #[serde(default)]
+    corner_normals: Vec<[f64; 3]>,
+    /// Reflectance per face, overriding the face's material's (a texture's mean over the face).
+    #[serde(default)]
+    face_reflectance: Vec<[f64; 3]>,
 }
 
 #[derive(Deserialize)]
@@ -284,10 +290,15 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
     let n_materials = materials.len();
     let mut objects = Vec::new();
     let mut two_sided = Vec::new();
+    let mut surfaces = Vec::new();
     for (o, obj) in file.objects.into_iter().enumerate() {
         if obj.two_sided {
             two_sided.push(o);
         }
+        surfaces.push(super::Surface {
+            corner_normals: obj.corner_normals.iter().map(|n| DVec3::from_array(*n)).collect(),
+            face_reflectance: obj.face_reflectance.clone(),
+        });
         let name = obj.name.unwrap_or_else(|| format!("object {o}"));
         let place = format!("object \"{name}\"");
         let vertices: Vec<DVec3> = obj.vertices.iter().map(|v| DVec3::from_array(*v)).collect();
@@ -349,7 +360,8 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
     Scene::new(settings, frames, materials, emission_keys, objects)?
         .with_lights(lights)?
         .with_world(file.world.map(parse_world))?
-        .with_two_sided(&two_sided)
+        .with_two_sided(&two_sided)?
+        .with_surfaces(surfaces)
 }
 
 /// Reads and parses a scene file.
@@ -381,6 +393,18 @@ pub struct ResultFile {
     pub stats: serde_json::Value,
 }
 
+/// An object's `corner_normals` and `face_reflectance`, where it has them.
+fn surface_to_json(object: &mut serde_json::Value, surface: Option<&super::Surface>) {
+    let Some(s) = surface else { return };
+    if !s.corner_normals.is_empty() {
+        object["corner_normals"] =
+            serde_json::json!(s.corner_normals.iter().map(|n| n.to_array()).collect::<Vec<_>>());
+    }
+    if !s.face_reflectance.is_empty() {
+        object["face_reflectance"] = serde_json::json!(s.face_reflectance);
+    }
+}
+
 /// Writes a scene as a version-1 scene file (placement keys included).
 pub fn scene_to_json(scene: &Scene) -> String {
     use serde_json::json;
@@ -410,7 +434,7 @@ pub fn scene_to_json(scene: &Scene) -> String {
                     KeyTransform::Matrix(m) => json!({"frame": k.frame, "matrix": row_major(m)}),
                 })
                 .collect();
-            json!({
+            let mut object = json!({
                 "name": o.name,
                 "vertices": o.vertices.iter().map(|v| v.to_array()).collect::<Vec<_>>(),
                 "faces": o.faces,
@@ -418,7 +442,9 @@ pub fn scene_to_json(scene: &Scene) -> String {
                 "matrix": row_major(&o.matrix),
                 "animation": animation,
                 "two_sided": scene.two_sided.get(i).copied().unwrap_or(false),
-            })
+            });
+            surface_to_json(&mut object, scene.surfaces.get(i));
+            object
         })
         .collect();
     let lights: Vec<_> = scene

@@ -6,9 +6,11 @@
 
 pub mod json;
 pub mod placement;
+pub mod surface;
 mod validate;
 
 pub use placement::{Key, KeyTransform};
+pub use surface::Surface;
 pub use validate::{
     MAX_COORDINATE, MAX_EMISSION, MAX_FRAMES, MAX_THREADS, check_animation, check_frames, check_placed,
 };
@@ -134,6 +136,9 @@ pub struct Scene {
     /// Objects whose emitting faces emit from both sides, by object index (missing: one-sided;
     /// [`crate::lights`]'s `backs`); set with [`Scene::with_two_sided`].
     pub two_sided: Vec<bool>,
+    /// Per object (empty: none at all): shading normals and per-face reflectance
+    /// ([`surface`]); set with [`Scene::with_surfaces`].
+    pub surfaces: Vec<Surface>,
 }
 
 impl Scene {
@@ -156,6 +161,7 @@ impl Scene {
             lights: Vec::new(),
             world: None,
             two_sided: Vec::new(),
+            surfaces: Vec::new(),
         };
         validate::validate(&mut scene)?;
         Ok(scene)
@@ -191,6 +197,56 @@ impl Scene {
         }
         self.two_sided = two_sided;
         Ok(self)
+    }
+
+    /// The scene with `surfaces` (one per object, or none), validated against the objects.
+    pub fn with_surfaces(mut self, surfaces: Vec<Surface>) -> crate::Result<Self> {
+        if !surfaces.is_empty() && surfaces.len() != self.objects.len() {
+            return Err(crate::error::invalid_scene!(
+                "{} surfaces for {} objects",
+                surfaces.len(),
+                self.objects.len()
+            ));
+        }
+        for (o, (s, obj)) in surfaces.iter().zip(&self.objects).enumerate() {
+            s.validate(obj, &format!("object {o} \"{}\"", obj.name))?;
+        }
+        self.surfaces = if surfaces.iter().all(Surface::is_empty) { Vec::new() } else { surfaces };
+        Ok(self)
+    }
+
+    /// Replaces object `o`'s surface data (validated; on error nothing changes).
+    pub fn set_surface(&mut self, o: usize, surface: Surface) -> crate::Result<()> {
+        let Some(obj) = self.objects.get(o) else {
+            return Err(crate::Error::InvalidArgument(format!(
+                "object {o} out of range (0..{})",
+                self.objects.len()
+            )));
+        };
+        surface.validate(obj, &format!("object {o} \"{}\"", obj.name))?;
+        if self.surfaces.is_empty() {
+            if surface.is_empty() {
+                return Ok(());
+            }
+            self.surfaces = vec![Surface::default(); self.objects.len()];
+        }
+        self.surfaces[o] = surface;
+        Ok(())
+    }
+
+    /// The diffuse reflectance of face `f` of object `o`, whose material is `material`: the
+    /// face's own where given ([`Surface::face_reflectance`]), else the material's.
+    pub fn reflectance_of(&self, o: usize, f: usize, material: u32) -> [f64; 3] {
+        self.surfaces
+            .get(o)
+            .and_then(|s| s.face_reflectance.get(f))
+            .copied()
+            .unwrap_or(self.materials[material as usize].reflectance)
+    }
+
+    /// Object `o`'s shading normals per face corner (empty: its faces' own).
+    pub fn corner_normals(&self, o: usize) -> &[DVec3] {
+        self.surfaces.get(o).map_or(&[], |s| &s.corner_normals)
     }
 
     /// Emission of material `m` at `frame`.

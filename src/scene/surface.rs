@@ -1,0 +1,69 @@
+//! What a mesh says about its surface beyond its faces and materials (issue 22): per-corner
+//! shading normals (smooth shading, custom split normals) and per-face reflectance (a texture's
+//! mean over the face). Both are optional per object; without them an object is what it was
+//! before, bit for bit.
+
+use glam::{DMat3, DMat4, DVec3};
+
+use super::Object;
+use crate::error::{Result, invalid_scene};
+
+/// One object's surface data.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Surface {
+    /// Object-space shading normal per face corner, faces in order and corners in face order
+    /// (as `Object::faces` lists them); empty: every corner takes its face's normal. A zero
+    /// vector also means "the face's own normal" (a flat face of a partly smooth mesh).
+    pub corner_normals: Vec<DVec3>,
+    /// Diffuse reflectance per face, overriding the face's material's (an image texture's mean
+    /// over the face); empty: the materials'.
+    pub face_reflectance: Vec<[f64; 3]>,
+}
+
+impl Surface {
+    pub fn is_empty(&self) -> bool {
+        self.corner_normals.is_empty() && self.face_reflectance.is_empty()
+    }
+
+    /// Checks the lengths against `obj` and every value; `place` names the object in messages.
+    pub fn validate(&self, obj: &Object, place: &str) -> Result<()> {
+        let corners: usize = obj.faces.iter().map(Vec::len).sum();
+        if !self.corner_normals.is_empty() && self.corner_normals.len() != corners {
+            return Err(invalid_scene!(
+                "{place}: corner_normals has {} entries for {corners} face corners",
+                self.corner_normals.len()
+            ));
+        }
+        if let Some(k) = self.corner_normals.iter().position(|n| !n.is_finite()) {
+            return Err(invalid_scene!("{place}: corner_normals[{k}] is not finite"));
+        }
+        if !self.face_reflectance.is_empty() && self.face_reflectance.len() != obj.faces.len() {
+            return Err(invalid_scene!(
+                "{place}: face_reflectance has {} entries for {} faces",
+                self.face_reflectance.len(),
+                obj.faces.len()
+            ));
+        }
+        for (f, rho) in self.face_reflectance.iter().enumerate() {
+            for (c, &r) in rho.iter().enumerate() {
+                if !(r.is_finite() && (0.0..1.0).contains(&r)) {
+                    return Err(invalid_scene!("{place}: face_reflectance[{f}][{c}] = {r} is outside [0,1)"));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A shading normal placed by `world_from_object`: transformed by the inverse transpose (as
+/// Blender's normal matrix, so a mirroring placement keeps the front side) and normalized;
+/// `None` for the zero vector (the face's own normal) or a singular placement.
+pub fn world_normal(world_from_object: &DMat4, n: DVec3) -> Option<DVec3> {
+    if n == DVec3::ZERO {
+        return None;
+    }
+    let linear = DMat3::from_mat4(*world_from_object);
+    let w = linear.inverse().transpose() * n;
+    let w = w.normalize_or_zero();
+    (w != DVec3::ZERO && w.is_finite()).then_some(w)
+}

@@ -1,0 +1,176 @@
+"""Textured reflectance (issue 22, item 3): an Image Texture on Principled Base Color (directly,
+or multiplied with a constant by a Mix node) enters the solve per face as its mean over the face
+(addon/blender/textures.py), sRGB decoded as Blender does.
+
+- The exported per-face reflectance is the image's mean over each face, computed here from the
+  image's own pixels.
+- A red/white checker floor bleeding onto white walls, baked through the add-on, against Cycles'
+  DIFFUSE bake of the walls (the floor's texture at full resolution): relative RMSE per wall
+  within 3% + twice Cycles' noise (two seeds), as tests/python/test_validation.py. Cycles bakes
+  each loop from inside its own face, and a wall's bottom vertex on a check boundary then reads
+  the red side from one face and the white from the other (0.08-0.13 relative RMSE between the
+  loops of that row); the library gathers a vertex once, so the walls are compared with Cycles'
+  per-vertex mean (with a plain floor the two readings agree to the noise).
+- What cannot be read is named in the bake's report, by node type.
+"""
+
+import numpy as np
+from scenes import bake, grid_quad, mesh_object, stored
+from test_smooth_shading import _vertex_mean
+
+from tools import bakes
+from tools.blender_scene import corner_values
+
+SAMPLES = 1024
+RED = (0.8, 0.05, 0.05)
+
+
+def _srgb_encode(c):
+    c = np.asarray(c, np.float64)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+
+
+def _checker(bpy, size=64, checks=4):
+    """An 8-bit sRGB image of checks x checks squares, red and white (scene-linear RED and 0.8)."""
+    img = bpy.data.images.new("Checker", size, size, alpha=False)
+    i, j = np.meshgrid(np.arange(size), np.arange(size), indexing="ij")   # rows (v), columns (u)
+    red = ((i // (size // checks)) + (j // (size // checks))) % 2 == 0
+    lin = np.where(red[..., None], np.array(RED), np.array([0.8, 0.8, 0.8]))
+    px = np.concatenate([_srgb_encode(lin), np.ones((size, size, 1))], axis=2)
+    img.pixels.foreach_set(px.astype(np.float32).reshape(-1))
+    img.update()
+    return img, lin
+
+
+def _textured(bpy, img, mix=None):
+    mat = bpy.data.materials.new("Checker floor")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    bsdf = nodes["Principled BSDF"]
+    bsdf.inputs["Specular IOR Level"].default_value = 0.0   # Lambertian in Cycles
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    tex.interpolation = "Closest"
+    out = tex.outputs["Color"]
+    if mix is not None:
+        m = nodes.new("ShaderNodeMix")
+        m.data_type = "RGBA"
+        m.blend_type = "MULTIPLY"
+        m.inputs["Factor"].default_value = 1.0
+        m.inputs[7].default_value = (*mix, 1.0)            # B: the constant
+        links.new(out, m.inputs[6])                         # A: the image
+        out = m.outputs[2]
+    links.new(out, bsdf.inputs["Base Color"])
+    return mat
+
+
+def _diffuse(bpy, name, color):
+    mat = bpy.data.materials.new(name)
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    nodes = mat.node_tree.nodes
+    nodes.remove(nodes["Principled BSDF"])
+    bsdf = nodes.new("ShaderNodeBsdfDiffuse")
+    bsdf.inputs["Color"].default_value = (*color, 1.0)
+    mat.node_tree.links.new(bsdf.outputs[0], nodes["Material Output"].inputs["Surface"])
+    return mat
+
+
+def _room(bpy, floor_mat, n=4, floor_n=8):
+    """Room [-1,1]^2 x [0,2], inward faces; the floor UV-mapped 0..1 over it; a Point light."""
+    white = _diffuse(bpy, "White", (0.8, 0.8, 0.8))
+    walls = {
+        "Ceiling": ((-1, -1, 2), (0, 2, 0), (2, 0, 0)),
+        "Back": ((-1, 1, 0), (2, 0, 0), (0, 0, 2)),
+        "Front": ((-1, -1, 0), (0, 0, 2), (2, 0, 0)),
+        "Left": ((-1, -1, 0), (0, 2, 0), (0, 0, 2)),
+        "Right": ((1, -1, 0), (0, 0, 2), (0, 2, 0)),
+    }
+    objs = {name: mesh_object(bpy, name, *grid_quad(o, u, v, n), white) for name, (o, u, v) in walls.items()}
+    verts, faces = grid_quad((-1, -1, 0), (2, 0, 0), (0, 2, 0), floor_n)
+    floor = mesh_object(bpy, "Floor", verts, faces, floor_mat)
+    uv = floor.data.uv_layers.new(name="UVMap")
+    loops = np.empty(len(floor.data.loops), np.int32)
+    floor.data.loops.foreach_get("vertex_index", loops)
+    co = np.asarray(verts, np.float64)[loops]
+    uv.uv.foreach_set("vector", ((co[:, :2] + 1.0) / 2.0).astype(np.float32).reshape(-1))
+    objs["Floor"] = floor
+    data = bpy.data.lights.new("Lamp", "POINT")
+    data.energy = 150.0
+    data.shadow_soft_size = 0.0
+    lamp = bpy.data.objects.new("Lamp", data)
+    lamp.location = (0.2, -0.1, 1.2)
+    bpy.context.scene.collection.objects.link(lamp)
+    sc = bpy.context.scene
+    sc.frame_start = sc.frame_end = 1
+    return objs
+
+
+def _face_means(floor, lin):
+    """The image's exact mean over each floor face (the faces are axis-aligned in UV)."""
+    size = lin.shape[0]
+    me = floor.data
+    out = []
+    for p in me.polygons:
+        uv = np.array([me.uv_layers["UVMap"].uv[i].vector[:] for i in p.loop_indices])
+        (u0, v0), (u1, v1) = uv.min(axis=0), uv.max(axis=0)
+        c0, c1 = round(u0 * size), round(u1 * size)
+        r0, r1 = round(v0 * size), round(v1 * size)
+        out.append(lin[r0:r1, c0:c1].reshape(-1, 3).mean(axis=0))
+    return np.array(out)
+
+
+def test_the_exported_reflectance_is_the_textures_mean_over_each_face(blender):
+    bpy = blender
+    from addon.blender import export
+
+    img, lin = _checker(bpy)
+    for mix, scale in ((None, 1.0), ((0.5, 0.5, 0.5), 0.5)):
+        objs = _room(bpy, _textured(bpy, img, mix), floor_n=6)   # faces straddle the checks
+        exp = export.export(bpy.context.evaluated_depsgraph_get(), [objs["Floor"]])
+        assert exp.problems_line() is None, exp.problems_line()
+        got = exp.objects[0].data.face_reflectance
+        # 8-bit storage of the sRGB values costs up to half a step of 1/255 before decoding.
+        np.testing.assert_allclose(got, _face_means(objs["Floor"], lin) * scale, atol=4e-3)
+        for ob in list(bpy.data.objects):
+            bpy.data.objects.remove(ob)
+
+
+def test_a_checker_floor_bleeds_onto_white_walls_as_in_cycles(blender):
+    bpy = blender
+    img, _ = _checker(bpy)
+    objs = _room(bpy, _textured(bpy, img))
+    walls = [o for name, o in objs.items() if name != "Floor"]
+    bakes.cycles_bake(bpy, walls, SAMPLES, attr="Cycles", seed=1)
+    bakes.cycles_bake(bpy, walls, SAMPLES, attr="Cycles2", seed=2)
+    assert bake(bpy, method="FULL") == {"FINISHED"}
+    lines, ok = [], True
+    for ob in walls:
+        ref = _vertex_mean(ob.data, corner_values(ob, "Cycles"))
+        noise = bakes.relative_rmse(_vertex_mean(ob.data, corner_values(ob, "Cycles2")), ref) / np.sqrt(2)
+        ours = stored(ob.data, 1)
+        rmse = bakes.relative_rmse(ours, ref)
+        mean = abs(ours.mean() - ref.mean()) / ref.mean()
+        # The bleed is there: the walls' red exceeds their green (white walls, red checks).
+        redness = ours[:, 0].mean() / ours[:, 1].mean()
+        lines.append(f"{ob.name}: rmse {rmse:.4f}, mean {mean:.4f}, noise {noise:.4f}, "
+                     f"red/green {redness:.3f}")
+        ok &= rmse < 0.03 + 2 * noise and redness > 1.05
+    print("\n".join(lines))
+    assert ok, "\n".join(lines)
+
+
+def test_what_cannot_be_read_is_named(blender):
+    bpy = blender
+    from addon.blender import export
+
+    mat = bpy.data.materials.new("Noisy")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    noise = mat.node_tree.nodes.new("ShaderNodeTexNoise")
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    mat.node_tree.links.new(noise.outputs["Color"], bsdf.inputs["Base Color"])
+    objs = _room(bpy, mat)
+    line = export.export(bpy.context.evaluated_depsgraph_get(), [objs["Floor"]]).problems_line()
+    assert line is not None and "Noise Texture" in line and "Noisy" in line, line
