@@ -15,13 +15,9 @@ use galerkin_radiosity::scene::{Material, Object, Scene, Settings};
 use galerkin_radiosity::scenes;
 use galerkin_radiosity::system::{System, no_progress};
 
-fn peak_rss_mib() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM")).map(|l| l.to_string()))
-        .and_then(|l| l.split_whitespace().nth(1).and_then(|k| k.parse::<f64>().ok()))
-        .map_or(f64::NAN, |kib| kib / 1024.0)
-}
+#[path = "common/rss.rs"]
+mod rss;
+use rss::peak_rss_mib;
 
 /// Per coarse face of `coarse`, the area-mean of `fine`'s solution over the fine faces whose
 /// centre lies on it (same object, on its plane, inside its domain).
@@ -92,45 +88,25 @@ fn run_case(case: &str, arg: &str) {
         }
         "presubdivided" => {
             let n: usize = arg.parse().unwrap();
-            let scene = scenes::cornell_box(n, Settings { basis_order: 1, ..Default::default() });
-            let t = Instant::now();
-            let h = solve_frame(&scene, 0.0, &HierarchySettings::of(&scene.settings), &no_progress).unwrap();
-            println!(
-                "{} {} {} {} NaN",
-                t.elapsed().as_secs_f64(),
-                h.stats.faces,
-                h.stats.leaves,
-                h.stats.links
-            );
+            solve_and_report(&scenes::cornell_box(n, Settings { basis_order: 1, ..Default::default() }));
         }
         "scene" => {
             let mut scene = read_scene(std::path::Path::new(arg)).unwrap();
             scene.settings.basis_order = 1;
-            let t = Instant::now();
-            let h = solve_frame(&scene, 0.0, &HierarchySettings::of(&scene.settings), &no_progress).unwrap();
-            println!(
-                "{} {} {} {} NaN",
-                t.elapsed().as_secs_f64(),
-                h.stats.faces,
-                h.stats.leaves,
-                h.stats.links
-            );
+            solve_and_report(&scene);
         }
-        "obj" => {
-            let scene = obj_under_a_light(arg);
-            let t = Instant::now();
-            let h = solve_frame(&scene, 0.0, &HierarchySettings::of(&scene.settings), &no_progress).unwrap();
-            println!(
-                "{} {} {} {} NaN",
-                t.elapsed().as_secs_f64(),
-                h.stats.faces,
-                h.stats.leaves,
-                h.stats.links
-            );
-        }
+        "obj" => solve_and_report(&obj_under_a_light(arg)),
         c => panic!("unknown case {c}"),
     }
     eprintln!("peak {}", peak_rss_mib());
+}
+
+/// Solves `scene` on the hierarchy at its own settings and prints `seconds faces leaves links NaN`.
+fn solve_and_report(scene: &Scene) {
+    let t = Instant::now();
+    let h = solve_frame(scene, 0.0, &HierarchySettings::of(&scene.settings), &no_progress).unwrap();
+    let s = &h.stats;
+    println!("{} {} {} {} NaN", t.elapsed().as_secs_f64(), s.faces, s.leaves, s.links);
 }
 
 /// An OBJ (`v` and `f` lines) on a ground, lit by an emissive square above it: order 1.

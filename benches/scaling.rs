@@ -13,13 +13,9 @@ use galerkin_radiosity::scenes;
 use galerkin_radiosity::session::{Method, Session};
 use galerkin_radiosity::system::{System, no_progress};
 
-fn peak_rss_mib() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM")).map(|l| l.to_string()))
-        .and_then(|l| l.split_whitespace().nth(1).and_then(|k| k.parse::<f64>().ok()))
-        .map_or(f64::NAN, |kib| kib / 1024.0)
-}
+#[path = "common/rss.rs"]
+mod rss;
+use rss::peak_rss_mib;
 
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");

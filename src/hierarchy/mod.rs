@@ -120,7 +120,6 @@ pub fn solve_frame(
     let emission: Vec<[f64; 3]> =
         faces.iter().map(|e| scene.emission_at(e.material as usize, frame)).collect();
     let total_area: f64 = faces.iter().map(|e| e.area).sum();
-    let start = Instant::now();
     let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
     let lights = DirectLight::new(scene, frame, &faces);
     let tree = Tree::new(faces, reflectance, basis);
@@ -162,7 +161,6 @@ pub fn solve_frame(
         stats.sweeps += solved.sweeps;
         stats.solve_seconds += t.elapsed().as_secs_f64();
     }
-    let _ = start;
     stats.nodes = hierarchy.tree.nodes.len();
     let mut leaves = Vec::new();
     hierarchy.tree.leaves_below(hierarchy.tree.root, &mut leaves);

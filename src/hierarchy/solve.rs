@@ -17,10 +17,6 @@ use super::tree::{Kind, NodeId, Tree};
 use super::two_scale::TwoScale;
 use crate::error::{Error, Result};
 use crate::lights::direct::DirectLight;
-use crate::quadrature::GaussLegendre;
-
-/// Gauss points per axis projecting the lights' `rho E_d` onto a leaf (as the flat system does).
-const PROJECTION_POINTS: usize = 6;
 
 /// The radiosity state of every node.
 pub struct State {
@@ -147,8 +143,7 @@ impl State {
                     && !tree.nodes[id].is_cluster()
             })
             .collect();
-        let rule = GaussLegendre::new(PROJECTION_POINTS);
-        let basis = tree.basis;
+        let rule = DirectLight::projection_rule();
         let computed: Vec<Vec<[f64; 3]>> = todo
             .par_iter()
             .map(|&id| {
@@ -156,24 +151,8 @@ impl State {
                 let f = s.face as usize;
                 let mut out = vec![[0.0; 3]; nb];
                 out[0] = emission[f];
-                let rho = tree.reflectance[f];
-                if let Some(lights) = lights.filter(|_| rho.iter().any(|&r| r > 0.0)) {
-                    let mut g = vec![0.0; nb];
-                    for (u, wu) in rule.iter() {
-                        for (v, wv) in rule.iter() {
-                            let n = s.patch.area_vector(u, v).normalize_or_zero();
-                            let irr = lights.irradiance(s.patch.point(u, v), n, s.face);
-                            if irr.iter().all(|&x| x == 0.0) {
-                                continue;
-                            }
-                            basis.eval_into(u, v, &mut g);
-                            for k in 0..nb {
-                                for c in 0..3 {
-                                    out[k][c] += wu * wv * g[k] * rho[c] * irr[c];
-                                }
-                            }
-                        }
-                    }
+                if let Some(lights) = lights {
+                    lights.project_onto(&s.patch, s.face, tree.reflectance[f], tree.basis, &rule, &mut out);
                 }
                 out
             })

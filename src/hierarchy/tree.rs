@@ -247,16 +247,4 @@ impl Tree {
             }
         }
     }
-
-    /// The faces below `id`.
-    pub fn faces_below(&self, id: NodeId, out: &mut Vec<u32>) {
-        match &self.nodes[id as usize].kind {
-            Kind::Surface(s) => out.push(s.face),
-            Kind::Cluster { children } => {
-                for &c in children {
-                    self.faces_below(c, out);
-                }
-            }
-        }
-    }
 }

@@ -295,28 +295,47 @@ impl DirectLight {
         let rule = GaussLegendre::new(PROJECTION_POINTS);
         let mut out = vec![[0.0; 3]; patches.len() * nb];
         out.par_chunks_mut(nb).enumerate().for_each(|(e, coeffs)| {
-            let rho = reflectance[e];
-            if rho.iter().all(|&r| r == 0.0) {
-                return;
-            }
-            let mut g = vec![0.0; nb];
-            for (s, ws) in rule.iter() {
-                for (t, wt) in rule.iter() {
-                    let p = &patches[e];
-                    let n = p.area_vector(s, t).normalize_or_zero();
-                    let irr = self.irradiance_with(p.point(s, t), n, e as u32, self.world_axis.1);
-                    if irr.iter().all(|&v| v == 0.0) {
-                        continue;
-                    }
-                    basis.eval_into(s, t, &mut g);
-                    for k in 0..nb {
-                        for c in 0..3 {
-                            coeffs[k][c] += ws * wt * g[k] * rho[c] * irr[c];
-                        }
+            self.project_onto(&patches[e], e as u32, reflectance[e], basis, &rule, coeffs);
+        });
+        out
+    }
+
+    /// [`DirectLight::project`] of one patch lying on element `owner` (the whole element, or a
+    /// part of it: the hierarchy's sub-elements), added to `coeffs` (`nb`); `rule` is
+    /// [`DirectLight::projection_rule`].
+    pub fn project_onto(
+        &self,
+        p: &Patch,
+        owner: u32,
+        rho: [f64; 3],
+        basis: Basis,
+        rule: &GaussLegendre,
+        coeffs: &mut [[f64; 3]],
+    ) {
+        if rho.iter().all(|&r| r == 0.0) {
+            return;
+        }
+        let nb = basis.len();
+        let mut g = [0.0; 16];
+        for (s, ws) in rule.iter() {
+            for (t, wt) in rule.iter() {
+                let n = p.area_vector(s, t).normalize_or_zero();
+                let irr = self.irradiance_with(p.point(s, t), n, owner, self.world_axis.1);
+                if irr.iter().all(|&v| v == 0.0) {
+                    continue;
+                }
+                basis.eval_into(s, t, &mut g[..nb]);
+                for k in 0..nb {
+                    for c in 0..3 {
+                        coeffs[k][c] += ws * wt * g[k] * rho[c] * irr[c];
                     }
                 }
             }
-        });
-        out
+        }
+    }
+
+    /// The Gauss rule [`DirectLight::project_onto`] takes.
+    pub fn projection_rule() -> GaussLegendre {
+        GaussLegendre::new(PROJECTION_POINTS)
     }
 }

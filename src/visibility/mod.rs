@@ -240,13 +240,7 @@ impl Occluders {
     /// Visibility between elements `i` and `j`; also returns whether any ray was needed.
     pub fn link_visibility(&self, i: usize, pi: &Patch, j: usize, pj: &Patch) -> Visibility {
         let shaft = Shaft::new(&self.sample_bounds[i], &self.sample_bounds[j]);
-        let planes = [self.culling_planes[i], self.culling_planes[j]];
-        let mut culling = [(DVec3::ZERO, 0.0); 2];
-        let mut count = 0;
-        for p in planes.into_iter().flatten() {
-            culling[count] = p;
-            count += 1;
-        }
+        let (culling, count) = self.culling_pair(i, j);
         CANDIDATES.with_borrow_mut(|candidates| {
             // Segments between the fronts of two planar elements stay in front of both planes.
             shaft_candidates(self, &shaft, &culling[..count], (i as u32, j as u32), candidates);
@@ -255,9 +249,19 @@ impl Occluders {
             }
             // Without plane culling the candidates are every triangle the shaft may hold, so
             // testing them all gives what the BVH's any-hit gives, however many there are.
-            let complete = planes == [None, None];
-            self.cast(i, pi, j, pj, candidates, complete)
+            self.cast(i, pi, j, pj, candidates, count == 0)
         })
+    }
+
+    /// The culling planes of elements `i` and `j` that exist, packed, and how many.
+    fn culling_pair(&self, i: usize, j: usize) -> ([(DVec3, f64); 2], usize) {
+        let mut culling = [(DVec3::ZERO, 0.0); 2];
+        let mut count = 0;
+        for p in [self.culling_planes[i], self.culling_planes[j]].into_iter().flatten() {
+            culling[count] = p;
+            count += 1;
+        }
+        (culling, count)
     }
 
     /// [`Occluders::link_visibility`] between parts of elements: `pi` lies on element `i`
@@ -269,19 +273,13 @@ impl Occluders {
         let (xi, xj) = (sample_points(pi, m), sample_points(pj, m));
         let (xi, xj) = (&xi[..m * m], &xj[..m * m]);
         let shaft = Shaft::new(&Aabb::from_points(xi), &Aabb::from_points(xj));
-        let planes = [self.culling_planes[i], self.culling_planes[j]];
-        let mut culling = [(DVec3::ZERO, 0.0); 2];
-        let mut count = 0;
-        for p in planes.into_iter().flatten() {
-            culling[count] = p;
-            count += 1;
-        }
+        let (culling, count) = self.culling_pair(i, j);
         CANDIDATES.with_borrow_mut(|candidates| {
             shaft_candidates(self, &shaft, &culling[..count], (i as u32, j as u32), candidates);
             if candidates.is_empty() {
                 return Visibility::Full;
             }
-            self.cast_between(i, xi, j, xj, candidates, planes == [None, None])
+            self.cast_between(i, xi, j, xj, candidates, count == 0)
         })
     }
 
