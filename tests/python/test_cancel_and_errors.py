@@ -332,7 +332,7 @@ def test_zero_area_faces_non_meshes_and_unreadable_materials_are_reported(blende
     assert "1 zero-area face(s)" in text and "Sliver (1)" in text
     assert "Curve (CURVE)" in text
     line = next(w for w in job.warnings if w.startswith("Materials not fully read"))
-    assert "Wood (Base Color is linked)" in line
+    assert "Wood (Base Color is linked to Image Texture without an image, not read)" in line
     assert "Glass (shader Glass BSDF is not read)" in line
     assert "<no material> on Right (no material)" in line
     assert "0.8 grey" in line
