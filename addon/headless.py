@@ -12,6 +12,10 @@ line ``Radiosity: summary: solved i of n frame(s) in T, M s a frame``. On failur
 line ``galerkin-radiosity: error: ...`` on stderr and exits 1 (2 for a usage error). Options not
 given keep the file's Radiosity settings.
 
+``--memory-limit MB`` is the panel's Memory Limit (MB): a bake whose estimate is above it is refused
+before anything is changed, with one line giving the estimate, the limit and what to lower (0, the
+panel's default, is 80% of the memory available when the bake starts).
+
 SIGINT (Ctrl-C) or SIGTERM stops the bake within one progress poll of the library (<= 50 ms
 inside a frame), keeps every complete frame, saves them to ``--save`` and exits 130 or 143. With
 ``--save``, the file is also saved every ``--checkpoint N`` solved frames (default 10), so a killed
@@ -45,6 +49,9 @@ def parse(argv):
     p.add_argument("--tolerance", type=float)
     p.add_argument("--method", choices=["incremental", "exact", "full"], type=str.lower)
     p.add_argument("--threads", type=int, help="0 = all cores")
+    p.add_argument("--memory-limit", type=int, metavar="MB",
+                   help="refuse a bake that would need more than MB megabytes, at once "
+                        "(0 = automatic: 80%% of the memory available when the bake starts)")
     p.add_argument("--subdiv", type=int, help="display subdivision 0..4")
     p.add_argument("--preview-material", action="store_true",
                    help="show colours through the preview material")
@@ -62,6 +69,8 @@ def parse(argv):
     args = p.parse_args(argv)
     if not args.progress_interval >= 0:
         p.error(f"--progress-interval {args.progress_interval}: must be at least 0")
+    if args.memory_limit is not None and args.memory_limit < 0:
+        p.error(f"--memory-limit {args.memory_limit}: must be 0 (automatic) or more megabytes")
     if args.checkpoint < 1:
         p.error(f"--checkpoint {args.checkpoint}: must be at least 1")
     if args.resume and not args.save:
@@ -174,7 +183,8 @@ def _main(args, bpy, pkg):
         p.use_scene_range = False
         p.frame_start, p.frame_end = frames_arg(args.frames)
     for name, attr in (("step", "frame_step"), ("order", "basis_order"), ("quality", "quality"),
-                       ("tolerance", "tolerance"), ("threads", "threads"), ("subdiv", "display_subdivision")):
+                       ("tolerance", "tolerance"), ("threads", "threads"), ("subdiv", "display_subdivision"),
+                       ("memory_limit", "memory_limit_mb")):
         value = getattr(args, name)
         if value is not None:
             try:
@@ -283,6 +293,8 @@ def _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt, lines):
 
 
 def fail(message):
+    # The panel's name of the memory budget, with this script's option for it.
+    message = message.replace("Memory Limit (MB)", "Memory Limit (MB), --memory-limit")
     print(f"{PREFIX}: error: {message}", file=sys.stderr)
     return 1
 

@@ -81,3 +81,30 @@ def test_sigint_keeps_complete_frames_and_resume_matches_an_uninterrupted_bake(b
             x, y = np.asarray(a["frames"][f][name]), np.asarray(b["frames"][f][name])
             assert x.shape == y.shape and x.size > 0
             np.testing.assert_allclose(y, x, rtol=1e-5, atol=1e-7, err_msg=f"frame {f} {name}")
+
+
+def test_memory_limit_refuses_a_bake_at_once_in_one_line(blender, tmp_path):
+    src = tmp_path / "in.blend"
+    scenes.cornell_box(blender, n=4)
+    blender.ops.wm.save_as_mainfile(filepath=str(src))
+    out = tmp_path / "out.blend"
+    common = ["--blend", str(src), "--frames", "1-3", "--order", "2", "--save", str(out)]
+    done = subprocess.run(_cmd([*common, "--memory-limit", "1"]), capture_output=True, text=True,
+                          timeout=600, env=_env(tmp_path))
+    assert done.returncode == 1, done.stdout + done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    start = "galerkin-radiosity: error: over the memory budget: this bake needs up to "
+    assert lines[0].startswith(start), lines[0]
+    assert "but the budget is 1 MB (Memory Limit (MB), --memory-limit)" in lines[0], lines[0]
+    assert "raise Memory Limit (MB), --memory-limit" in lines[0], lines[0]
+    assert not _solved(done.stdout) and not out.exists(), done.stdout
+
+    # A usage error for a negative limit; a generous one bakes.
+    bad = subprocess.run(_cmd([*common, "--memory-limit", "-3"]), capture_output=True, text=True,
+                         timeout=120, env=_env(tmp_path))
+    assert bad.returncode == 2 and "--memory-limit -3: must be 0" in bad.stderr, bad.stderr
+    ok = subprocess.run(_cmd([*common, "--memory-limit", "100000"]), capture_output=True, text=True,
+                        timeout=600, env=_env(tmp_path))
+    assert ok.returncode == 0, ok.stderr
+    assert _solved(ok.stdout) == [1, 2, 3] and out.exists(), ok.stdout
