@@ -748,7 +748,7 @@ pub fn advance(
                 }
             }
         }
-        sys.links.replace_blocks(&rewrites, &mut replaced);
+        sys.links.replace_blocks(&rewrites, &mut replaced)?;
         // Delta K (b - u) with the previous frame's b and u (the part already shot: module docs)
         // for both receivers of each changed pair (eq. 9), summed per receiver in parallel: the
         // changes are listed by receiver (a counting sort), so each task owns its rows of Delta b

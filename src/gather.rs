@@ -73,9 +73,22 @@ struct Stop<'a> {
     /// Points gathered so far, of `total`.
     done: std::sync::atomic::AtomicUsize,
     total: usize,
+    /// A row's allocation the allocator refused ([`crate::budget::try_vec`]): the gather stops
+    /// (as cancelled) and returns it.
+    failed: std::sync::Mutex<Option<Error>>,
 }
 
 impl Stop<'_> {
+    /// Room for `len` values, or `None` after stopping the gather with the allocation's error.
+    fn vec<T>(&self, len: usize) -> Option<Vec<T>> {
+        crate::budget::try_vec(len, "the corner gather's rows")
+            .map_err(|e| {
+                self.failed.lock().unwrap_or_else(|p| p.into_inner()).get_or_insert(e);
+                self.cancelled.store(true, std::sync::atomic::Ordering::Relaxed);
+            })
+            .ok()
+    }
+
     /// Whether the host asked to stop; asks it again when [`POLL_INTERVAL`] has passed.
     fn stopped(&self) -> bool {
         use std::sync::atomic::Ordering::Relaxed;
@@ -374,6 +387,7 @@ impl CornerGather {
             cancelled: false.into(),
             done: 0.into(),
             total: points.len(),
+            failed: None.into(),
         };
         // Asked once before any corner (later polls wait for POLL_INTERVAL).
         if !progress(0.0, "corner gather") {
@@ -421,7 +435,7 @@ impl CornerGather {
         };
         // Four points at a time: their rows, then their values, the four sums interleaved (each
         // in its own order, as one at a time); reading kept moments overlaps other chunks' rays.
-        let gathered: Vec<(Row, usize, [f64; 3])> = points
+        let gathered: Result<Vec<(Row, usize, [f64; 3])>> = points
             .par_chunks(4)
             .zip(kept_rows.into_par_iter().chunks(4))
             .flat_map_iter(|(points, kept)| {
@@ -460,7 +474,11 @@ impl CornerGather {
                 sys.add_direct_light(points.iter().map(|p| p.at.map(|at| (at, p.normal))), &mut values);
                 rows.into_iter().zip(values).map(|((row, n), v)| Ok((row, n, v))).collect()
             })
-            .collect::<Result<_>>()?;
+            .collect::<Result<_>>();
+        if let Some(e) = stop.failed.lock().unwrap_or_else(|p| p.into_inner()).take() {
+            return Err(e);
+        }
+        let gathered = gathered?;
         // A cancel seen inside a row cut it short without an error.
         if stop.cancelled.load(std::sync::atomic::Ordering::Relaxed) {
             return Err(Error::Cancelled);
@@ -840,13 +858,12 @@ impl Gather<'_> {
             }
             return (row, computed);
         }
-        let mut row = Row {
-            near,
-            sources: Vec::with_capacity(wanted.len()),
-            modes: Vec::with_capacity(wanted.len()),
-            moments: Vec::with_capacity(wanted.len() * nb),
-            feet: Vec::new(),
+        let (Some(sources), Some(modes), Some(moments)) =
+            (self.stop.vec(wanted.len()), self.stop.vec(wanted.len()), self.stop.vec(wanted.len() * nb))
+        else {
+            return (Row::default(), 0);
         };
+        let mut row = Row { near, sources, modes, moments, feet: Vec::new() };
         let mut computed = 0;
         let (previous, mut previous_feet) = match previous {
             Some(mut p) => {

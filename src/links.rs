@@ -293,14 +293,21 @@ impl LinkStore {
     /// `g = [G_r,other | G_other,r]` (f32, `nb x nb` row-major each), with the columns written in
     /// parallel, one shooter per task. The blocks they replace, read from the cache lines being
     /// written, go to `replaced` (whose buffers are reused from call to call). Visibility is left
-    /// as it is ([`LinkStore::set_visibility`]).
-    pub fn replace_blocks(&mut self, items: &[(PairId, ElementId, &[f32])], replaced: &mut ReplacedBlocks) {
+    /// as it is ([`LinkStore::set_visibility`]). Its buffers are reserved before anything is
+    /// written ([`crate::budget::try_reserve`]): when the allocator refuses, the error is returned
+    /// and the store is as it was.
+    pub fn replace_blocks(
+        &mut self,
+        items: &[(PairId, ElementId, &[f32])],
+        replaced: &mut ReplacedBlocks,
+    ) -> Result<()> {
         use rayon::prelude::*;
         let nb = self.nb;
         let n2 = nb * nb;
         // The writes by shooter (a counting sort): (item, slot, half of the item's blocks).
         let n = self.receivers.len();
-        let mut start = vec![0usize; n + 1];
+        let mut start: Vec<usize> = budget::try_vec(n + 1, STORE)?;
+        start.resize(n + 1, 0);
         for &(p, ..) in items {
             let pair = &self.pairs[p as usize];
             start[pair.a as usize + 1] += 1;
@@ -309,10 +316,19 @@ impl LinkStore {
         for e in 0..n {
             start[e + 1] += start[e];
         }
-        let mut fill = start.clone();
-        let mut writes = vec![(0u32, 0u32, 0u32); 2 * items.len()];
-        replaced.n2 = n2;
+        let mut fill: Vec<usize> = budget::try_vec(n + 1, STORE)?;
+        fill.extend_from_slice(&start);
+        let mut writes: Vec<(u32, u32, u32)> = budget::try_vec(2 * items.len(), STORE)?;
+        writes.resize(2 * items.len(), (0, 0, 0));
+        let len = 2 * items.len() * n2;
         replaced.position.clear();
+        budget::try_reserve(&mut replaced.position, 2 * items.len(), STORE)?;
+        replaced.old.clear();
+        budget::try_reserve(&mut replaced.old, len, STORE)?;
+        let mut parts = budget::try_vec(n, STORE)?;
+        let weighted = !self.transfer.is_empty();
+        let mut unweighted: Vec<f64> = budget::try_vec(if weighted { 0 } else { n * nb }, STORE)?;
+        replaced.n2 = n2;
         replaced.position.resize(2 * items.len(), 0);
         for (k, &(p, r, _)) in items.iter().enumerate() {
             let other = self.other(p, r);
@@ -324,10 +340,6 @@ impl LinkStore {
             }
         }
         // The old blocks in write order, so that each shooter's task owns a contiguous part.
-        let len = 2 * items.len() * n2;
-        replaced.old.clear();
-        replaced.old.reserve(len);
-        let mut parts = Vec::with_capacity(n);
         let mut rest = &mut replaced.old.spare_capacity_mut()[..len];
         for e in 0..n {
             let (part, tail) = rest.split_at_mut((start[e + 1] - start[e]) * n2);
@@ -335,8 +347,6 @@ impl LinkStore {
             rest = tail;
         }
         // Each task also moves its shooter's transfers by the change of its columns.
-        let weighted = !self.transfer.is_empty();
-        let mut unweighted = Vec::new();
         let transfer = if weighted {
             &mut self.transfer
         } else {
@@ -377,6 +387,7 @@ impl LinkStore {
         // SAFETY: the parts cover the first `len` spare entries, one `n2` chunk per write, and
         // every chunk had all of its `nb x nb` entries written above.
         unsafe { replaced.old.set_len(len) };
+        Ok(())
     }
 
     pub fn set_visibility(&mut self, p: PairId, visibility: Visibility) {
@@ -534,7 +545,7 @@ mod tests {
             .collect();
         let untouched = (store.block(0, 0), store.block(0, 1), store.block(2, 0), store.block(2, 3));
         let mut replaced = ReplacedBlocks::default();
-        store.replace_blocks(&items, &mut replaced);
+        store.replace_blocks(&items, &mut replaced).unwrap();
         for (k, &(p, r, g)) in items.iter().enumerate() {
             assert_eq!(store.block(p, r), g[..n2]);
             assert_eq!(store.block(p, store.other(p, r)), g[n2..]);
@@ -569,7 +580,7 @@ mod tests {
         // Rewrite two pairs (one to zero), then add one: the kept transfers move with them.
         let g1: Vec<f32> = (0..2 * nb * nb).map(|x| 0.01 * x as f32 - 0.1).collect();
         let g3 = vec![0.0f32; 2 * nb * nb];
-        store.replace_blocks(&[(1, 2, &g1[..]), (3, 3, &g3[..])], &mut ReplacedBlocks::default());
+        store.replace_blocks(&[(1, 2, &g1[..]), (3, 3, &g3[..])], &mut ReplacedBlocks::default()).unwrap();
         store.push(4, 0, &block(nb, 9, 4, 2e-3), &block(nb, 9, 0, 2e-3), Visibility::Full);
         let (kept, fresh) = (store.transfers().to_vec(), fresh_transfers(&store));
         for (k, f) in kept.iter().zip(&fresh) {

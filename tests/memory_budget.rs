@@ -82,3 +82,30 @@ fn a_scene_inside_its_budget_bakes() {
     // Keeping 10^5 frames' results does not fit in that budget.
     assert!(budget::check(&scene, 100_000).is_err());
 }
+
+/// Past the estimate (a budget set far above what the process may have), the allocator's refusal
+/// in the big arrays is an error with exit 1, not an abort: the CLI on a 1,456-face box at order 2
+/// under a 300 MB address-space limit (`prlimit --as`; one thread, whose small allocations fit).
+#[cfg(target_os = "linux")]
+#[test]
+fn an_allocation_refused_past_the_estimate_is_an_error_not_an_abort() {
+    let dir = std::env::temp_dir().join(format!("gr-oom-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = dir.join("box.json");
+    let scene = scenes::cornell_box(16, Settings { basis_order: 2, ..Settings::default() });
+    assert!(scene.face_count() >= 1400, "{}", scene.face_count());
+    std::fs::write(&input, galerkin_radiosity::scene::json::scene_to_json(&scene)).unwrap();
+    let out = dir.join("out.json");
+    let o = Command::new("prlimit")
+        .arg(format!("--as={}", 300_000_000))
+        .arg(env!("CARGO_BIN_EXE_galerkin-radiosity"))
+        .args(["bake", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--quiet"])
+        .args(["--threads", "1", "--memory-budget", "1000000"])
+        .output()
+        .expect("prlimit (util-linux) runs");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.starts_with("galerkin-radiosity: error: out of memory while building the "), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(!out.exists());
+}
