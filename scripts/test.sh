@@ -6,6 +6,8 @@
 # The random tests run a small fixed set by default; the long runs are
 #   ANIMATION_RANDOM_CASES=1000 cargo test --release --test animation_random   (about 5 minutes)
 #   PROPTEST_CASES=300000 cargo test --release --test ffi_props -- --nocapture  (about 5 minutes)
+#   PROPTEST_CASES=20000 cargo test --release --test scene_file_props -- --nocapture  (the scene-file
+#     fuzz of issue 23, 64 cases in the run below; about 12 minutes on one thread)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
