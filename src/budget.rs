@@ -165,6 +165,14 @@ pub fn try_vec<T>(len: usize, what: &str) -> Result<Vec<T>> {
     Ok(v)
 }
 
+/// `len` copies of `value`, or [`Error::OutOfMemory`] naming `what` (`vec![value; len]` that
+/// returns the allocator's refusal).
+pub fn try_filled<T: Clone>(len: usize, value: T, what: &str) -> Result<Vec<T>> {
+    let mut v = try_vec(len, what)?;
+    v.resize(len, value);
+    Ok(v)
+}
+
 /// `v.try_reserve(additional)` (amortised growth, as `push` does), with the failure as
 /// [`Error::OutOfMemory`] naming `what`.
 pub fn try_reserve<T>(v: &mut Vec<T>, additional: usize, what: &str) -> Result<()> {

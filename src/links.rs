@@ -306,8 +306,7 @@ impl LinkStore {
         let n2 = nb * nb;
         // The writes by shooter (a counting sort): (item, slot, half of the item's blocks).
         let n = self.receivers.len();
-        let mut start: Vec<usize> = budget::try_vec(n + 1, STORE)?;
-        start.resize(n + 1, 0);
+        let mut start = budget::try_filled(n + 1, 0usize, STORE)?;
         for &(p, ..) in items {
             let pair = &self.pairs[p as usize];
             start[pair.a as usize + 1] += 1;
@@ -318,8 +317,7 @@ impl LinkStore {
         }
         let mut fill: Vec<usize> = budget::try_vec(n + 1, STORE)?;
         fill.extend_from_slice(&start);
-        let mut writes: Vec<(u32, u32, u32)> = budget::try_vec(2 * items.len(), STORE)?;
-        writes.resize(2 * items.len(), (0, 0, 0));
+        let mut writes = budget::try_filled(2 * items.len(), (0u32, 0u32, 0u32), STORE)?;
         let len = 2 * items.len() * n2;
         replaced.position.clear();
         budget::try_reserve(&mut replaced.position, 2 * items.len(), STORE)?;
@@ -327,7 +325,7 @@ impl LinkStore {
         budget::try_reserve(&mut replaced.old, len, STORE)?;
         let mut parts = budget::try_vec(n, STORE)?;
         let weighted = !self.transfer.is_empty();
-        let mut unweighted: Vec<f64> = budget::try_vec(if weighted { 0 } else { n * nb }, STORE)?;
+        let mut unweighted = budget::try_filled(if weighted { 0 } else { n * nb }, 0.0f64, STORE)?;
         replaced.n2 = n2;
         replaced.position.resize(2 * items.len(), 0);
         for (k, &(p, r, _)) in items.iter().enumerate() {
@@ -347,12 +345,7 @@ impl LinkStore {
             rest = tail;
         }
         // Each task also moves its shooter's transfers by the change of its columns.
-        let transfer = if weighted {
-            &mut self.transfer
-        } else {
-            unweighted.resize(n * nb, 0.0);
-            &mut unweighted
-        };
+        let transfer = if weighted { &mut self.transfer } else { &mut unweighted };
         let (receivers, areas) = (&self.receivers, &self.areas);
         let tasks = self.columns.par_chunks_mut(nb).zip(parts).zip(transfer.par_chunks_mut(nb));
         tasks.enumerate().for_each(|(e, ((cols, old), transfer))| {
