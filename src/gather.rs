@@ -64,23 +64,49 @@ const POLL_INTERVAL: std::time::Duration = std::time::Duration::from_millis(10);
 
 /// The gather's cancel and progress: the host's callback, called at most every
 /// [`POLL_INTERVAL`] from whichever thread looks first, and what it said.
-struct Stop<'a> {
+pub(crate) struct Stop<'a> {
     progress: Progress<'a>,
     start: std::time::Instant,
     /// Microseconds after `start` of the last call of `progress`.
     last_poll: std::sync::atomic::AtomicU64,
     cancelled: std::sync::atomic::AtomicBool,
     /// Points gathered so far, of `total`.
-    done: std::sync::atomic::AtomicUsize,
+    pub done: std::sync::atomic::AtomicUsize,
     total: usize,
     /// A row's allocation the allocator refused ([`crate::budget::try_vec`]): the gather stops
     /// (as cancelled) and returns it.
     failed: std::sync::Mutex<Option<Error>>,
 }
 
-impl Stop<'_> {
+impl<'a> Stop<'a> {
+    /// The stop of a gather of `total` points.
+    pub fn new(progress: Progress<'a>, total: usize) -> Self {
+        Stop {
+            progress,
+            start: std::time::Instant::now(),
+            last_poll: 0.into(),
+            cancelled: false.into(),
+            done: 0.into(),
+            total,
+            failed: None.into(),
+        }
+    }
+
+    /// The gather's outcome once its rows are done: the allocation error that stopped it, else
+    /// `Cancelled` when the host asked to stop (a cancel seen inside a row cut it short without
+    /// an error), else `Ok`.
+    pub fn outcome(&self) -> Result<()> {
+        if let Some(e) = self.failed.lock().unwrap_or_else(|p| p.into_inner()).take() {
+            return Err(e);
+        }
+        if self.cancelled.load(std::sync::atomic::Ordering::Relaxed) {
+            return Err(Error::Cancelled);
+        }
+        Ok(())
+    }
+
     /// Room for `len` values, or `None` after stopping the gather with the allocation's error.
-    fn vec<T>(&self, len: usize) -> Option<Vec<T>> {
+    pub fn vec<T>(&self, len: usize) -> Option<Vec<T>> {
         crate::budget::try_vec(len, "the corner gather's rows")
             .map_err(|e| {
                 self.failed.lock().unwrap_or_else(|p| p.into_inner()).get_or_insert(e);
@@ -90,7 +116,7 @@ impl Stop<'_> {
     }
 
     /// Whether the host asked to stop; asks it again when [`POLL_INTERVAL`] has passed.
-    fn stopped(&self) -> bool {
+    pub fn stopped(&self) -> bool {
         use std::sync::atomic::Ordering::Relaxed;
         if self.cancelled.load(Relaxed) {
             return true;
@@ -136,15 +162,15 @@ const GAUSS_POINTS: usize = 3;
 const MAX_DEPTH: u32 = 12;
 
 /// A corner whose normal and a source's are opposed by more than this cosine faces the source.
-const FACING: f64 = 0.5;
+pub(crate) const FACING: f64 = 0.5;
 
 /// A corner facing a source from closer than this fraction of the source's radius takes the part
 /// of the source next to it from a foot ([`Gather::near_facing`]).
-const NEAR_FACING: f64 = 0.2;
+pub(crate) const NEAR_FACING: f64 = 0.2;
 
 /// The part of a faced source within this many times the distance counts with the foot's `B`: a
 /// disc of radius `sqrt(15) d`, 15/16 of a parallel plane's form factor.
-const FOOT_BALL: f64 = 4.0;
+pub(crate) const FOOT_BALL: f64 = 4.0;
 
 /// Moved elements up to this many are tested one by one against a kept moment's rays
 /// ([`Gather::unchanged`]); with more, a swept box entering the shaft recomputes the moment.
@@ -207,12 +233,12 @@ pub struct GatherStats {
 /// has the mesh's interpolated normal ([`crate::scene::Surface::corner_normals`]), so the faces
 /// of a smooth vertex share one point and one value: no facets, as Cycles bakes them.
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct CornerPoint {
+pub(crate) struct CornerPoint {
     /// The element covering it and the local point (inset), or `None` for a skipped face.
-    at: Option<(usize, f64, f64)>,
-    material: u32,
+    pub at: Option<(usize, f64, f64)>,
+    pub material: u32,
     /// The world-space shading normal, where it is not the face's own.
-    normal: Option<DVec3>,
+    pub normal: Option<DVec3>,
 }
 
 /// One point's sources, sorted by element, with how their visibility was decided and their
@@ -304,7 +330,12 @@ impl CornerGather {
         let is_emitter: Vec<bool> =
             (0..patches.len()).map(|e| sys.emission[e * nb].iter().any(|&x| x > 0.0)).collect();
         let emitters: Vec<usize> = (0..patches.len()).filter(|&e| is_emitter[e]).collect();
-        let (points, point_of_corner, corners_per_object) = corner_points(sys, scene, frame);
+        let (points, point_of_corner, corners_per_object) = corner_points(
+            scene,
+            frame,
+            |o, f, s, t| sys.element_of_face(o, f, s, t),
+            |e| sys.elements[e].patch,
+        );
 
         // What moved since `previous`, by object: each object's old and new bounds.
         let previous = previous.filter(|p| p.points == points && p.patches.len() == patches.len());
@@ -380,15 +411,7 @@ impl CornerGather {
             .map(|p| {
                 MovedOccluders::new(movers.iter().map(|&e| (&p.patches[e as usize], &patches[e as usize])))
             });
-        let stop = Stop {
-            progress,
-            start: std::time::Instant::now(),
-            last_poll: 0.into(),
-            cancelled: false.into(),
-            done: 0.into(),
-            total: points.len(),
-            failed: None.into(),
-        };
+        let stop = Stop::new(progress, points.len());
         // Asked once before any corner (later polls wait for POLL_INTERVAL).
         if !progress(0.0, "corner gather") {
             return Err(Error::Cancelled);
@@ -475,14 +498,8 @@ impl CornerGather {
                 rows.into_iter().zip(values).map(|((row, n), v)| Ok((row, n, v))).collect()
             })
             .collect::<Result<_>>();
-        if let Some(e) = stop.failed.lock().unwrap_or_else(|p| p.into_inner()).take() {
-            return Err(e);
-        }
+        stop.outcome()?;
         let gathered = gathered?;
-        // A cancel seen inside a row cut it short without an error.
-        if stop.cancelled.load(std::sync::atomic::Ordering::Relaxed) {
-            return Err(Error::Cancelled);
-        }
         let mut values: Vec<[f64; 3]> = gathered.iter().map(|g| g.2).collect();
         // A point inside another closed surface receives nothing (crate::solids); which points
         // are is decided again only when something moved.
@@ -525,8 +542,15 @@ impl CornerGather {
 }
 
 /// The distinct corner points of the scene's faces, the point of each face corner, and the
-/// number of face corners per object.
-fn corner_points(sys: &System, scene: &Scene, frame: f64) -> (Vec<CornerPoint>, Vec<usize>, Vec<usize>) {
+/// number of face corners per object. `locate(o, f, s, t)` gives the element covering face `f`
+/// of object `o` at its parameters `(s,t)` and the local point there (`None`: a skipped face),
+/// `patch(e)` that element's patch: the flat system's elements, or the hierarchy's faces.
+pub(crate) fn corner_points(
+    scene: &Scene,
+    frame: f64,
+    locate: impl Fn(usize, usize, f64, f64) -> Option<(usize, f64, f64)>,
+    patch: impl Fn(usize) -> Patch,
+) -> (Vec<CornerPoint>, Vec<usize>, Vec<usize>) {
     let mut points = Vec::new();
     let mut point_of_corner = Vec::new();
     let mut per_object = Vec::with_capacity(scene.objects.len());
@@ -543,7 +567,7 @@ fn corner_points(sys: &System, scene: &Scene, frame: f64) -> (Vec<CornerPoint>, 
                 // halfway along the collapsed edge it lies INSET inside along the median.
                 let s = if face.len() == 3 && t == 1.0 { 0.5 } else { s };
                 let (si, ti) = (s.clamp(INSET, 1.0 - INSET), t.clamp(INSET, 1.0 - INSET));
-                let at = sys.element_of_face(o, f, si, ti);
+                let at = locate(o, f, si, ti);
                 let material = obj.face_materials[f];
                 let normal = shading.get(first + k).and_then(|&n| world_normal(&world_from_object, n));
                 // Faces with their own reflectance (a texture's means) share a point only with
@@ -551,8 +575,7 @@ fn corner_points(sys: &System, scene: &Scene, frame: f64) -> (Vec<CornerPoint>, 
                 let rho = scene.surfaces.get(o).and_then(|s| s.face_reflectance.get(f));
                 let rho = rho.map(|r| r.map(f64::to_bits));
                 let key = at.map(|(e, s, t)| {
-                    let n =
-                        normal.unwrap_or_else(|| sys.elements[e].patch.area_vector(s, t).normalize_or_zero());
+                    let n = normal.unwrap_or_else(|| patch(e).area_vector(s, t).normalize_or_zero());
                     (o, v, material, rho, (n * 1e6).round().as_i64vec3().to_array())
                 });
                 let k = match key.and_then(|k| shared.get(&k)) {

@@ -196,30 +196,59 @@ impl Occluders {
         targets: &[DVec3],
         out: &mut [bool],
     ) {
+        CANDIDATES.with_borrow_mut(|candidates| {
+            self.point_candidates(x, n, (i, j), bounds, candidates);
+            self.visibility_among(candidates, x, (i, j), targets, out);
+        });
+    }
+
+    /// The occluder triangles that may block a segment from the point `x` (on element `i`, front
+    /// normal `n`) to a point of element `j` inside `bounds`, into `out`: those
+    /// [`Occluders::point_visibility`] tests. They are candidates for every part of `j` inside
+    /// `bounds` too, so a point gathering a source it splits finds them once.
+    pub fn point_candidates(
+        &self,
+        x: DVec3,
+        n: DVec3,
+        (i, j): (u32, u32),
+        bounds: &crate::geometry::Aabb,
+        out: &mut Vec<usize>,
+    ) {
         let shaft = Shaft::new(&crate::geometry::Aabb { min: x, max: x }, bounds);
         // Segments leave `x` to its front and end on `j`: triangles wholly behind `x`'s tangent
         // plane, or behind `j`'s plane, cannot block.
         let (own, source) = ((n, n.dot(x)), self.culling_planes[j as usize]);
         let both = [own, source.unwrap_or(own)];
         let planes = &both[..1 + source.is_some() as usize];
-        CANDIDATES.with_borrow_mut(|candidates| {
-            shaft_candidates(self, &shaft, planes, (i, j), candidates);
-            if candidates.is_empty() {
-                out.fill(true);
-            } else if candidates.len() <= BRUTE_FORCE_CANDIDATES {
-                CAST.with_borrow_mut(|(tris, from)| {
-                    tris.gather_into(&self.edges, candidates);
-                    tris.terms_from(x, from);
-                    for (o, &y) in out.iter_mut().zip(targets) {
-                        *o = !tris.any_hit(from, y - x, 1e-9, 1.0 - 1e-9);
-                    }
-                });
-            } else {
+        shaft_candidates(self, &shaft, planes, (i, j), out);
+    }
+
+    /// Which segments from `x` (on element `i`) to `targets` (on element `j`) are unobstructed,
+    /// into `out`, given the triangles that may block them ([`Occluders::point_candidates`] for
+    /// bounds holding the targets): short lists tested directly, long ones through the BVH.
+    pub fn visibility_among(
+        &self,
+        candidates: &[usize],
+        x: DVec3,
+        (i, j): (u32, u32),
+        targets: &[DVec3],
+        out: &mut [bool],
+    ) {
+        if candidates.is_empty() {
+            out.fill(true);
+        } else if candidates.len() <= BRUTE_FORCE_CANDIDATES {
+            CAST.with_borrow_mut(|(tris, from)| {
+                tris.gather_into(&self.edges, candidates);
+                tris.terms_from(x, from);
                 for (o, &y) in out.iter_mut().zip(targets) {
-                    *o = !self.bvh.occluded(x, y - x, 1e-9, 1.0 - 1e-9, i, j);
+                    *o = !tris.any_hit(from, y - x, 1e-9, 1.0 - 1e-9);
                 }
+            });
+        } else {
+            for (o, &y) in out.iter_mut().zip(targets) {
+                *o = !self.bvh.occluded(x, y - x, 1e-9, 1.0 - 1e-9, i, j);
             }
-        });
+        }
     }
 
     /// Whether some occluder triangle, not of element `i`, has bounds within `r` of the point `x`
