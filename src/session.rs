@@ -30,8 +30,9 @@ pub enum Method {
     /// Every frame from scratch: all links recomputed, fresh solve.
     Full,
     /// Every frame from scratch on the hierarchy of clusters and elements below faces
-    /// ([`crate::hierarchy`]): what scenes of 10^4 faces and more need. Corners come from the
-    /// leaves' polynomials (no corner gather yet) and previews are full frames.
+    /// ([`crate::hierarchy`]): what scenes of 10^4 faces and more need. Corners are gathered
+    /// through the links ([`crate::hierarchy::gather`]) with `corner_gather` on, else read from
+    /// the leaves' polynomials (as in a preview).
     Hierarchical,
 }
 
@@ -484,7 +485,9 @@ impl Session {
         start: Instant,
         progress: Progress,
     ) -> Result<FrameStats> {
-        let settings = crate::hierarchy::HierarchySettings::of(&placed.settings);
+        let mut settings = crate::hierarchy::HierarchySettings::of(&placed.settings);
+        // A preview reads the leaves, as the flat path's preview skips its gather.
+        settings.corner_gather &= !self.preview;
         let solved =
             self.pool.install(|| crate::hierarchy::solve_frame(placed, frame, &settings, progress))?;
         check_results(&solved.face_results(placed, frame), placed, frame)?;
@@ -497,6 +500,7 @@ impl Session {
             elements: h.leaves,
             pairs: h.links,
             links_recomputed: h.links,
+            gather_seconds: h.gather_seconds,
             full_rebuild: true,
             preview: self.preview,
             ..Default::default()

@@ -19,7 +19,7 @@ use crate::quadrature::GaussLegendre;
 use crate::visibility::{Occluders, Visibility};
 
 /// Rays per cluster link (pairs of points that face each other).
-const CLUSTER_RAYS: usize = 8;
+pub(crate) const CLUSTER_RAYS: usize = 8;
 
 #[derive(Clone, Debug)]
 pub enum Coupling {
@@ -70,6 +70,9 @@ pub struct Computed {
     pub coupling: Option<Coupling>,
     /// Some rays arrive and some do not: a shadow boundary crosses the link.
     pub partial: bool,
+    /// The two nodes face each other but none of the sampled rays arrives: the solve gets
+    /// nothing through them, the corner gather may (a corner sees what no sample does).
+    pub blocked: bool,
 }
 
 /// Computes the link between `a` and `b`.
@@ -80,17 +83,18 @@ pub fn compute(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Computed
             surfaces(ctx, (sa.face as usize, &sa.patch), (sb.face as usize, &sb.patch))
         }
         _ => {
-            let t = transmittance(ctx, tree, a, b);
+            let (t, facing) = transmittance(ctx, tree, a, b);
             Computed {
                 coupling: (t > 0.0).then_some(Coupling::Clusters { transmittance: t as f32 }),
                 partial: t > 0.0 && t < 1.0,
+                blocked: facing && t == 0.0,
             }
         }
     }
 }
 
 fn surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize, &Patch)) -> Computed {
-    let none = Computed { coupling: None, partial: false };
+    let none = Computed { coupling: None, partial: false, blocked: false };
     if fa == fb || !may_face(pa, pb) || !may_face(pb, pa) {
         return none;
     }
@@ -99,7 +103,7 @@ fn surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize, &Pat
         None => Visibility::Full,
     };
     if vis == Visibility::Blocked {
-        return none;
+        return Computed { blocked: true, ..none };
     }
     let partial = matches!(vis, Visibility::Partial(_));
     let p = &ctx.pair;
@@ -127,13 +131,14 @@ fn surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize, &Pat
         return none;
     }
     let blocks: Box<[f32]> = c.ij.iter().chain(&c.ji).map(|&x| x as f32).collect();
-    Computed { coupling: Some(Coupling::Surfaces(blocks)), partial }
+    Computed { coupling: Some(Coupling::Surfaces(blocks)), partial, blocked: false }
 }
 
 /// The share of up to [`CLUSTER_RAYS`] segments between points of `a` and of `b` that face
-/// each other and arrive unobstructed; 1 without visibility, 0 when no sampled pair faces.
-fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> f64 {
-    let Some(occ) = ctx.occluders else { return 1.0 };
+/// each other and arrive unobstructed (1 without visibility, 0 when no sampled pair faces), and
+/// whether some sampled pair faces.
+fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> (f64, bool) {
+    let Some(occ) = ctx.occluders else { return (1.0, true) };
     let mut rng = SplitMix(((a as u64) << 32) ^ b as u64 ^ 0x5851_F42D_4C95_7F2D);
     let (mut facing, mut arrived) = (0, 0);
     for _ in 0..4 * CLUSTER_RAYS {
@@ -149,11 +154,11 @@ fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> f64 {
             break;
         }
     }
-    if facing == 0 { 0.0 } else { arrived as f64 / facing as f64 }
+    if facing == 0 { (0.0, false) } else { (arrived as f64 / facing as f64, true) }
 }
 
 /// A point below node `id` (face, position, normal), area-weighted down the tree.
-fn sample_point(tree: &Tree, mut id: NodeId, rng: &mut SplitMix) -> (u32, DVec3, DVec3) {
+pub(crate) fn sample_point(tree: &Tree, mut id: NodeId, rng: &mut SplitMix) -> (u32, DVec3, DVec3) {
     loop {
         let node = tree.node(id);
         match &node.kind {
@@ -171,10 +176,10 @@ fn sample_point(tree: &Tree, mut id: NodeId, rng: &mut SplitMix) -> (u32, DVec3,
 }
 
 /// Deterministic uniform numbers in [0,1) (splitmix64).
-struct SplitMix(u64);
+pub(crate) struct SplitMix(pub u64);
 
 impl SplitMix {
-    fn next(&mut self) -> f64 {
+    pub(crate) fn next(&mut self) -> f64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);

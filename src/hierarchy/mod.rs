@@ -9,6 +9,7 @@
 //! link again where the solution's brightness asks for it, solve again.
 
 pub mod coupling;
+pub mod gather;
 pub mod lobes;
 pub mod refine;
 pub mod solve;
@@ -54,12 +55,14 @@ pub struct HierarchySettings {
     pub clusters: bool,
     /// How links between near surfaces are integrated.
     pub near: coupling::NearRule,
+    /// Corners gathered through the links ([`gather`]); else read from the leaf polynomials.
+    pub corner_gather: bool,
 }
 
 impl HierarchySettings {
     /// The defaults with the scene's accuracy.
     pub fn of(settings: &crate::scene::Settings) -> Self {
-        Self { accuracy: settings.accuracy, ..Default::default() }
+        Self { accuracy: settings.accuracy, corner_gather: settings.corner_gather, ..Default::default() }
     }
 }
 
@@ -73,6 +76,7 @@ impl Default for HierarchySettings {
             max_sweeps: 500,
             clusters: true,
             near: coupling::NearRule::Coarse,
+            corner_gather: false,
         }
     }
 }
@@ -90,6 +94,9 @@ pub struct HierarchyStats {
     pub sweeps: usize,
     pub link_seconds: f64,
     pub solve_seconds: f64,
+    /// Distinct corner points gathered, and the gather's time (0 without it).
+    pub gather_points: usize,
+    pub gather_seconds: f64,
 }
 
 /// One frame solved on the hierarchy.
@@ -97,6 +104,8 @@ pub struct HierarchicalFrame {
     pub hierarchy: Hierarchy,
     pub state: State,
     pub stats: HierarchyStats,
+    /// `B` at every face corner per object, gathered ([`gather`]); `None`: from the leaves.
+    pub corners: Option<crate::gather::CornerValues>,
 }
 
 /// Solves `scene` at `frame` on the hierarchy, from scratch. Runs on the current rayon pool;
@@ -180,7 +189,25 @@ pub fn solve_frame(
                 }
         })
         .sum();
-    Ok(HierarchicalFrame { hierarchy, state, stats })
+    let corners = if hs.corner_gather {
+        let t = Instant::now();
+        let inputs = gather::Inputs {
+            tree: &hierarchy.tree,
+            links: &hierarchy.links,
+            blocked: &hierarchy.blocked,
+            state: &state,
+            emission: &emission,
+            occluders: occluders.as_ref(),
+            lights: lights.as_ref(),
+        };
+        let (corners, points) = gather::corners(&inputs, scene, frame, progress)?;
+        stats.gather_points = points;
+        stats.gather_seconds = t.elapsed().as_secs_f64();
+        Some(corners)
+    } else {
+        None
+    };
+    Ok(HierarchicalFrame { hierarchy, state, stats, corners })
 }
 
 impl HierarchicalFrame {
@@ -230,8 +257,8 @@ impl HierarchicalFrame {
         out
     }
 
-    /// Per object, per face: the mean `B` and `B` at each corner from the leaf polynomials, as
-    /// [`crate::system::System::face_results`] reports them.
+    /// Per object, per face: the mean `B` and `B` at each corner (gathered, else from the leaf
+    /// polynomials), as [`crate::system::System::face_results`] reports them.
     pub fn face_results(&self, scene: &Scene, frame: f64) -> Vec<ObjectResult> {
         let tree = &self.hierarchy.tree;
         let to_f32 = |v: [f64; 3]| v.map(|x| x as f32);
@@ -264,6 +291,9 @@ impl HierarchicalFrame {
                         res.corner_radiosity.extend(std::iter::repeat_n(e, face.len()));
                     }
                 }
+            }
+            if let Some(gathered) = &self.corners {
+                res.corner_radiosity = gathered[o].iter().map(|&v| to_f32(v)).collect();
             }
             out.push(res);
         }

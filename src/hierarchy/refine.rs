@@ -55,6 +55,12 @@ impl Oracle {
     /// bounded over the spheres), times how far a polynomial of the basis order can be off over
     /// the pair, `min(1, ((r_p + r_q) / d)^(order + 1))`.
     fn carried(&self, tree: &Tree, radiosity: &[f64], p: NodeId, q: NodeId) -> f64 {
+        self.carried_as(tree, radiosity, p, q, true)
+    }
+
+    /// [`Oracle::carried`], the smoothness factor left out unless `smooth`: across a shadow
+    /// boundary the transfer is not smooth, and a link's error is up to all it carries.
+    fn carried_as(&self, tree: &Tree, radiosity: &[f64], p: NodeId, q: NodeId, smooth: bool) -> f64 {
         let (np, nq) = (tree.node(p), tree.node(q));
         let b = radiosity[q as usize];
         if b <= 0.0 || np.rho_max <= 0.0 {
@@ -73,12 +79,17 @@ impl Oracle {
         // A cluster's transfer from the centres is off by the spread of `1/r^2` over the pair,
         // `~ ((r_p + r_q) / d)^2`; a surface pair's polynomials by the kernel's next order.
         let power = if np.is_cluster() || nq.is_cluster() { 2 } else { tree.basis.order() as i32 + 1 };
-        let smooth = sin.powi(power);
-        np.rho_max * b * np.area * f * smooth
+        let smoothness = if smooth { sin.powi(power) } else { 1.0 };
+        np.rho_max * b * np.area * f * smoothness
     }
 
     fn pair_carried(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId) -> f64 {
         self.carried(tree, radiosity, a, b).max(self.carried(tree, radiosity, b, a))
+    }
+
+    /// The power a pair carries at most, without the smoothness factor (a partly visible pair).
+    fn pair_power(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId) -> f64 {
+        self.carried_as(tree, radiosity, a, b, false).max(self.carried_as(tree, radiosity, b, a, false))
     }
 
     fn decide(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId, bar: f64) -> Verdict {
@@ -131,6 +142,9 @@ impl Oracle {
 pub struct Hierarchy {
     pub tree: Tree,
     pub links: Vec<Link>,
+    /// Pairs the oracle accepted whose sampled rays were all blocked ([`coupling::Computed`]):
+    /// no link for the solve, sources the corner gather tries with its own rays.
+    pub blocked: Vec<(NodeId, NodeId)>,
     pub oracle: Oracle,
 }
 
@@ -144,7 +158,7 @@ pub struct RefineStats {
 
 impl Hierarchy {
     pub fn new(tree: Tree, oracle: Oracle) -> Self {
-        Self { tree, links: Vec::new(), oracle }
+        Self { tree, links: Vec::new(), blocked: Vec::new(), oracle }
     }
 
     /// Builds the links from the root's interaction with itself, `radiosity` per node (it grows
@@ -212,9 +226,14 @@ impl Hierarchy {
             let computed: Vec<coupling::Computed> =
                 accepted.par_iter().map(|&(a, b)| coupling::compute(ctx, tree, a, b)).collect();
             for (&(a, b), c) in accepted.iter().zip(computed) {
-                let Some(coupling) = c.coupling else { continue };
+                let Some(coupling) = c.coupling else {
+                    if c.blocked {
+                        self.blocked.push((a, b));
+                    }
+                    continue;
+                };
                 let refine_shadow = c.partial
-                    && self.oracle.pair_carried(&self.tree, radiosity, a, b) > PARTIAL_SHARE * bar
+                    && self.oracle.pair_power(&self.tree, radiosity, a, b) > PARTIAL_SHARE * bar
                     && (self.oracle.splittable(&self.tree, a) || self.oracle.splittable(&self.tree, b));
                 if refine_shadow {
                     stats.split_for_shadows += 1;

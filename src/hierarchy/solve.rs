@@ -42,18 +42,23 @@ pub struct Incoming {
 
 impl Incoming {
     pub fn new(nodes: usize, links: &[Link]) -> Self {
+        Self::of_pairs(nodes, &links.iter().map(|l| (l.a, l.b)).collect::<Vec<_>>())
+    }
+
+    /// Per node, the pairs `(a, b)` of `pairs` it is an end of: `(pair, side)`.
+    pub fn of_pairs(nodes: usize, pairs: &[(NodeId, NodeId)]) -> Self {
         let mut count = vec![0usize; nodes + 1];
-        for l in links {
-            count[l.a as usize + 1] += 1;
-            count[l.b as usize + 1] += 1;
+        for &(a, b) in pairs {
+            count[a as usize + 1] += 1;
+            count[b as usize + 1] += 1;
         }
         for i in 0..nodes {
             count[i + 1] += count[i];
         }
         let mut fill = count.clone();
-        let mut entries = vec![(0u32, 0u8); 2 * links.len()];
-        for (k, l) in links.iter().enumerate() {
-            for (node, side) in [(l.a, 0u8), (l.b, 1u8)] {
+        let mut entries = vec![(0u32, 0u8); 2 * pairs.len()];
+        for (k, &(a, b)) in pairs.iter().enumerate() {
+            for (node, side) in [(a, 0u8), (b, 1u8)] {
                 entries[fill[node as usize]] = (k as u32, side);
                 fill[node as usize] += 1;
             }
@@ -61,7 +66,7 @@ impl Incoming {
         Self { offsets: count, entries }
     }
 
-    fn of(&self, node: usize) -> &[(u32, u8)] {
+    pub(crate) fn of(&self, node: usize) -> &[(u32, u8)] {
         &self.entries[self.offsets[node]..self.offsets[node + 1]]
     }
 }
@@ -420,6 +425,11 @@ impl State {
             }
         }
         out.map(|x| if area > 0.0 { x / area } else { 0.0 })
+    }
+
+    /// The intensity lobes node `id` shoots through cluster links (W/sr by direction).
+    pub fn lobes(&self, id: NodeId) -> &Lobes {
+        &self.lobes[id as usize]
     }
 
     /// `b` of surface node `id`.
