@@ -59,6 +59,12 @@ TABLES: dict[str, Table | None] = {
     "ab-moving-light": Table(f"{PY} -m tools.ab HEAD --exact HEAD --runs 5 --gather", 0,
                              f"{PY} -m tools.ab WORK --exact WORK --runs 1 --frames 4 --gather",
                              "a build of the revision, then about 3 min"),
+    "hierarchy-cornell": Table("cargo bench --bench hierarchy", 0, "cargo bench --bench hierarchy -- --quick",
+                               "about 5 s after a 1 min build"),
+    "hierarchy-presubdivided": Table("cargo bench --bench hierarchy", 1,
+                                     "cargo bench --bench hierarchy -- --quick", "(the same run)"),
+    "hierarchy-real": Table("cargo bench --bench hierarchy", 2, "cargo bench --bench hierarchy -- --quick",
+                            "(the same run)"),
     "tolerance": Table(f"{PY} -m tools.tolerance_sweep", 0,
                        f"{PY} -m tools.tolerance_sweep --frames 4 --subdiv 6", "about 1.5 min"),
     "validation": Table(f"{PY} -m tools.validate_cycles --subdiv 12 --samples 4096 --pictures "
