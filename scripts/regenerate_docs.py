@@ -45,6 +45,15 @@ STAGE_LOG = "docs/test-stages.log"
 # The lines of scripts/test.sh's output the stage table reads (kept in STAGE_LOG): its own
 # `== STAGE` / `-- STAGE: N s` lines, cargo's and pytest's counts, and `# ` notes about the run.
 STAGE_LINES = r"^(== |-- |# |test result: |[0-9]+ passed)"
+STAGE_TABLE = f"python3 scripts/regenerate_docs.py --stage-table {STAGE_LOG}"
+FRESH_RUN = " ".join([
+    "rm -rf out/fresh-clone && git clone -q --no-checkout . out/fresh-clone",
+    "&& git -C out/fresh-clone checkout -q $(git rev-parse HEAD)",
+    f"&& (cd out/fresh-clone && CI=true bash .ci/run) > {FRESH_LOG} 2>&1;",
+    '{ echo "# a fresh clone of $(git rev-parse --short HEAD) running CI=true bash .ci/run,',
+    "$(date -u '+%Y-%m-%d %H:%M') UTC, $(nproc) cores\";",
+    f"grep -E '{STAGE_LINES}' {FRESH_LOG}; }} > {STAGE_LOG}; {STAGE_TABLE}",
+])
 
 
 @dataclass(frozen=True)
@@ -74,13 +83,8 @@ TABLES: dict[str, Table | None] = {
     "hierarchy-real": Table("cargo bench --bench hierarchy", 2, "cargo bench --bench hierarchy -- --quick",
                             "(the same run)"),
     # A fresh clone's `.ci/run` (= scripts/test.sh): its stage lines kept in docs/test-stages.log.
-    "test-stages": Table(f"rm -rf out/fresh-clone && git clone -q --no-checkout . out/fresh-clone && git -C out/fresh-clone "
-                         f"checkout -q $(git rev-parse HEAD) && (cd out/fresh-clone && CI=true bash .ci/run) > {FRESH_LOG} 2>&1; {{ echo \"# a fresh clone of $(git rev-parse "
-                         f"--short HEAD) running CI=true bash .ci/run, $(date -u '+%Y-%m-%d %H:%M') UTC, "
-                         f"$(nproc) cores\"; grep -E '{STAGE_LINES}' {FRESH_LOG}; }} > {STAGE_LOG}; python3 scripts/regenerate_docs.py --stage-table {STAGE_LOG}", 0,
-                         f"python3 scripts/regenerate_docs.py --stage-table {STAGE_LOG}",
-                         "about 8-10 min, both cores (a clone of HEAD built from scratch)",
-                         stored=f"python3 scripts/regenerate_docs.py --stage-table {STAGE_LOG}"),
+    "test-stages": Table(FRESH_RUN, 0, STAGE_TABLE, "about 8-10 min, both cores (a clone built from scratch)",
+                         stored=STAGE_TABLE),
     "tolerance": Table(f"{PY} -m tools.tolerance_sweep", 0,
                        f"{PY} -m tools.tolerance_sweep --frames 4 --subdiv 6", "about 1.5 min"),
     "validation": Table(f"{PY} -m tools.validate_cycles --subdiv 12 --samples 4096 --pictures "

@@ -95,3 +95,26 @@ def test_the_hierarchy_bench_still_prints_the_documents_tables(tmp_path):
             want = documented[row[0]]
             assert [c for i, c in enumerate(row) if i not in timed] == \
                 [c for i, c in enumerate(want) if i not in timed], (name, row[0])
+
+
+def test_the_test_stages_block_is_the_table_of_the_kept_log(tmp_path):
+    log = (REPO / regen.STAGE_LOG).read_text()
+    doc = tmp_path / "benchmarks.md"
+    shutil.copy(regen.DOC, doc)
+    new, bodies = regen.regenerate(["test-stages"], doc=doc, stored=True)
+    table = subprocess.run([sys.executable, "scripts/regenerate_docs.py", "--stage-table", regen.STAGE_LOG],
+                           cwd=REPO, capture_output=True, text=True, check=True).stdout.strip()
+    assert bodies["test-stages"].strip().endswith(table)
+    assert _blocks(regen.DOC.read_text())["test-stages"].strip().endswith(table)
+    # One row per `-- STAGE: N s` line of scripts/test.sh, in its order; the stages add up to
+    # no more than the total it printed.
+    stages = [m for m in map(regen.STAGE_DONE.match, log.splitlines()) if m]
+    rows = _rows(bodies["test-stages"])
+    assert [r[0] for r in rows[:-1]] == [m["name"] for m in stages]
+    total = int(next(m for m in map(regen.TOTAL.match, log.splitlines()) if m)["seconds"])
+    assert sum(int(m["seconds"]) for m in stages) <= total
+    assert rows[-1][1] == f"**{total // 60} m {total % 60:02d} s**"
+    # The stage names are the ones scripts/test.sh prints today.
+    script = (REPO / "scripts" / "test.sh").read_text()
+    for m in stages:
+        assert f'"{m["name"]}"' in script, m["name"]
