@@ -55,8 +55,8 @@ class RadiositySceneSettings(bpy.types.PropertyGroup):
         name="Accuracy", default=1e-4, min=1e-8, max=0.5, precision=6,
         description="When to stop bouncing light: smaller is more accurate and slower. 1e-4 leaves "
                     "corners within about 0.1% of a converged bake; 1e-3 is about 2.4 times faster "
-                    "to solve, within about 1%. Technical: solver tolerance, the fraction of the "
-                    "emitted power the unshot light may still deliver")
+                    "to solve, its worst corner about 1.3% off. Technical: solver tolerance, the "
+                    "fraction of the emitted power the unshot light may still deliver")
     visibility: BoolProperty(
         name="Shadows", default=True,
         description="Objects block light. Off: much faster, but light passes through everything. "

@@ -4,6 +4,7 @@
     python3 scripts/regenerate_docs.py --section NAME [--section NAME ...] [--dry-run]
     python3 scripts/regenerate_docs.py --quick --section NAME     # the plumbing, on a reduced case
     python3 scripts/regenerate_docs.py --stored --section validation  # from the last run's report
+    python3 scripts/regenerate_docs.py --stage-table LOG       # scripts/test.sh's log as a table
 
 docs/benchmarks.md holds blocks
 
@@ -39,6 +40,22 @@ DOC = REPO / "docs" / "benchmarks.md"
 PY = ".venv/bin/python"
 
 
+FRESH_LOG = "out/test-stages.log"
+STAGE_LOG = "docs/test-stages.log"
+# The lines of scripts/test.sh's output the stage table reads (kept in STAGE_LOG): its own
+# `== STAGE` / `-- STAGE: N s` lines, cargo's and pytest's counts, and `# ` notes about the run.
+STAGE_LINES = r"^(== |-- |# |test result: |[0-9]+ passed)"
+STAGE_TABLE = f"python3 scripts/regenerate_docs.py --stage-table {STAGE_LOG}"
+FRESH_RUN = " ".join([
+    "rm -rf out/fresh-clone && git clone -q --no-checkout . out/fresh-clone",
+    "&& git -C out/fresh-clone checkout -q $(git rev-parse HEAD)",
+    f"&& (cd out/fresh-clone && CI=true bash .ci/run) > {FRESH_LOG} 2>&1;",
+    '{ echo "# a fresh clone of $(git rev-parse --short HEAD) running CI=true bash .ci/run,',
+    "$(date -u '+%Y-%m-%d %H:%M') UTC, $(nproc) cores\";",
+    f"grep -E '{STAGE_LINES}' {FRESH_LOG}; }} > {STAGE_LOG}; {STAGE_TABLE}",
+])
+
+
 @dataclass(frozen=True)
 class Table:
     command: str      # prints the table (and others)
@@ -59,6 +76,15 @@ TABLES: dict[str, Table | None] = {
     "ab-moving-light": Table(f"{PY} -m tools.ab HEAD --exact HEAD --runs 5 --gather", 0,
                              f"{PY} -m tools.ab WORK --exact WORK --runs 1 --frames 4 --gather",
                              "a build of the revision, then about 3 min"),
+    "hierarchy-cornell": Table("cargo bench --bench hierarchy", 0, "cargo bench --bench hierarchy -- --quick",
+                               "about 5 s after a 1 min build"),
+    "hierarchy-presubdivided": Table("cargo bench --bench hierarchy", 1,
+                                     "cargo bench --bench hierarchy -- --quick", "(the same run)"),
+    "hierarchy-real": Table("cargo bench --bench hierarchy", 2, "cargo bench --bench hierarchy -- --quick",
+                            "(the same run)"),
+    # A fresh clone's `.ci/run` (= scripts/test.sh): its stage lines kept in docs/test-stages.log.
+    "test-stages": Table(FRESH_RUN, 0, STAGE_TABLE, "about 8-10 min, both cores (a clone built from scratch)",
+                         stored=STAGE_TABLE),
     "tolerance": Table(f"{PY} -m tools.tolerance_sweep", 0,
                        f"{PY} -m tools.tolerance_sweep --frames 4 --subdiv 6", "about 1.5 min"),
     "validation": Table(f"{PY} -m tools.validate_cycles --subdiv 12 --samples 4096 --pictures "
@@ -97,6 +123,49 @@ def tables(text: str) -> list[str]:
     if cur:
         close()
     return out
+
+
+STAGE_DONE = re.compile(r"^-- (?P<name>.+): (?P<seconds>\d+) s(?P<failed>, FAILED.*)?$")
+STAGE_SKIPPED = re.compile(r"^-- (?P<name>.+): skipped(?P<why>.*)$")
+CARGO_COUNT = re.compile(r"^test result: \w+\. (?P<passed>\d+) passed; (?P<failed>\d+) failed")
+PYTEST_COUNT = re.compile(r"^(?P<passed>\d+) passed(?:, (?P<failed>\d+) failed)?.* in (?P<seconds>[\d.]+)s")
+TOTAL = re.compile(r"^== all tests passed in (?P<seconds>\d+) s")
+
+
+def _minutes(seconds: int) -> str:
+    return f"{seconds // 60} m {seconds % 60:02d} s"
+
+
+def stage_table(text: str) -> str:
+    """scripts/test.sh's output (or its stage lines) as a caption and a markdown table: each
+    stage's wall time from its `-- STAGE: N s` line, the tests it ran (cargo's `test result`
+    lines, pytest's summary), and the total. `# ` lines are notes about the run, put in the
+    caption."""
+    notes, rows, tests, total = [], [], 0, None
+    for line in text.splitlines():
+        if line.startswith("# "):
+            notes.append(line[2:].strip())
+        elif m := CARGO_COUNT.match(line):
+            tests += int(m["passed"])
+        elif m := PYTEST_COUNT.match(line):
+            tests += int(m["passed"])
+        elif m := STAGE_DONE.match(line):
+            rows.append((m["name"], f"{m['seconds']} s" + (" (FAILED)" if m["failed"] else ""),
+                         f"{tests:,}" if tests else "", int(m["seconds"])))
+            tests = 0
+        elif m := STAGE_SKIPPED.match(line):
+            rows.append((m["name"], "skipped" + m["why"], "", 0))
+        elif m := TOTAL.match(line):
+            total = int(m["seconds"])
+    if not rows:
+        raise SystemExit("regenerate_docs: error: no `-- STAGE: N s` lines (is it scripts/test.sh's output?)")
+    done = f"all passed in {total} s ({_minutes(total)})" if total is not None else "did not pass"
+    out = [f"Stages of `scripts/test.sh`, {done}{': ' + '; '.join(notes) if notes else ''}:", "",
+           "| stage | wall | tests passed |", "|---|---|---|"]
+    out += [f"| {name} | {wall} | {count} |" for name, wall, count, _ in rows]
+    out.append(f"| **all** | **{_minutes(total) if total is not None else 'failed'}** | "
+               f"{sum(int(c.replace(',', '')) for _, _, c, _ in rows if c):,} |")
+    return "\n".join(out)
 
 
 def revision() -> str:
@@ -180,8 +249,13 @@ def main(argv=None) -> int:
     p.add_argument("--stored", action="store_true",
                    help="print the tables from the last full runs' saved reports "
                         "(validation: docs/validation.json)")
+    p.add_argument("--stage-table", type=Path, metavar="LOG",
+                   help="print scripts/test.sh's output (or its stage lines) in LOG as a table, and exit")
     p.add_argument("--doc", type=Path, help=f"the document to rewrite (default {DOC.relative_to(REPO)})")
     args = p.parse_args(argv)
+    if args.stage_table:
+        print(stage_table(args.stage_table.read_text()))
+        return 0
     names = list(dict.fromkeys(args.names + args.section))
     if args.list or not names:
         for name, t in TABLES.items():

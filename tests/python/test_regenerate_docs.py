@@ -58,3 +58,63 @@ def test_the_tolerance_sweep_still_prints_the_table_its_block_wants(tmp_path):
             or line.startswith("| 1e-3")]
     assert len(rows) == 3
 
+
+
+HIERARCHY = ("hierarchy-cornell", "hierarchy-presubdivided", "hierarchy-real")
+
+
+def _rows(body):
+    """A block's table rows (header and rule dropped), as lists of cells."""
+    lines = [line for line in body.splitlines() if line.startswith("|")][2:]
+    return [[cell.strip() for cell in line.strip("|").split("|")] for line in lines]
+
+
+@pytest.mark.skipif(not any(p.is_file() and p.suffix == "" for p in (REPO / "target" / "release" / "deps")
+                            .glob("hierarchy-*")) or shutil.which("cargo") is None,
+                    reason="needs the hierarchy bench built: cargo bench --bench hierarchy --no-run "
+                           "(scripts/test.sh does not build the benches)")
+def test_the_hierarchy_bench_still_prints_the_documents_tables(tmp_path):
+    doc = tmp_path / "benchmarks.md"
+    shutil.copy(regen.DOC, doc)
+    _, bodies = regen.regenerate(list(HIERARCHY), doc=doc, quick=True)
+    in_doc = _blocks(regen.DOC.read_text())
+    for name in HIERARCHY:
+        assert "reduced case" in bodies[name]
+        assert _header(bodies[name]) == _header(in_doc[name]), name
+    # The reduced case's rows are rows of the full run: their counts and errors (not their
+    # times or memory) are the document's. A difference means the hierarchy changed since the
+    # blocks were written: regenerate them (see the section).
+    for name in HIERARCHY:
+        header = [c.strip() for c in _header(in_doc[name]).strip("|").split("|")]
+        timed = {i for i, h in enumerate(header) if h in ("s", "peak RSS MiB")}
+        documented = {row[0]: row for row in _rows(in_doc[name])}
+        quick = _rows(bodies[name])
+        assert quick, name
+        for row in quick:
+            assert row[0] in documented, (name, row[0])
+            want = documented[row[0]]
+            assert [c for i, c in enumerate(row) if i not in timed] == \
+                [c for i, c in enumerate(want) if i not in timed], (name, row[0])
+
+
+def test_the_test_stages_block_is_the_table_of_the_kept_log(tmp_path):
+    log = (REPO / regen.STAGE_LOG).read_text()
+    doc = tmp_path / "benchmarks.md"
+    shutil.copy(regen.DOC, doc)
+    new, bodies = regen.regenerate(["test-stages"], doc=doc, stored=True)
+    table = subprocess.run([sys.executable, "scripts/regenerate_docs.py", "--stage-table", regen.STAGE_LOG],
+                           cwd=REPO, capture_output=True, text=True, check=True).stdout.strip()
+    assert bodies["test-stages"].strip().endswith(table)
+    assert _blocks(regen.DOC.read_text())["test-stages"].strip().endswith(table)
+    # One row per `-- STAGE: N s` line of scripts/test.sh, in its order; the stages add up to
+    # no more than the total it printed.
+    stages = [m for m in map(regen.STAGE_DONE.match, log.splitlines()) if m]
+    rows = _rows(bodies["test-stages"])
+    assert [r[0] for r in rows[:-1]] == [m["name"] for m in stages]
+    total = int(next(m for m in map(regen.TOTAL.match, log.splitlines()) if m)["seconds"])
+    assert sum(int(m["seconds"]) for m in stages) <= total
+    assert rows[-1][1] == f"**{total // 60} m {total % 60:02d} s**"
+    # The stage names are the ones scripts/test.sh prints today.
+    script = (REPO / "scripts" / "test.sh").read_text()
+    for m in stages:
+        assert f'"{m["name"]}"' in script, m["name"]
