@@ -24,7 +24,7 @@ use crate::kernel::PairContext;
 use crate::lights::direct::DirectLight;
 use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
-use crate::scene::json::ObjectResult;
+use crate::scene::json::{ObjectResult, irradiance_from_radiosity};
 use crate::system::{Progress, build_elements, corner_params};
 use crate::visibility::Occluders;
 
@@ -242,6 +242,7 @@ impl HierarchicalFrame {
                 name: obj.name.clone(),
                 face_radiosity: Vec::with_capacity(obj.faces.len()),
                 corner_radiosity: Vec::new(),
+                corner_irradiance: Vec::new(),
             };
             for (fi, face) in obj.faces.iter().enumerate() {
                 match faces.peek() {
@@ -249,6 +250,9 @@ impl HierarchicalFrame {
                         let f = *f;
                         faces.next();
                         res.face_radiosity.push(to_f32(self.face_mean(f)));
+                        let material = obj.face_materials[fi];
+                        let rho = scene.reflectance_of(o, fi, material);
+                        let emission = scene.emission_at(material as usize, frame);
                         for (s, t) in corner_params(face.len()) {
                             let v = if face.len() == 3 && t == 1.0 {
                                 self.apex(f)
@@ -256,12 +260,14 @@ impl HierarchicalFrame {
                                 self.eval_face(f, s, t)
                             };
                             res.corner_radiosity.push(to_f32(v));
+                            res.corner_irradiance.push(to_f32(irradiance_from_radiosity(v, emission, rho)));
                         }
                     }
                     _ => {
                         let e = to_f32(scene.emission_at(obj.face_materials[fi] as usize, frame));
                         res.face_radiosity.push(e);
                         res.corner_radiosity.extend(std::iter::repeat_n(e, face.len()));
+                        res.corner_irradiance.extend(std::iter::repeat_n([0.0; 3], face.len()));
                     }
                 }
             }
