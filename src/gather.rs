@@ -438,7 +438,9 @@ impl CornerGather {
         };
         // Four points at a time: their rows, then their values, the four sums interleaved (each
         // in its own order, as one at a time); reading kept moments overlaps other chunks' rays.
-        let gathered: Result<Vec<(Row, usize, [f64; 3], [f64; 3])>> = points
+        // Per point: its row, how many moments were computed, and `[B, H]`.
+        type Gathered = (Row, usize, [[f64; 3]; 2]);
+        let gathered: Result<Vec<Gathered>> = points
             .par_chunks(4)
             .zip(kept_rows.into_par_iter().chunks(4))
             .flat_map_iter(|(points, kept)| {
@@ -487,7 +489,11 @@ impl CornerGather {
                         }
                     }
                 }
-                rows.into_iter().zip(values).zip(light).map(|(((row, n), v), h)| Ok((row, n, v, h))).collect()
+                rows.into_iter()
+                    .zip(values)
+                    .zip(light)
+                    .map(|(((row, n), v), h)| Ok((row, n, [v, h])))
+                    .collect()
             })
             .collect::<Result<_>>();
         if let Some(e) = stop.failed.lock().unwrap_or_else(|p| p.into_inner()).take() {
@@ -498,8 +504,8 @@ impl CornerGather {
         if stop.cancelled.load(std::sync::atomic::Ordering::Relaxed) {
             return Err(Error::Cancelled);
         }
-        let mut values: Vec<[f64; 3]> = gathered.iter().map(|g| g.2).collect();
-        let mut light: Vec<[f64; 3]> = gathered.iter().map(|g| g.3).collect();
+        let mut values: Vec<[f64; 3]> = gathered.iter().map(|g| g.2[0]).collect();
+        let mut light: Vec<[f64; 3]> = gathered.iter().map(|g| g.2[1]).collect();
         // A point inside another closed surface receives nothing (crate::solids); which points
         // are is decided again only when something moved.
         let buried = match kept_buried {
