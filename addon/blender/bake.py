@@ -673,6 +673,9 @@ def clear_bake(scene, objects=None) -> int:
     # materials that no object still baked uses.
     if whole:
         light_nodes.remove_from(bpy.data.materials)
+        group = bpy.data.node_groups.get(light_nodes.GROUP)
+        if group is not None and group.users == 0:
+            bpy.data.node_groups.remove(group)
     else:
         still = {m.name_full for m in light_nodes.materials_of(
             o for o in bpy.data.objects if switch.find(o) is not None)}
