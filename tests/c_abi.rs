@@ -979,6 +979,15 @@ fn corner_irradiance_is_the_light_received() {
         assert!(worst < 1e-6, "gather {gather}: |B - E - rho H| up to {worst:.2e} of the peak");
         unsafe { gr_session_free(s) };
     }
+    // The hierarchy's corners are its leaf polynomials': H derived, the identity still holds.
+    let settings = GrSettings { method: GrMethod::Hierarchical, ..defaults() };
+    let flat = Flat::from_scene(&scenes::cornell_box(2, Settings::default()));
+    let s = flat.new_session(&settings).unwrap();
+    assert_eq!(unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) }, GrStatus::Ok);
+    let worst = worst_identity_error(s, &flat);
+    assert!(worst < 1e-6, "hierarchical: |B - E - rho H| up to {worst:.2e} of the peak");
+    assert!(corner_irradiance(s, 0).iter().any(|&h| h > 0.0));
+    unsafe { gr_session_free(s) };
     // Two patches: the receiver (rho 0.5) and a black emitter facing it.
     for gather in [1, 0] {
         let s = Flat::two_patches().new_session(&GrSettings { corner_gather: gather, ..defaults() }).unwrap();

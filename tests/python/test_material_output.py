@@ -61,20 +61,25 @@ def _reflectance_and_radiance(obj):
 def test_irradiance_times_reflectance_plus_emission_is_the_radiosity(blender):
     bpy = blender
     objs = scenes.cornell_box(bpy, n=3, light_frames=(1, 2), box=True)
-    for gather in (True, False):
-        assert scenes.bake(bpy, basis_order=1, corner_gather=gather) == {"FINISHED"}
-        peak = max(float(_stored(o.data, "Rad_0001").max()) for o in objs.values())
+    # Gathered corners, polynomial corners, and Display Subdivision's grid (Session.eval, on
+    # bake-time copies).
+    for gather, level in ((True, 0), (False, 0), (True, 1)):
+        result = scenes.bake(bpy, basis_order=1, corner_gather=gather, display_subdivision=level)
+        assert result == {"FINISHED"}
+        meshes = {name: bpy.data.meshes["Radiosity Copy: " + name] if level else o.data
+                  for name, o in objs.items()}
+        peak = max(float(_stored(m, "Rad_0001").max()) for m in meshes.values())
         for name, obj in objs.items():
             rho, radiance = _reflectance_and_radiance(obj)
             for f in (1, 2):
-                b, h = _stored(obj.data, f"Rad_{f:04d}"), _stored(obj.data, f"Irr_{f:04d}")
+                b, h = _stored(meshes[name], f"Rad_{f:04d}"), _stored(meshes[name], f"Irr_{f:04d}")
                 assert (h >= 0).all()
                 np.testing.assert_allclose(h * rho + radiance, b, atol=1e-5 * peak,
                                            err_msg=f"{name} frame {f} gather={gather}")
             if name == "Floor":
                 assert h.mean() > 0.1
-        light = _stored(objs["Light"].data, "Irr_0001")
-        if gather:  # black: H is what it receives, gathered (not derivable from B)
+        light = _stored(meshes["Light"], "Irr_0001")
+        if gather and not level:  # black: H is what it receives, gathered (not derivable from B)
             assert light.min() > 0.0
         else:
             assert (light == 0).all()  # rho 0: (B - E) / rho is not derived
