@@ -196,3 +196,26 @@ def test_a_cancelled_rebake_leaves_both_attributes(blender):
         assert sorted(after[name]) == sorted(attrs), name  # no IrrNew_ / RadNew_ left
         for a, v in attrs.items():
             np.testing.assert_array_equal(after[name][a], v, err_msg=f"{name} {a}")
+
+
+def test_linked_materials_are_skipped_in_one_line(blender, tmp_path):
+    bpy = blender
+    from addon.blender import bake, light_nodes
+
+    objs = scenes.cornell_box(bpy, n=2, light_frames=(1, 1), box=False)
+    lib = scenes.material(bpy, "Library White", (0.7, 0.7, 0.7))
+    path = str(tmp_path / "lib.blend")
+    bpy.data.libraries.write(path, {lib})
+    bpy.data.materials.remove(lib)
+    with bpy.data.libraries.load(path, link=True) as (_, dst):
+        dst.materials = ["Library White"]
+    linked = dst.materials[0]
+    assert linked.library is not None
+    objs["Floor"].data.materials[0] = linked
+    bpy.context.scene.radiosity.apply_to_materials = True
+    job = bake.BakeJob(bpy.context, bake.settings_from_scene(bpy.context.scene))
+    job.run()
+    lines = [w for w in job.warnings if w.startswith("Apply to Materials skipped")]
+    assert lines == ["Apply to Materials skipped: Library White (linked from a library)"]
+    assert light_nodes.inserted(linked) is None
+    assert light_nodes.inserted(bpy.data.materials["White"]) is not None
