@@ -219,3 +219,24 @@ def test_linked_materials_are_skipped_in_one_line(blender, tmp_path):
     assert lines == ["Apply to Materials skipped: Library White (linked from a library)"]
     assert light_nodes.inserted(linked) is None
     assert light_nodes.inserted(bpy.data.materials["White"]) is not None
+
+
+def test_the_live_preview_writes_the_irradiance_too(blender):
+    bpy = blender
+    from addon.blender import live
+
+    objs = scenes.cornell_box(bpy, light_frames=(1, 3), box=False)
+    sc = bpy.context.scene
+    sc.radiosity.basis_order = 1
+    assert scenes.bake(bpy) == {"FINISHED"}
+    solves = live.stats["solves"]
+    sc.radiosity.live_preview = True
+    sc.frame_set(3)
+    assert live.stats["solves"] >= solves + 2
+    floor = objs["Floor"]
+    light = scenes.stored_named(floor.data, "Radiosity Light")
+    np.testing.assert_allclose(light, _stored(floor.data, "Irr_0003"), rtol=0.02, atol=1e-3)
+    rho, _ = _reflectance_and_radiance(floor)
+    shown = scenes.stored_named(floor.data, "Radiosity")
+    np.testing.assert_allclose(light * rho, shown, rtol=1e-5, atol=1e-7)
+    sc.radiosity.live_preview = False
