@@ -55,6 +55,8 @@ def parse(argv):
     p.add_argument("--subdiv", type=int, help="display subdivision 0..4")
     p.add_argument("--preview-material", action="store_true",
                    help="show colours through the preview material")
+    p.add_argument("--apply-to-materials", action="store_true",
+                   help="insert the Radiosity Light node group into the baked objects' materials")
     p.add_argument("--no-shadows", action="store_true", help="no visibility tests")
     p.add_argument("--no-corner-gather", action="store_true",
                    help="corners from the face polynomials (faster, softer contact shadows)")
@@ -195,6 +197,8 @@ def _main(args, bpy, pkg):
         p.method = args.method.upper()
     if args.preview_material:
         p.preview_material = True
+    if args.apply_to_materials:
+        p.apply_to_materials = True
     if args.no_shadows:
         p.visibility = False
     if args.no_corner_gather:

@@ -98,6 +98,13 @@ class RadiositySceneSettings(bpy.types.PropertyGroup):
         name="Preview Material", default=False,
         description="Show the baked colours as emission through a separate material set by the switch "
                     "modifier (your materials are not changed)")
+    apply_to_materials: BoolProperty(
+        name="Apply to Materials", default=False,
+        description="Show the baked light in your own materials: the bake inserts a node group "
+                    "\"Radiosity Light\" between each baked object's shader and its Material Output "
+                    "(your colour and textures times the baked light, as emission; Factor 0 in the "
+                    "group gives your shader back). Clear takes it out again. Technical: reads the "
+                    "irradiance attribute \"Radiosity Light\" (H / pi)")
     live_preview: BoolProperty(
         name="Live Preview", default=False, update=_live_update,
         description="Update the light as you move objects, change lights or the frame. Keep scenes "

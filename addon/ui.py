@@ -74,6 +74,7 @@ class RENDER_PT_radiosity_output(bpy.types.Panel):
         p = context.scene.radiosity
         layout.prop(p, "display_subdivision")
         layout.prop(p, "preview_material")
+        layout.prop(p, "apply_to_materials")
 
 
 class OBJECT_PT_radiosity(bpy.types.Panel):

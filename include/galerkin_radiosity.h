@@ -686,6 +686,23 @@ GrStatus gr_session_corner_radiosity(const struct GrSession *s,
                                      size_t len);
 
 /**
+ * Writes the irradiance `H` (RGB, W/m^2) at each face corner of object `object` at the last
+ * solved frame, laid out as `gr_session_corner_radiosity`'s values: the light the surface
+ * receives (the lights' direct light, the World, the other surfaces), without its own emission
+ * `E` and reflectance `rho`, so that `B = E + rho H` at each corner. A host multiplies it with a
+ * material's own (textured) reflectance. Gathered with the corners; where the corners come from
+ * the face polynomials (corner gather off, a preview, the hierarchical method) it is
+ * `(B - E) / rho` per channel, 0 where `rho` is below 1e-4.
+ *
+ * # Safety
+ * `s` is NULL or a live session; `out` is NULL or points to `len` writable floats.
+ */
+GrStatus gr_session_corner_irradiance(const struct GrSession *s,
+                                      uint32_t object,
+                                      float *out,
+                                      size_t len);
+
+/**
  * Evaluates the radiosity (RGB, W/m^2) of the last solved frame at `count` points: point `i` is
  * face `faces[i]` of object `objects[i]` at face parameters `(st[2i], st[2i+1])` in [0,1]^2
  * (corner order of the face: (0,0), (1,0), (1,1), (0,1); a triangle's third corner is the
@@ -704,6 +721,21 @@ GrStatus gr_session_eval(const struct GrSession *s,
                          const uint32_t *faces,
                          const float *st,
                          float *out);
+
+/**
+ * As `gr_session_eval`, the irradiance `H` (RGB, W/m^2) at the points: `(B - E) / rho` per
+ * channel of the face polynomial's `B` there (0 where `rho` is below 1e-4, and on a skipped
+ * zero-area face), clamped at 0. Same arguments and contract as `gr_session_eval`.
+ *
+ * # Safety
+ * As `gr_session_eval`.
+ */
+GrStatus gr_session_eval_irradiance(const struct GrSession *s,
+                                    size_t count,
+                                    const uint32_t *objects,
+                                    const uint32_t *faces,
+                                    const float *st,
+                                    float *out);
 
 /**
  * Frees a session. NULL is ignored. No call on `s` may be running or follow.

@@ -11,8 +11,8 @@
 //!   last frame's store;
 //! - the corner gather: every corner point with a moment of `nb` f32 for every element;
 //! - elements and the solver's coefficients (small next to the links);
-//! - per-frame results kept until they are written (the CLI): every face mean and corner as f32
-//!   and as JSON text.
+//! - per-frame results kept until they are written (the CLI): every face mean, corner radiosity
+//!   and corner irradiance as f32 and as JSON text.
 //!
 //! Series terms of the incremental update (a few KB per expanded pair, only where they pay) are
 //! not counted.
@@ -72,7 +72,7 @@ pub fn estimate(scene: &Scene, frames: u64) -> Estimate {
     // Elements (patch, moments, geometry samples), and the solution, unshot and emission
     // coefficients (three copies of RGB f64 per coefficient, and the saved copies of an update).
     let elements = n.saturating_mul(1024 + nb * 8 * 4 + 6 * nb * 3 * 8);
-    let values = (scene.face_count() as u64).saturating_add(corners);
+    let values = (scene.face_count() as u64).saturating_add(corners.saturating_mul(2));
     let results = frames.saturating_mul(values).saturating_mul(12 + JSON_BYTES_PER_VALUE);
     Estimate { links, gather, elements, results }
 }

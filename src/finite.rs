@@ -36,6 +36,16 @@ pub fn check_results(results: &[ObjectResult], scene: &Scene, frame: f64) -> Res
             }
             peak = v.iter().fold(peak, |p, &x| p.max(f64::from(x)));
         }
+        let corners = obj.faces.iter().enumerate().flat_map(|(f, face)| std::iter::repeat_n(f, face.len()));
+        if let Some((f, v)) =
+            corners.zip(&r.corner_irradiance).find(|(_, v)| !v.iter().all(|x| x.is_finite()))
+        {
+            return Err(invalid_scene!(
+                "object \"{}\" face {f} at frame {frame}: corner irradiance {v:?} is not finite \
+                 (NaN, or above f32's 3.4e38)",
+                r.name
+            ));
+        }
     }
     for r in results {
         for (f, v) in r.face_radiosity.iter().enumerate() {
@@ -57,7 +67,7 @@ pub fn check_results(results: &[ObjectResult], scene: &Scene, frame: f64) -> Res
 /// Clamps to 0 the negative values that [`check_results`] let through.
 pub fn clamp_rounding(results: &mut [ObjectResult]) {
     for r in results {
-        for v in r.face_radiosity.iter_mut().chain(&mut r.corner_radiosity) {
+        for v in r.face_radiosity.iter_mut().chain(&mut r.corner_radiosity).chain(&mut r.corner_irradiance) {
             *v = v.map(|x| x.max(0.0));
         }
     }
@@ -79,6 +89,7 @@ mod tests {
                 name: o.name.clone(),
                 face_radiosity: vec![[m; 3]],
                 corner_radiosity: vec![[m; 3]; 4],
+                corner_irradiance: vec![[m; 3]; 4],
             })
             .collect();
         (results, scene)
@@ -95,5 +106,9 @@ mod tests {
         assert!(e.contains("wall2") && e.contains("is negative"), "{e}");
         let (r, scene) = results([1.0, f32::NAN, 1.0, 1.0, 1.0, 1.0]);
         assert!(check_results(&r, &scene, 1.0).unwrap_err().to_string().contains("not finite"));
+        let (mut r, scene) = results([1.0; 6]);
+        r[4].corner_irradiance[1][2] = f32::INFINITY;
+        let e = check_results(&r, &scene, 1.0).unwrap_err().to_string();
+        assert!(e.contains("wall4") && e.contains("irradiance"), "{e}");
     }
 }

@@ -216,6 +216,9 @@ pub struct CornerGather {
     hull: Vec<bool>,
     /// Per point, inside another closed surface (empty: none are, or visibility is off).
     buried: Vec<bool>,
+    /// The irradiance `H` at every face corner, as the corners of [`CornerGather::run`]'s
+    /// values: `B = E + rho H` (the lights' direct light included; 0 at a buried point).
+    irradiance: CornerValues,
 }
 
 /// What this frame's gather did.
@@ -458,7 +461,9 @@ impl CornerGather {
         };
         // Four points at a time: their rows, then their values, the four sums interleaved (each
         // in its own order, as one at a time); reading kept moments overlaps other chunks' rays.
-        let gathered: Result<Vec<(Row, usize, [f64; 3])>> = points
+        // Per point: its row, how many moments were computed, and `[B, H]`.
+        type Gathered = (Row, usize, [[f64; 3]; 2]);
+        let gathered: Result<Vec<Gathered>> = points
             .par_chunks(4)
             .zip(kept_rows.into_par_iter().chunks(4))
             .flat_map_iter(|(points, kept)| {
@@ -483,24 +488,41 @@ impl CornerGather {
                     .collect();
                 let at: Vec<(usize, usize)> =
                     points.iter().enumerate().filter_map(|(k, p)| Some((k, p.at?.0))).collect();
-                if let [a, b, c, d] = at[..] {
-                    let irradiance =
-                        source_irradiance(sys, [&rows[a.0].0, &rows[b.0].0, &rows[c.0].0, &rows[d.0].0]);
-                    for ((k, e), irradiance) in [a, b, c, d].into_iter().zip(irradiance) {
-                        values[k] = finish(sys, e, &rows[k].0, irradiance);
-                    }
+                // `H`, the light the point receives (without its own emission and reflectance),
+                // beside `B = E + rho H`.
+                let mut light = vec![[0.0; 3]; points.len()];
+                let sums: Vec<[f64; 3]> = if let [a, b, c, d] = at[..] {
+                    source_irradiance(sys, [&rows[a.0].0, &rows[b.0].0, &rows[c.0].0, &rows[d.0].0]).to_vec()
                 } else {
-                    for (k, e) in at {
-                        values[k] = radiosity(sys, e, &rows[k].0);
+                    at.iter().map(|&(k, _)| source_irradiance(sys, [&rows[k].0])[0]).collect()
+                };
+                for (&(k, e), sum) in at.iter().zip(sums) {
+                    light[k] = received(sys, &rows[k].0, sum);
+                    let (rho, emission) = (sys.surface_reflectance[e], sys.emission[e * nb]);
+                    values[k] = std::array::from_fn(|c| emission[c] + rho[c] * light[k][c]);
+                }
+                if let Some(lights) = &sys.lights {
+                    for (k, p) in points.iter().enumerate() {
+                        let Some((e, s, t)) = p.at else { continue };
+                        let (x, n) = shading_point(&sys.elements[e].patch, s, t, p.normal);
+                        let direct = lights.irradiance(x, n, e as u32);
+                        for c in 0..3 {
+                            light[k][c] += direct[c];
+                            values[k][c] += sys.surface_reflectance[e][c] * direct[c];
+                        }
                     }
                 }
-                sys.add_direct_light(points.iter().map(|p| p.at.map(|at| (at, p.normal))), &mut values);
-                rows.into_iter().zip(values).map(|((row, n), v)| Ok((row, n, v))).collect()
+                rows.into_iter()
+                    .zip(values)
+                    .zip(light)
+                    .map(|(((row, n), v), h)| Ok((row, n, [v, h])))
+                    .collect()
             })
             .collect::<Result<_>>();
         stop.outcome()?;
         let gathered = gathered?;
-        let mut values: Vec<[f64; 3]> = gathered.iter().map(|g| g.2).collect();
+        let mut values: Vec<[f64; 3]> = gathered.iter().map(|g| g.2[0]).collect();
+        let mut light: Vec<[f64; 3]> = gathered.iter().map(|g| g.2[1]).collect();
         // A point inside another closed surface receives nothing (crate::solids); which points
         // are is decided again only when something moved.
         let buried = match kept_buried {
@@ -511,18 +533,23 @@ impl CornerGather {
         for (k, _) in buried.iter().enumerate().filter(|(_, b)| **b) {
             let e = points[k].at.expect("a buried point is on an element").0;
             values[k] = sys.emission[e * nb];
+            light[k] = [0.0; 3];
         }
-        let rows: Vec<(Row, usize)> = gathered.into_iter().map(|(r, n, _)| (r, n)).collect();
+        let rows: Vec<(Row, usize)> = gathered.into_iter().map(|(r, n, ..)| (r, n)).collect();
         let stats = GatherStats {
             points: points.len(),
             moments: rows.iter().map(|(r, _)| r.moment_count()).sum(),
             recomputed: rows.iter().map(|(_, n)| n).sum(),
         };
-        let mut out = Vec::with_capacity(corners_per_object.len());
-        let mut it = point_of_corner.iter().map(|&k| values[k]);
-        for &n in &corners_per_object {
-            out.push(it.by_ref().take(n).collect());
-        }
+        let per_object = |values: &[[f64; 3]]| {
+            let mut out: CornerValues = Vec::with_capacity(corners_per_object.len());
+            let mut it = point_of_corner.iter().map(|&k| values[k]);
+            for &n in &corners_per_object {
+                out.push(it.by_ref().take(n).collect());
+            }
+            out
+        };
+        let (out, irradiance) = (per_object(&values), per_object(&light));
         let rows = rows.into_iter().map(|(r, _)| r).collect();
         let kept = CornerGather {
             points,
@@ -536,8 +563,17 @@ impl CornerGather {
             occluded: occluders.is_some(),
             hull,
             buried,
+            irradiance,
         };
         Ok((out, kept, stats))
+    }
+}
+
+impl CornerGather {
+    /// The irradiance `H` at every face corner, per object in face order (the corners of the
+    /// values [`CornerGather::run`] returned), handed over once.
+    pub fn take_irradiance(&mut self) -> CornerValues {
+        std::mem::take(&mut self.irradiance)
     }
 }
 
@@ -687,8 +723,17 @@ fn source_irradiance<const K: usize>(sys: &System, rows: [&Row; K]) -> [[f64; 3]
 
 /// [`radiosity`] from the sources' part of the irradiance: the feet's added, bounded by the
 /// point's hemisphere, then `E + rho` times it.
-fn finish(sys: &System, i: usize, row: &Row, mut irradiance: [f64; 3]) -> [f64; 3] {
+fn finish(sys: &System, i: usize, row: &Row, irradiance: [f64; 3]) -> [f64; 3] {
     let nb = sys.basis.len();
+    let irradiance = received(sys, row, irradiance);
+    let (rho, e) = (sys.surface_reflectance[i], sys.emission[i * nb]);
+    std::array::from_fn(|c| e[c] + rho[c] * irradiance[c])
+}
+
+/// The irradiance `H` a point receives from the surfaces (the lights' direct light is added
+/// apart), from the sources' part: the feet's added, bounded by the point's hemisphere.
+/// [`finish`] makes `B = E + rho H` of it.
+fn received(sys: &System, row: &Row, mut irradiance: [f64; 3]) -> [f64; 3] {
     for foot in &row.feet {
         let mut b = [radiosity(sys, foot.element as usize, &foot.row)];
         sys.add_direct_light(
@@ -702,8 +747,7 @@ fn finish(sys: &System, i: usize, row: &Row, mut irradiance: [f64; 3]) -> [f64; 
         }
     }
     let bound = if sys.corner_bound { crate::hemisphere::bound(form_factor_sum(sys, row)) } else { 1.0 };
-    let (rho, e) = (sys.surface_reflectance[i], sys.emission[i * nb]);
-    std::array::from_fn(|c| e[c] + rho[c] * bound * irradiance[c])
+    irradiance.map(|x| bound * x)
 }
 
 /// The point's form factors summed over its sources (`m_j^0`, `Gamma_0 = 1`) and feet, each

@@ -397,6 +397,7 @@ impl Session {
                 sys.emission.clone(),
                 sys.reflectance.clone(),
                 sys.corners.take(),
+                sys.corner_irradiance.take(),
             );
             let outcome = self.pool.install(|| {
                 let outcome = animation::advance(sys, state, &placed, frame, progress)?;
@@ -446,7 +447,14 @@ impl Session {
                 }
                 Ok((Outcome::NeedsRebuild, _)) => {}
                 Err(e) => {
-                    (sys.solution, sys.elements, sys.emission, sys.reflectance, sys.corners) = saved;
+                    (
+                        sys.solution,
+                        sys.elements,
+                        sys.emission,
+                        sys.reflectance,
+                        sys.corners,
+                        sys.corner_irradiance,
+                    ) = saved;
                     self.stale = true;
                     return Err(e);
                 }
@@ -591,5 +599,31 @@ impl Session {
             Some((e, ls, lt)) => Ok(sys.eval(e, ls, lt).map(|x| x.max(0.0))),
             None => Ok(exitance()),
         }
+    }
+
+    /// The irradiance `H` at `(s,t)` of face `f` of object `o` from the face's polynomial, as
+    /// [`Session::eval`] gives `B`: `(B - E) / rho` per channel
+    /// ([`crate::scene::json::irradiance_from_radiosity`]: 0 where `rho` is below 1e-4),
+    /// clamped at 0; a skipped zero-area face reports 0.
+    pub fn eval_irradiance(&self, o: usize, f: usize, s: f64, t: f64) -> Result<[f64; 3]> {
+        let b = self.eval(o, f, s, t)?;
+        let from = crate::scene::json::irradiance_from_radiosity;
+        if let Some(h) = &self.hierarchical {
+            if h.face_index(o, f).is_none() {
+                return Ok([0.0; 3]);
+            }
+            let frame = self.frame.unwrap_or(0.0);
+            let m = self.scene.objects[o].face_materials[f];
+            let e = self.emission[m as usize].unwrap_or_else(|| self.scene.emission_at(m as usize, frame));
+            return Ok(from(b, e, self.scene.reflectance_of(o, f, m)).map(|x| x.max(0.0)));
+        }
+        let sys = self.solved()?;
+        Ok(match sys.element_of_face(o, f, s, t) {
+            Some((e, ..)) => {
+                let (rho, emission) = (sys.surface_reflectance[e], sys.emission[e * sys.basis.len()]);
+                from(b, emission, rho).map(|x| x.max(0.0))
+            }
+            None => [0.0; 3],
+        })
     }
 }

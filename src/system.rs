@@ -15,7 +15,7 @@ use crate::lights::direct::DirectLight;
 use crate::links::LinkStore;
 use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
-use crate::scene::json::ObjectResult;
+use crate::scene::json::{ObjectResult, irradiance_from_radiosity};
 use crate::scene::placement::{self, front_order};
 use crate::solver::{self, Coefficients, ShootStats};
 use crate::visibility::Occluders;
@@ -175,6 +175,8 @@ pub struct System {
     /// `B` gathered at every face corner for the current solution ([`crate::gather`]), per object
     /// in face order; `None` when corners come from the face polynomials.
     pub corners: Option<Vec<Vec<[f64; 3]>>>,
+    /// The irradiance `H` at the same corners (`B = E + rho H`), present with `corners`.
+    pub corner_irradiance: Option<Vec<Vec<[f64; 3]>>>,
     /// The last corner gather, which the next one updates.
     gather: Option<CornerGather>,
     /// The occluders of the elements as placed now (visibility on): kept by the build and each
@@ -237,6 +239,7 @@ impl System {
             lights,
             solution,
             corners: None,
+            corner_irradiance: None,
             gather: None,
             occluders,
             stats,
@@ -362,9 +365,10 @@ impl System {
     /// reports those corners.
     pub fn gather_corners(&mut self, scene: &Scene, frame: f64, progress: Progress) -> Result<GatherStats> {
         self.corners = None;
+        self.corner_irradiance = None;
         let previous = self.gather.take();
         let changed = self.links.take_visibility_changes();
-        let (corners, kept, stats) = CornerGather::run(
+        let (corners, mut kept, stats) = CornerGather::run(
             self,
             scene,
             frame,
@@ -374,6 +378,7 @@ impl System {
             progress,
         )?;
         self.corners = Some(corners);
+        self.corner_irradiance = Some(kept.take_irradiance());
         self.gather = Some(kept);
         Ok(stats)
     }
@@ -388,11 +393,15 @@ impl System {
                 name: o.name.clone(),
                 face_radiosity: Vec::with_capacity(o.faces.len()),
                 corner_radiosity: Vec::new(),
+                corner_irradiance: Vec::new(),
             })
             .collect();
         if let Some(corners) = &self.corners {
             for (res, c) in out.iter_mut().zip(corners) {
                 res.corner_radiosity = c.iter().map(|v| to_f32(*v)).collect();
+            }
+            for (res, c) in out.iter_mut().zip(self.corner_irradiance.iter().flatten()) {
+                res.corner_irradiance = c.iter().map(|v| to_f32(*v)).collect();
             }
         }
         let gathered = self.corners.is_some();
@@ -413,6 +422,9 @@ impl System {
                             let v =
                                 if face.len() == 3 && t == 1.0 { self.apex(e) } else { self.eval(e, s, t) };
                             res.corner_radiosity.push(to_f32(v));
+                            let (rho, emission) =
+                                (self.surface_reflectance[e], self.emission[e * self.basis.len()]);
+                            res.corner_irradiance.push(to_f32(irradiance_from_radiosity(v, emission, rho)));
                         }
                     }
                     _ => {
@@ -421,6 +433,7 @@ impl System {
                         res.face_radiosity.push(e);
                         if !gathered {
                             res.corner_radiosity.extend(std::iter::repeat_n(e, face.len()));
+                            res.corner_irradiance.extend(std::iter::repeat_n([0.0; 3], face.len()));
                         }
                     }
                 }

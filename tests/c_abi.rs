@@ -910,3 +910,108 @@ fn calls_from_the_progress_callback_do_not_deadlock() {
     assert_eq!(r.cancel.load(Ordering::SeqCst), GrStatus::Ok as u32);
     unsafe { gr_session_free(s) };
 }
+
+fn corner_irradiance(s: *const GrSession, object: u32) -> Vec<f32> {
+    let mut n = 0;
+    assert_eq!(unsafe { gr_session_corner_count(s, object, &mut n) }, GrStatus::Ok);
+    let mut out = vec![f32::NAN; 3 * n as usize];
+    assert_eq!(unsafe { gr_session_corner_irradiance(s, object, out.as_mut_ptr(), out.len()) }, GrStatus::Ok);
+    out
+}
+
+/// Per corner of every object, `B - (E + rho H)` relative to `B`'s peak, the worst: the
+/// definition of the irradiance `H` (issue 22, item 7), with `rho` and `E` per face from `flat`.
+fn worst_identity_error(s: *const GrSession, flat: &Flat) -> f64 {
+    let (mut worst, mut peak, mut face) = (0.0f64, 0.0f64, 0usize);
+    for (o, &nf) in flat.face_counts.iter().enumerate() {
+        let (b, h) = (corner_radiosity(s, o as u32), corner_irradiance(s, o as u32));
+        assert_eq!(b.len(), h.len());
+        let mut k = 0;
+        for f in face..face + nf as usize {
+            let m = flat.face_materials[f] as usize;
+            for _ in 0..flat.face_vertex_counts[f] {
+                for c in 0..3 {
+                    let (rho, e) = (flat.reflectance[3 * m + c] as f64, flat.emission[3 * m + c] as f64);
+                    let (b, h) = (b[3 * k + c] as f64, h[3 * k + c] as f64);
+                    assert!(h >= 0.0 && h.is_finite(), "H = {h}");
+                    peak = peak.max(b);
+                    if rho >= 1e-4 {
+                        worst = worst.max((b - (e + rho * h)).abs());
+                    }
+                }
+                k += 1;
+            }
+        }
+        face += nf as usize;
+    }
+    worst / peak
+}
+
+/// The irradiance at the corners (issue 22, item 7): a closed box of rho 0.5 and E 1 receives
+/// `H = B = E / (1 - rho) = 2` everywhere, gathered or from the polynomials; on a lit Cornell box
+/// `B = E + rho H` at every corner with the corner gather on and off; a black emitter's gathered
+/// irradiance is what it receives, its polynomial one 0 (rho below 1e-4); and
+/// `gr_session_eval_irradiance` at a face's corner is the polynomial corner's value.
+#[test]
+fn corner_irradiance_is_the_light_received() {
+    for gather in [1, 0] {
+        let settings = GrSettings { corner_gather: gather, tolerance: 1e-7, ..defaults() };
+        let flat = Flat::from_scene(&scenes::closed_box(2, 0.5, 1.0, Settings::default()));
+        let s = flat.new_session(&settings).unwrap();
+        assert_eq!(unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) }, GrStatus::Ok);
+        for o in 0..6 {
+            for h in corner_irradiance(s, o) {
+                assert!((h as f64 - 2.0).abs() < 0.01 * 2.0, "gather {gather}: H = {h}, want 2");
+            }
+        }
+        assert!(worst_identity_error(s, &flat) < 1e-6);
+        unsafe { gr_session_free(s) };
+
+        let flat = Flat::from_scene(&scenes::cornell_box(2, Settings::default()));
+        let mut light = unsafe { std::mem::zeroed::<GrLight>() };
+        assert_eq!(unsafe { gr_light_default(&mut light) }, GrStatus::Ok);
+        light.matrix =
+            glam::DMat4::from_translation(glam::DVec3::new(0.3, 0.35, 0.25)).transpose().to_cols_array();
+        light.power = 20.0;
+        let s = flat.build(&settings, Some(&light)).unwrap();
+        assert_eq!(unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) }, GrStatus::Ok);
+        let worst = worst_identity_error(s, &flat);
+        assert!(worst < 1e-6, "gather {gather}: |B - E - rho H| up to {worst:.2e} of the peak");
+        unsafe { gr_session_free(s) };
+    }
+    // The hierarchy's corners are its leaf polynomials': H derived, the identity still holds.
+    let settings = GrSettings { method: GrMethod::Hierarchical, ..defaults() };
+    let flat = Flat::from_scene(&scenes::cornell_box(2, Settings::default()));
+    let s = flat.new_session(&settings).unwrap();
+    assert_eq!(unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) }, GrStatus::Ok);
+    let worst = worst_identity_error(s, &flat);
+    assert!(worst < 1e-6, "hierarchical: |B - E - rho H| up to {worst:.2e} of the peak");
+    assert!(corner_irradiance(s, 0).iter().any(|&h| h > 0.0));
+    unsafe { gr_session_free(s) };
+    // Two patches: the receiver (rho 0.5) and a black emitter facing it.
+    for gather in [1, 0] {
+        let s = Flat::two_patches().new_session(&GrSettings { corner_gather: gather, ..defaults() }).unwrap();
+        assert_eq!(unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) }, GrStatus::Ok);
+        let emitter = corner_irradiance(s, 1);
+        if gather == 1 {
+            // It sees the receiver's B = 0.5 H_receiver, about 0.1 W/m^2, over a form factor of 0.2.
+            assert!(emitter.iter().all(|&h| h > 0.005 && h < 0.05), "{emitter:?}");
+        } else {
+            assert_eq!(emitter, vec![0.0; 12], "rho 0: not derived");
+        }
+        let receiver = corner_irradiance(s, 0);
+        let (objects, faces, st) = ([0u32], [0u32], [0.0f32, 0.0]);
+        let mut out = [-1f32; 3];
+        let status = unsafe {
+            gr_session_eval_irradiance(s, 1, objects.as_ptr(), faces.as_ptr(), st.as_ptr(), out.as_mut_ptr())
+        };
+        assert_eq!(status, GrStatus::Ok);
+        if gather == 0 {
+            for c in 0..3 {
+                assert!((out[c] - receiver[c]).abs() <= 1e-6 * receiver[c], "{out:?} {receiver:?}");
+            }
+        }
+        assert!(out[0] > 0.1, "H at the receiver's corner {out:?}");
+        unsafe { gr_session_free(s) };
+    }
+}

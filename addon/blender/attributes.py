@@ -1,6 +1,8 @@
 """Colour attributes: one FLOAT_COLOR corner attribute per frame (``Rad_0001``...), holding the
 outgoing radiance B / pi (scene-linear, alpha 1), and the ``Radiosity`` attribute the viewport
 and renderers read (the Geometry Nodes switch overwrites it with the current frame's values).
+Beside each, the irradiance H / pi, light only (``Irr_0001``..., switched into ``Radiosity
+Light``), which a material multiplies with its own colour (``light_nodes.py``).
 
 Colours go either on the object's own mesh ("mesh" storage: its evaluated polygons and corners
 match the original mesh's) or on a bake-time copy ("copy" storage: display subdivision, or
@@ -57,8 +59,23 @@ def read_frame(mesh, frame: int) -> np.ndarray | None:
     return read(mesh, core_frames.attribute_name(frame))
 
 
-def write_staged(mesh, frame: int, rgb: np.ndarray) -> None:
+def read_light_frame(mesh, frame: int) -> np.ndarray | None:
+    """The irradiance H / pi of `frame` (``Irr_NNNN``), None if the mesh has none."""
+    return read(mesh, core_frames.attribute_name(frame, core_frames.LIGHT_PREFIX))
+
+
+def write_staged(mesh, frame: int, rgb: np.ndarray, light: np.ndarray | None = None) -> None:
+    """A frame's B / pi (``RadNew_NNNN``) and, given, its H / pi (``IrrNew_NNNN``)."""
     write(mesh, core_frames.staging_name(frame), rgb)
+    if light is not None:
+        write(mesh, core_frames.staging_name(frame, core_frames.LIGHT_STAGING_PREFIX), light)
+
+
+# (stored prefix, staging prefix) of each kind of frame attribute.
+KINDS = (
+    (core_frames.ATTRIBUTE_PREFIX, core_frames.STAGING_PREFIX),
+    (core_frames.LIGHT_PREFIX, core_frames.LIGHT_STAGING_PREFIX),
+)
 
 
 def baked_frames(mesh, prefix: str = core_frames.ATTRIBUTE_PREFIX) -> list[int]:
@@ -66,54 +83,72 @@ def baked_frames(mesh, prefix: str = core_frames.ATTRIBUTE_PREFIX) -> list[int]:
     return sorted(f for f in found if f is not None)
 
 
-def staged_frames(mesh) -> list[int]:
-    return baked_frames(mesh, core_frames.STAGING_PREFIX)
+def complete_frames(mesh) -> list[int]:
+    """Frames stored with both their B / pi and their H / pi (a bake from before the irradiance
+    has only the first: such frames are solved again by a re-bake)."""
+    return sorted(set(baked_frames(mesh)) & set(baked_frames(mesh, core_frames.LIGHT_PREFIX)))
+
+
+def staged_frames(mesh, prefix: str = core_frames.STAGING_PREFIX) -> list[int]:
+    return baked_frames(mesh, prefix)
 
 
 def remove_staged(mesh) -> int:
-    """Removes the ``RadNew_NNNN`` attributes (a bake that ended without keeping them)."""
-    names = [core_frames.staging_name(f) for f in staged_frames(mesh)]
-    for name in names:
-        mesh.color_attributes.remove(mesh.color_attributes[name])
-    return len(names)
+    """Removes the ``RadNew_NNNN`` and ``IrrNew_NNNN`` attributes (a bake that ended without
+    keeping them); returns how many ``RadNew_`` frames there were."""
+    n = 0
+    for kind, (_, staging) in enumerate(KINDS):
+        names = [core_frames.staging_name(f, staging) for f in staged_frames(mesh, staging)]
+        for name in names:
+            mesh.color_attributes.remove(mesh.color_attributes[name])
+        n += len(names) if kind == 0 else 0
+    return n
 
 
 def promote_frames(mesh, keep_live=lambda frame: False) -> list[int]:
-    """Swaps the staged frames in: removes every ``Rad_`` frame that is staged too or that
-    `keep_live` rejects, then renames each ``RadNew_NNNN`` to ``Rad_NNNN``. Returns the frames
-    now stored, sorted."""
+    """Swaps the staged frames in: removes every ``Rad_`` (``Irr_``) frame that is staged too or
+    that `keep_live` rejects, then renames each ``RadNew_NNNN`` (``IrrNew_NNNN``) to
+    ``Rad_NNNN`` (``Irr_NNNN``). Returns the ``Rad_`` frames now stored, sorted."""
     staged = set(staged_frames(mesh))
     remove_frames(mesh, keep=lambda f: f not in staged and keep_live(f))
-    for f in sorted(staged):
-        mesh.color_attributes[core_frames.staging_name(f)].name = core_frames.attribute_name(f)
+    for prefix, staging in KINDS:
+        for f in staged_frames(mesh, staging):
+            attr = mesh.color_attributes[core_frames.staging_name(f, staging)]
+            attr.name = core_frames.attribute_name(f, prefix)
     return baked_frames(mesh)
 
 
 def remove_frames(mesh, keep=lambda frame: False) -> int:
-    """Removes the ``Rad_NNNN`` attributes whose frame `keep` rejects; returns how many."""
-    names = [a.name for a in mesh.color_attributes
-             if (f := core_frames.frame_of_attribute(a.name)) is not None and not keep(f)]
-    for name in names:
-        mesh.color_attributes.remove(mesh.color_attributes[name])
-    return len(names)
+    """Removes the ``Rad_NNNN`` and ``Irr_NNNN`` attributes whose frame `keep` rejects; returns
+    how many ``Rad_`` frames it removed."""
+    n = 0
+    for kind, (prefix, _) in enumerate(KINDS):
+        names = [a.name for a in mesh.color_attributes
+                 if (f := core_frames.frame_of_attribute(a.name, prefix)) is not None and not keep(f)]
+        for name in names:
+            mesh.color_attributes.remove(mesh.color_attributes[name])
+        n += len(names) if kind == 0 else 0
+    return n
 
 
-def ensure_result(mesh, rgb: np.ndarray | None = None) -> None:
+def ensure_result(mesh, rgb: np.ndarray | None = None, light: np.ndarray | None = None) -> None:
     """The ``Radiosity`` attribute, made active and the render colour, so the viewport's Color
-    Attribute shading and a Color Attribute node with an empty name show it."""
+    Attribute shading and a Color Attribute node with an empty name show it, and beside it
+    ``Radiosity Light`` (the irradiance H / pi; zeros when `light` is None)."""
     name = core_frames.RESULT_ATTRIBUTE
-    if rgb is None:
-        rgb = np.zeros((len(mesh.loops), 3), np.float32)
-    write(mesh, name, rgb)
+    zeros = np.zeros((len(mesh.loops), 3), np.float32)
+    write(mesh, name, zeros if rgb is None else rgb)
+    write(mesh, core_frames.LIGHT_ATTRIBUTE, zeros if light is None else light)
     attrs = mesh.color_attributes
     attrs.active_color = attrs[name]
     attrs.render_color_index = attrs.find(name)
 
 
 def remove_result(mesh) -> None:
-    attr = mesh.color_attributes.get(core_frames.RESULT_ATTRIBUTE)
-    if attr is not None:
-        mesh.color_attributes.remove(attr)
+    for name in (core_frames.RESULT_ATTRIBUTE, core_frames.LIGHT_ATTRIBUTE):
+        attr = mesh.color_attributes.get(name)
+        if attr is not None:
+            mesh.color_attributes.remove(attr)
 
 
 def copy_name(name: str, staging: bool = False) -> str:

@@ -32,7 +32,7 @@ from ..core.marshal import with_object_names
 from ..core.materials import radiance_from_radiosity
 from ..core.record import BakeRecord, FrameState, first_changed
 from ..core.settings import BakeSettings, SettingsError, in_panel_words
-from . import attributes, switch, world
+from . import attributes, light_nodes, switch, world
 from .export import TopologyChanged, collect, export, sample
 
 RECORD_PROPERTY = "radiosity_bake"
@@ -146,15 +146,18 @@ class Target:
 
     staged_copy: bool = False  # copy mode: `copy` and `mesh` are this bake's staging copy
 
-    def values(self, session, split) -> np.ndarray:
-        """This frame's B / pi at the target's corners, (n,3) float32."""
+    def values(self, session, split, light: bool = False) -> np.ndarray:
+        """This frame's B / pi (with `light`, the irradiance H / pi) at the target's corners,
+        (n,3) float32."""
+        corners = session.corner_irradiance if light else session.corner_radiosity
         if self.mode == "mesh":
-            b = split.to_loops(session.corner_radiosity(self.index))
+            b = split.to_loops(corners(self.index))
         elif self.level == 0:
-            b = session.corner_radiosity(self.index)
+            b = corners(self.index)
         else:
             g = self.grid
-            b = session.eval(np.full(len(g.corner_face), self.index, np.int64), g.corner_face, g.corner_st)
+            b = session.eval(np.full(len(g.corner_face), self.index, np.int64), g.corner_face, g.corner_st,
+                             irradiance=light)
         return radiance_from_radiosity(b)
 
 
@@ -315,7 +318,7 @@ class BakeJob:
         for t in self.targets if reusable else ():
             if t.mesh is None:
                 continue
-            have = set(attributes.baked_frames(t.mesh))
+            have = set(attributes.complete_frames(t.mesh))
             k = next((i for i, f in enumerate(self.frames[:k]) if f not in have), k)
         self.previous = record  # for objects that left the bake
         self.reusable = reusable
@@ -338,7 +341,8 @@ class BakeJob:
         self.prev = None
         if self.kept:
             f = self.frames[self.kept - 1]
-            self.prev = (f, [attributes.read_frame(t.mesh, f) for t in self.targets])
+            self.prev = (f, [(attributes.read_frame(t.mesh, f), attributes.read_light_frame(t.mesh, f))
+                             for t in self.targets])
         # The session: the held one if it is for this scene key, else a new one.
         h = held(self.scene)
         if h is None or h.scene_key != self.session_key:
@@ -455,14 +459,15 @@ class BakeJob:
         for t in self.targets:
             if t.mesh is None:
                 self._build_copy(t)
-            rgb = t.values(h.session, self.rest.objects[t.index].data.split)
-            attributes.write_staged(t.mesh, f, rgb)
-            values.append(rgb)
+            split = self.rest.objects[t.index].data.split
+            rgb, light = t.values(h.session, split), t.values(h.session, split, light=True)
+            attributes.write_staged(t.mesh, f, rgb, light)
+            values.append((rgb, light))
         if self.prev is not None:
             f0, v0 = self.prev
             for g, w in core_frames.between(f0, f):
-                for t, a, b in zip(self.targets, v0, values, strict=True):
-                    attributes.write_staged(t.mesh, g, (1.0 - w) * a + w * b)
+                for t, (a, la), (b, lb) in zip(self.targets, v0, values, strict=True):
+                    attributes.write_staged(t.mesh, g, (1.0 - w) * a + w * b, (1.0 - w) * la + w * lb)
         self.prev = (f, values)
         self.record.solved[f] = {"state": state, "seconds": self.frame_seconds}
         self.record.complete = (self.frames[0], f)
@@ -564,10 +569,18 @@ class BakeJob:
             attributes.promote_frames(t.mesh, keep_live=keep_live)
             attributes.remove_frames(t.mesh, keep=lambda f: first <= f <= last)
             current = min(max(self.original_frame, first), last)
-            attributes.ensure_result(t.mesh, attributes.read_frame(t.mesh, current))
+            attributes.ensure_result(t.mesh, attributes.read_frame(t.mesh, current),
+                                     attributes.read_light_frame(t.mesh, current))
             switch.install(bpy, t.obj, first, last, copy=t.copy if t.mode == "copy" else None,
                            preview_material=preview)
             self.muted.pop(t.obj.name, None)
+        # Apply to Materials follows the option: inserted (again) when on, taken out when off.
+        objects = [t.obj for t in self.targets]
+        if s.apply_to_materials:
+            if line := light_nodes.apply_to(bpy, objects):
+                self.warnings.append(line)
+        else:
+            light_nodes.remove_from(light_nodes.materials_of(objects))
         self.record.stored = {t.obj.name: {"mode": t.mode, "mesh": t.mesh.name} for t in self.targets}
         self.scene[RECORD_PROPERTY] = self.record.dumps()
 
@@ -639,6 +652,7 @@ def settings_from_scene(scene) -> BakeSettings:
         frame_step=p.frame_step,
         display_subdivision=p.display_subdivision,
         preview_material=p.preview_material,
+        apply_to_materials=p.apply_to_materials,
         memory_limit_mb=p.memory_limit_mb,
     )
 
@@ -655,6 +669,17 @@ def clear_bake(scene, objects=None) -> int:
     for obj in objects:
         n += 1
         clear_object(obj)
+    # Apply to Materials: out of every material (a whole Clear), or out of the cleared objects'
+    # materials that no object still baked uses.
+    if whole:
+        light_nodes.remove_from(bpy.data.materials)
+        group = bpy.data.node_groups.get(light_nodes.GROUP)
+        if group is not None and group.users == 0:
+            bpy.data.node_groups.remove(group)
+    else:
+        still = {m.name_full for m in light_nodes.materials_of(
+            o for o in bpy.data.objects if switch.find(o) is not None)}
+        light_nodes.remove_from(m for m in light_nodes.materials_of(objects) if m.name_full not in still)
     if RECORD_PROPERTY in scene:
         del scene[RECORD_PROPERTY]
     drop_held(scene)

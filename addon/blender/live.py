@@ -137,13 +137,15 @@ def _update(scene) -> bool:
 
 
 def _write_corners(h, rest, objects) -> None:
-    """Writes the held session's corners into each previewed object's ``Radiosity`` attribute."""
+    """Writes the held session's corners into each previewed object's ``Radiosity`` and
+    ``Radiosity Light`` attributes."""
     for i, (o, obj) in enumerate(zip(rest.objects, objects, strict=True)):
         mesh = obj.data
         if not o.original_topology or mesh.library is not None or len(mesh.loops) != o.data.loop_count:
             continue
         rgb = radiance_from_radiosity(o.data.split.to_loops(h.session.corner_radiosity(i)))
-        attributes.ensure_result(mesh, rgb)
+        light = radiance_from_radiosity(o.data.split.to_loops(h.session.corner_irradiance(i)))
+        attributes.ensure_result(mesh, rgb, light)
         switch.set_muted(obj, True)
 
 

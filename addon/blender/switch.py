@@ -7,6 +7,8 @@ Node group "Radiosity Switch" (shared by all baked objects), as a modifier at th
     name     = "Rad_" + slice(value_to_string(frame + 10000), 1, 4)        -> "Rad_0042"
     geometry = Store Named Attribute(geometry, CORNER, FLOAT_COLOR, "Radiosity",
                                      Named Attribute(FLOAT_COLOR, name))
+    geometry = Store Named Attribute(geometry, CORNER, FLOAT_COLOR, "Radiosity Light",
+                                     Named Attribute(FLOAT_COLOR, "Irr_" + the same digits))
     geometry = Preview ? Set Material(geometry, Preview Material) : geometry
 
 The String Join node joins its multi-input in reverse link order, so the digits are linked
@@ -18,7 +20,7 @@ from __future__ import annotations
 
 from .export import SWITCH_GROUP, SWITCH_MODIFIER, is_switch_modifier
 
-VERSION = 1
+VERSION = 2  # 2: the irradiance (Irr_NNNN -> Radiosity Light)
 
 INPUTS = (
     ("First Frame", "NodeSocketInt"),
@@ -104,6 +106,27 @@ def node_group(bpy):
     store.location = (450, 0)
     links.new(source.outputs[0], store.inputs["Geometry"])
     links.new(named.outputs["Attribute"], store.inputs["Value"])
+
+    # The irradiance: "Irr_" + the same digits, stored as "Radiosity Light".
+    light_prefix = nodes.new("FunctionNodeInputString")
+    light_prefix.string = "Irr_"
+    light_prefix.location = (100, 700)
+    light_join = nodes.new("GeometryNodeStringJoin")
+    light_join.location = (300, 650)
+    links.new(digits.outputs[0], light_join.inputs["Strings"])
+    links.new(light_prefix.outputs[0], light_join.inputs["Strings"])
+    light_named = nodes.new("GeometryNodeInputNamedAttribute")
+    light_named.data_type = "FLOAT_COLOR"
+    light_named.location = (550, 300)
+    links.new(light_join.outputs[0], light_named.inputs["Name"])
+    light_store = nodes.new("GeometryNodeStoreNamedAttribute")
+    light_store.data_type = "FLOAT_COLOR"
+    light_store.domain = "CORNER"
+    light_store.inputs["Name"].default_value = "Radiosity Light"
+    light_store.location = (550, 0)
+    links.new(store.outputs[0], light_store.inputs["Geometry"])
+    links.new(light_named.outputs["Attribute"], light_store.inputs["Value"])
+    store = light_store
 
     setmat = nodes.new("GeometryNodeSetMaterial")
     setmat.location = (650, -150)

@@ -13,6 +13,12 @@ from __future__ import annotations
 ATTRIBUTE_PREFIX = "Rad_"
 STAGING_PREFIX = "RadNew_"
 RESULT_ATTRIBUTE = "Radiosity"
+# The irradiance H / pi (light only, without the surface's colour and emission), per frame and
+# switched likewise into LIGHT_ATTRIBUTE, which "Apply to Materials" multiplies with a material's
+# own colour (``blender/light_nodes.py``).
+LIGHT_PREFIX = "Irr_"
+LIGHT_STAGING_PREFIX = "IrrNew_"
+LIGHT_ATTRIBUTE = "Radiosity Light"
 MIN_FRAME = 0
 MAX_FRAME = 9999
 
@@ -27,14 +33,14 @@ def check_frame(frame: int) -> None:
         )
 
 
-def attribute_name(frame: int) -> str:
+def attribute_name(frame: int, prefix: str = ATTRIBUTE_PREFIX) -> str:
     check_frame(frame)
-    return f"{ATTRIBUTE_PREFIX}{frame:04d}"
+    return f"{prefix}{frame:04d}"
 
 
-def staging_name(frame: int) -> str:
+def staging_name(frame: int, prefix: str = STAGING_PREFIX) -> str:
     check_frame(frame)
-    return f"{STAGING_PREFIX}{frame:04d}"
+    return f"{prefix}{frame:04d}"
 
 
 def frame_of_attribute(name: str, prefix: str = ATTRIBUTE_PREFIX) -> int | None:

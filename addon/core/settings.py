@@ -42,6 +42,7 @@ class BakeSettings:
     frame_step: int = 1
     display_subdivision: int = 0
     preview_material: bool = False
+    apply_to_materials: bool = False  # insert the "Radiosity Light" node group (light_nodes.py)
     memory_limit_mb: int = 0  # 0: automatic (80% of the memory available when the bake starts)
 
     def validate(self) -> BakeSettings:

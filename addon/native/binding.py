@@ -194,6 +194,8 @@ def _declare(lib: ctypes.CDLL) -> None:
         "gr_session_face_radiosity": ([_SESSION, c_uint32, _F32, c_size_t], c_uint32),
         "gr_session_corner_radiosity": ([_SESSION, c_uint32, _F32, c_size_t], c_uint32),
         "gr_session_eval": ([_SESSION, c_size_t, _U32, _U32, _F32, _F32], c_uint32),
+        "gr_session_corner_irradiance": ([_SESSION, c_uint32, _F32, c_size_t], c_uint32),
+        "gr_session_eval_irradiance": ([_SESSION, c_size_t, _U32, _U32, _F32, _F32], c_uint32),
         "gr_session_free": ([_SESSION], None),
     }
     for name, (args, res) in sigs.items():
@@ -626,9 +628,18 @@ class Session:
         self._call("gr_session_corner_radiosity", o, _ptr(out, _F32), out.size)
         return out
 
-    def eval(self, objects, faces, st) -> np.ndarray:
+    def corner_irradiance(self, obj: int) -> np.ndarray:
+        """The irradiance H at each face corner of object ``obj`` (the light it receives, so
+        that B = E + rho H), laid out as ``corner_radiosity``: (C, 3) float32, W/m^2."""
+        o = self._object(obj)
+        out = np.empty((int(self._corners[o]), 3), np.float32)
+        self._call("gr_session_corner_irradiance", o, _ptr(out, _F32), out.size)
+        return out
+
+    def eval(self, objects, faces, st, irradiance: bool = False) -> np.ndarray:
         """Radiosity at face parameters ``st`` (n, 2) in [0,1]^2 of ``faces`` (n,) of ``objects``
-        (n,) or one object index: (n, 3) float32."""
+        (n,) or one object index: (n, 3) float32. With ``irradiance``, the irradiance H there,
+        (B - E) / rho of the face polynomial (0 where rho < 1e-4)."""
         f = _indices(faces, None, "faces")
         n = f.shape[0]
         obj = np.asarray(objects)
@@ -637,5 +648,6 @@ class Session:
         o = _indices(obj, n, "objects")
         st = _floats(np.asarray(st, dtype=np.float32).reshape(-1, 2), (n, 2), "st")
         out = np.empty((n, 3), np.float32)
-        self._call("gr_session_eval", n, _ptr(o, _U32), _ptr(f, _U32), _ptr(st, _F32), _ptr(out, _F32))
+        name = "gr_session_eval_irradiance" if irradiance else "gr_session_eval"
+        self._call(name, n, _ptr(o, _U32), _ptr(f, _U32), _ptr(st, _F32), _ptr(out, _F32))
         return out

@@ -35,11 +35,11 @@ pub use lights::{
 };
 pub use panic::run_in_boundary;
 pub use session::{
-    GrProgressFn, GrSession, gr_session_cancel, gr_session_corner_count, gr_session_corner_radiosity,
-    gr_session_eval, gr_session_face_count, gr_session_face_radiosity, gr_session_frame_stats_json,
-    gr_session_free, gr_session_new, gr_session_object_count, gr_session_refine,
-    gr_session_set_material_emission, gr_session_set_object_matrix, gr_session_set_preview,
-    gr_session_solve_frame,
+    GrProgressFn, GrSession, gr_session_cancel, gr_session_corner_count, gr_session_corner_irradiance,
+    gr_session_corner_radiosity, gr_session_eval, gr_session_eval_irradiance, gr_session_face_count,
+    gr_session_face_radiosity, gr_session_frame_stats_json, gr_session_free, gr_session_new,
+    gr_session_object_count, gr_session_refine, gr_session_set_material_emission,
+    gr_session_set_object_matrix, gr_session_set_preview, gr_session_solve_frame,
 };
 pub use settings::{GrMethod, GrSettings, gr_settings_default};
 pub use surface::gr_session_set_object_surface;

@@ -727,6 +727,39 @@ pub unsafe extern "C" fn gr_session_corner_radiosity(
     })
 }
 
+/// Writes the irradiance `H` (RGB, W/m^2) at each face corner of object `object` at the last
+/// solved frame, laid out as `gr_session_corner_radiosity`'s values: the light the surface
+/// receives (the lights' direct light, the World, the other surfaces), without its own emission
+/// `E` and reflectance `rho`, so that `B = E + rho H` at each corner. A host multiplies it with a
+/// material's own (textured) reflectance. Gathered with the corners; where the corners come from
+/// the face polynomials (corner gather off, a preview, the hierarchical method) it is
+/// `(B - E) / rho` per channel, 0 where `rho` is below 1e-4.
+///
+/// # Safety
+/// `s` is NULL or a live session; `out` is NULL or points to `len` writable floats.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn gr_session_corner_irradiance(
+    s: *const GrSession,
+    object: u32,
+    out: *mut f32,
+    len: usize,
+) -> GrStatus {
+    boundary("gr_session_corner_irradiance", || {
+        let s = unsafe { session(s) }?;
+        let o = s.object(object)?;
+        let need = 3 * s.corners[o] as usize;
+        if len < need {
+            return Err(Failure::invalid(format!(
+                "out holds {len} floats, object {object} needs {need} (3 per corner)"
+            )));
+        }
+        check_array(out.cast_const(), need, "out")?;
+        let state = s.read()?;
+        let r = &state.results()?[o];
+        unsafe { write_out(out, len, r.corner_irradiance.as_flattened(), "out") }
+    })
+}
+
 /// Evaluates the radiosity (RGB, W/m^2) of the last solved frame at `count` points: point `i` is
 /// face `faces[i]` of object `objects[i]` at face parameters `(st[2i], st[2i+1])` in [0,1]^2
 /// (corner order of the face: (0,0), (1,0), (1,1), (0,1); a triangle's third corner is the
@@ -772,6 +805,53 @@ pub unsafe extern "C" fn gr_session_eval(
                     )
                     .map_err(|e| Failure::from(e).prefixed(&format!("point {i}: ")))?;
                 values.extend(b.map(|x| x as f32));
+            }
+            values
+        };
+        unsafe { write_out(out, n3, &values, "out") }
+    })
+}
+
+/// As `gr_session_eval`, the irradiance `H` (RGB, W/m^2) at the points: `(B - E) / rho` per
+/// channel of the face polynomial's `B` there (0 where `rho` is below 1e-4, and on a skipped
+/// zero-area face), clamped at 0. Same arguments and contract as `gr_session_eval`.
+///
+/// # Safety
+/// As `gr_session_eval`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn gr_session_eval_irradiance(
+    s: *const GrSession,
+    count: usize,
+    objects: *const u32,
+    faces: *const u32,
+    st: *const f32,
+    out: *mut f32,
+) -> GrStatus {
+    boundary("gr_session_eval_irradiance", || {
+        let s = unsafe { session(s) }?;
+        let n2 = count.checked_mul(2).ok_or_else(|| Failure::invalid("count is too large"))?;
+        let n3 = count.checked_mul(3).ok_or_else(|| Failure::invalid("count is too large"))?;
+        check_array(out.cast_const(), n3, "out")?;
+        let values = {
+            let objects = unsafe { array(objects, count, "objects") }?;
+            let faces = unsafe { array(faces, count, "faces") }?;
+            let st = unsafe { array(st, n2, "st") }?;
+            let state = s.read()?;
+            if state.session.frame().is_none() {
+                return Err(Failure::new(GrStatus::NotSolved, "no frame has been solved yet"));
+            }
+            let mut values = Vec::with_capacity(n3);
+            for i in 0..count {
+                let h = state
+                    .session
+                    .eval_irradiance(
+                        objects[i] as usize,
+                        faces[i] as usize,
+                        f64::from(st[2 * i]),
+                        f64::from(st[2 * i + 1]),
+                    )
+                    .map_err(|e| Failure::from(e).prefixed(&format!("point {i}: ")))?;
+                values.extend(h.map(|x| x as f32));
             }
             values
         };

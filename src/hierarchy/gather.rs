@@ -77,14 +77,15 @@ pub struct Inputs<'a> {
     pub lights: Option<&'a DirectLight>,
 }
 
-/// `B` at every face corner of `scene` (placed at `frame`), per object in face order (the order
-/// of [`crate::scene::json::ObjectResult::corner_radiosity`]), and the number of distinct points.
+/// `B` and the light received `H` (`B = E + rho H`) at every face corner of `scene` (placed at
+/// `frame`), per object in face order (the order of
+/// [`crate::scene::json::ObjectResult::corner_radiosity`]), and the number of distinct points.
 pub fn corners(
     inputs: &Inputs,
     scene: &Scene,
     frame: f64,
     progress: Progress,
-) -> Result<(CornerValues, usize)> {
+) -> Result<(CornerValues, CornerValues, usize)> {
     let tree = inputs.tree;
     let (points, point_of_corner, corners_per_object) = corner_points(
         scene,
@@ -109,26 +110,29 @@ pub fn corners(
         .is_some()
         .then(|| Solids::new(&tree.faces, scene.objects.len()))
         .filter(|s| !s.is_empty());
-    let values: Vec<[f64; 3]> = points
+    let values: Vec<[[f64; 3]; 2]> = points
         .par_iter()
         .map(|p| {
             stop.done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             if stop.stopped() {
-                return [0.0; 3];
+                return [[0.0; 3]; 2];
             }
             match p.at {
                 Some(at) => gather.point(at, p.normal, solids.as_ref(), true),
-                None => scene.emission_at(p.material as usize, frame),
+                None => [scene.emission_at(p.material as usize, frame), [0.0; 3]],
             }
         })
         .collect();
     stop.outcome()?;
-    let mut out = Vec::with_capacity(corners_per_object.len());
-    let mut it = point_of_corner.iter().map(|&k| values[k]);
-    for &n in &corners_per_object {
-        out.push(it.by_ref().take(n).collect());
-    }
-    Ok((out, points.len()))
+    let per_object = |which: usize| {
+        let mut out = Vec::with_capacity(corners_per_object.len());
+        let mut it = point_of_corner.iter().map(|&k| values[k][which]);
+        for &n in &corners_per_object {
+            out.push(it.by_ref().take(n).collect());
+        }
+        out
+    };
+    Ok((per_object(0), per_object(1), points.len()))
 }
 
 /// The point being gathered: where it is and which face it is on (its rays skip that face).
@@ -191,7 +195,7 @@ impl<'a> Gather<'a> {
         }
     }
 
-    /// `B` at `(s,t)` of face `f` (its patch's parameters), gathered with the shading normal
+    /// `B` and `H` at `(s,t)` of face `f` (its patch's parameters), gathered with the shading normal
     /// `normal` where it is not the face's own; with `feet`, the part of a touched source next
     /// to the point counts with `B` gathered at the foot point (itself without feet).
     fn point(
@@ -200,7 +204,7 @@ impl<'a> Gather<'a> {
         normal: Option<DVec3>,
         solids: Option<&Solids>,
         feet: bool,
-    ) -> [f64; 3] {
+    ) -> [[f64; 3]; 2] {
         let tree = self.inputs.tree;
         let face = &tree.faces[f];
         let (x, n) = shading_point(&face.patch, s, t, normal);
@@ -209,7 +213,7 @@ impl<'a> Gather<'a> {
             let (centre, radius) = face.patch.bounding_sphere();
             let nf = face.patch.area_vector(s, t).normalize_or_zero();
             if solids.buries(crate::solids::test_point(face.patch.point(s, t), nf, centre, radius)) {
-                return emission;
+                return [emission, [0.0; 3]];
             }
         }
         let rx = Receiver { x, n, face: f as u32, radius: face.patch.bounding_sphere().1 };
@@ -236,7 +240,7 @@ impl<'a> Gather<'a> {
                     self.surface_source(&rx, source, feet, &mut h, &mut form_factors);
                 }
                 if self.stop.stopped() {
-                    return [0.0; 3];
+                    return [[0.0; 3]; 2];
                 }
             }
             let up = self.parent[node as usize];
@@ -248,7 +252,8 @@ impl<'a> Gather<'a> {
         let bound = crate::hemisphere::bound(form_factors);
         let direct = self.inputs.lights.map_or([0.0; 3], |l| l.irradiance(x, n, f as u32));
         let rho = tree.reflectance[f];
-        std::array::from_fn(|c| emission[c] + rho[c] * (bound * h[c] + direct[c]))
+        let received: [f64; 3] = std::array::from_fn(|c| bound * h[c] + direct[c]);
+        [std::array::from_fn(|c| emission[c] + rho[c] * received[c]), received]
     }
 
     /// Adds the surface node `source`'s light at the point to `h` and its form factor to `ff`.
@@ -288,7 +293,7 @@ impl<'a> Gather<'a> {
         *ff += m[0] + weight;
         if let (Some(t), Some(solids), true) = (touch, feet, weight > 0.0) {
             let (fs, ft) = s.domain.map(t.s, t.t);
-            let foot = self.point((s.face as usize, fs, ft), None, solids, false);
+            let [foot, _] = self.point((s.face as usize, fs, ft), None, solids, false);
             for c in 0..3 {
                 h[c] += weight * foot[c];
             }

@@ -25,7 +25,7 @@ use crate::kernel::PairContext;
 use crate::lights::direct::DirectLight;
 use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
-use crate::scene::json::ObjectResult;
+use crate::scene::json::{ObjectResult, irradiance_from_radiosity};
 use crate::system::{Progress, build_elements, corner_params};
 use crate::visibility::Occluders;
 
@@ -104,8 +104,9 @@ pub struct HierarchicalFrame {
     pub hierarchy: Hierarchy,
     pub state: State,
     pub stats: HierarchyStats,
-    /// `B` at every face corner per object, gathered ([`gather`]); `None`: from the leaves.
-    pub corners: Option<crate::gather::CornerValues>,
+    /// `B` and the light received `H` at every face corner per object, gathered ([`gather`]);
+    /// `None`: from the leaves.
+    pub corners: Option<(crate::gather::CornerValues, crate::gather::CornerValues)>,
 }
 
 /// Solves `scene` at `frame` on the hierarchy, from scratch. Runs on the current rayon pool;
@@ -200,10 +201,10 @@ pub fn solve_frame(
             occluders: occluders.as_ref(),
             lights: lights.as_ref(),
         };
-        let (corners, points) = gather::corners(&inputs, scene, frame, progress)?;
+        let (radiosity, irradiance, points) = gather::corners(&inputs, scene, frame, progress)?;
         stats.gather_points = points;
         stats.gather_seconds = t.elapsed().as_secs_f64();
-        Some(corners)
+        Some((radiosity, irradiance))
     } else {
         None
     };
@@ -269,6 +270,7 @@ impl HierarchicalFrame {
                 name: obj.name.clone(),
                 face_radiosity: Vec::with_capacity(obj.faces.len()),
                 corner_radiosity: Vec::new(),
+                corner_irradiance: Vec::new(),
             };
             for (fi, face) in obj.faces.iter().enumerate() {
                 match faces.peek() {
@@ -276,6 +278,9 @@ impl HierarchicalFrame {
                         let f = *f;
                         faces.next();
                         res.face_radiosity.push(to_f32(self.face_mean(f)));
+                        let material = obj.face_materials[fi];
+                        let rho = scene.reflectance_of(o, fi, material);
+                        let emission = scene.emission_at(material as usize, frame);
                         for (s, t) in corner_params(face.len()) {
                             let v = if face.len() == 3 && t == 1.0 {
                                 self.apex(f)
@@ -283,17 +288,20 @@ impl HierarchicalFrame {
                                 self.eval_face(f, s, t)
                             };
                             res.corner_radiosity.push(to_f32(v));
+                            res.corner_irradiance.push(to_f32(irradiance_from_radiosity(v, emission, rho)));
                         }
                     }
                     _ => {
                         let e = to_f32(scene.emission_at(obj.face_materials[fi] as usize, frame));
                         res.face_radiosity.push(e);
                         res.corner_radiosity.extend(std::iter::repeat_n(e, face.len()));
+                        res.corner_irradiance.extend(std::iter::repeat_n([0.0; 3], face.len()));
                     }
                 }
             }
-            if let Some(gathered) = &self.corners {
-                res.corner_radiosity = gathered[o].iter().map(|&v| to_f32(v)).collect();
+            if let Some((radiosity, irradiance)) = &self.corners {
+                res.corner_radiosity = radiosity[o].iter().map(|&v| to_f32(v)).collect();
+                res.corner_irradiance = irradiance[o].iter().map(|&v| to_f32(v)).collect();
             }
             out.push(res);
         }

@@ -378,6 +378,22 @@ pub struct ObjectResult {
     pub face_radiosity: Vec<[f32; 3]>,
     /// Radiosity at each face corner, faces in order, corners in face order.
     pub corner_radiosity: Vec<[f32; 3]>,
+    /// The irradiance `H` (W/m^2, RGB) at the same corners: the light the surface receives,
+    /// `B = E + rho H`, so that a material's own reflectance times `H` is the reflected part of
+    /// `B`. Gathered with the corners; from the face polynomials (corner gather off, the
+    /// hierarchy) it is `(B - E) / rho` per channel, 0 where `rho` is below [`MIN_REFLECTANCE`].
+    #[serde(default)]
+    pub corner_irradiance: Vec<[f32; 3]>,
+}
+
+/// Below this reflectance a channel's irradiance is not derived from `B` (`(B - E) / rho`
+/// would amplify rounding): it reads 0.
+pub const MIN_REFLECTANCE: f64 = 1e-4;
+
+/// `(B - E) / rho` per channel, 0 where `rho` is below [`MIN_REFLECTANCE`]: the irradiance of
+/// a point whose radiosity came from a polynomial rather than the gather.
+pub fn irradiance_from_radiosity(b: [f64; 3], e: [f64; 3], rho: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|c| if rho[c] < MIN_REFLECTANCE { 0.0 } else { (b[c] - e[c]) / rho[c] })
 }
 
 #[derive(Serialize, Deserialize, Clone, Debug)]
