@@ -59,6 +59,13 @@ const GAUSS_RATIO: f64 = 3.0;
 /// Gauss points per axis of a source rectangle.
 const GAUSS_POINTS: usize = 3;
 
+/// Past this many bounding radii a source rectangle takes [`FAR_POINTS`] per axis: 4 rays
+/// instead of 9. Measured on the bunny against Cycles (accuracy 1e-4, tests/hierarchy.rs):
+/// 5.66% / 0.66% per corner with 3 x 3 everywhere, 5.71% / 0.69% with this, 4 radii 5.72% /
+/// 0.92%; the decimated monastery's gather 83 -> 63 s, the bunny's 4.5 -> 3.4 s (one run).
+const FAR_RATIO: f64 = 6.0;
+const FAR_POINTS: usize = 2;
+
 /// Deepest split of a source rectangle; there its form factor is taken analytically.
 const MAX_DEPTH: u32 = 12;
 
@@ -170,6 +177,8 @@ struct Gather<'a> {
     /// Per node, its parent (the root's is itself).
     parent: Vec<NodeId>,
     rule: GaussLegendre,
+    /// The rule past [`FAR_RATIO`].
+    far_rule: GaussLegendre,
 }
 
 impl<'a> Gather<'a> {
@@ -192,6 +201,7 @@ impl<'a> Gather<'a> {
             blocked: Incoming::of_pairs(tree.nodes.len(), inputs.blocked),
             parent,
             rule: GaussLegendre::new(GAUSS_POINTS),
+            far_rule: GaussLegendre::new(FAR_POINTS),
         }
     }
 
@@ -413,7 +423,8 @@ impl<'a> Gather<'a> {
         }
         let basis = self.inputs.tree.basis;
         if distance >= GAUSS_RATIO * radius {
-            self.gauss(rx, src, rect, out);
+            let rule = if distance >= FAR_RATIO * radius { &self.far_rule } else { &self.rule };
+            self.gauss(rx, src, rect, rule, out);
             return;
         }
         if depth >= MAX_DEPTH {
@@ -441,15 +452,15 @@ impl<'a> Gather<'a> {
 
     /// The Gauss sum over `rect` of the source into `out`, with one shadow ray per node that
     /// the point faces.
-    fn gauss(&self, rx: &Receiver, src: &Source, rect: &Rect, out: &mut [f64]) {
+    fn gauss(&self, rx: &Receiver, src: &Source, rect: &Rect, rule: &GaussLegendre, out: &mut [f64]) {
         let patch = src.patch;
         const N: usize = GAUSS_POINTS * GAUSS_POINTS;
         let nb = out.len();
         let measure = rect.measure();
         let mut lit = [(DVec3::ZERO, 0.0f64, 0.0f64, 0.0f64); N];
         let mut count = 0;
-        for (u, wu) in self.rule.iter() {
-            for (v, wv) in self.rule.iter() {
+        for (u, wu) in rule.iter() {
+            for (v, wv) in rule.iter() {
                 let (s, t) = rect.map(u, v);
                 let av = patch.area_vector(s, t);
                 let a = av.length();
