@@ -437,7 +437,7 @@ const GATHER_CHUNKS: usize = 8;
 /// [`gather_row_pair`] for many receivers `rows` at once: the store streamed shooter by shooter
 /// (its layout, as a shot reads it), each shooter's columns read once for every row. A receiver's
 /// sum then runs in shooter order instead of its pairs' order, so it equals
-/// [`gather_row_pair`]'s up to rounding (billiard: 4e-20 of the peak on the solution). Reading
+/// [`gather_row_pair`]'s up to rounding (billiard, 8 frames: within 2.8e-18 of the peak). Reading
 /// the whole store pays when the rows are many: the billiard's ~630 of 1,189 hemisphere bounds a
 /// frame, pair by pair, were memory stalls on a scattered read (one column slice per `l`).
 pub fn gather_rows(links: &LinkStore, rows: &[ElementId], v: [&[[f64; 3]]; 2]) -> Vec<[Vec<[f64; 3]>; 2]> {
