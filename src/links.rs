@@ -211,7 +211,7 @@ impl LinkStore {
     /// Where `G_receiver,other` of pair `p` lives: the shooter and the receiver's slot among the
     /// shooter's receivers.
     #[inline]
-    fn slot(&self, p: PairId, receiver: ElementId) -> (usize, usize) {
+    pub fn slot(&self, p: PairId, receiver: ElementId) -> (usize, usize) {
         let pair = &self.pairs[p as usize];
         let [ab, ba] = self.slots[p as usize];
         if pair.a == receiver { (pair.b as usize, ab as usize) } else { (pair.a as usize, ba as usize) }

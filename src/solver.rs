@@ -382,6 +382,154 @@ pub fn gather_row(links: &LinkStore, i: ElementId, v: &[[f64; 3]]) -> Vec<[f64; 
     acc
 }
 
+/// [`gather_row`] on two vectors at once, each sum exactly as [`gather_row`] forms it (the same
+/// products, added in the same order: pair, then `l`), so the results are bit for bit its own.
+/// One pass over the row's blocks serves both vectors (the row, scattered over its shooters'
+/// columns, is what costs: the animation's hemisphere bound gathers `b - u` and `sigma` on each
+/// receiver whose bound changed, 630 of the billiard's 1,189 per frame).
+pub fn gather_row_pair(links: &LinkStore, i: ElementId, v: [&[[f64; 3]]; 2]) -> [Vec<[f64; 3]>; 2] {
+    match links.nb() {
+        1 => gather_row_pair_nb::<1>(links, i, v),
+        4 => gather_row_pair_nb::<4>(links, i, v),
+        9 => gather_row_pair_nb::<9>(links, i, v),
+        16 => gather_row_pair_nb::<16>(links, i, v),
+        nb => unreachable!("{nb} basis functions"),
+    }
+}
+
+/// How many pairs ahead [`gather_row_pair`] asks for a row's blocks.
+const PREFETCH_ROW_PAIRS: usize = 4;
+
+fn gather_row_pair_nb<const NB: usize>(
+    links: &LinkStore,
+    i: ElementId,
+    [v, w]: [&[[f64; 3]]; 2],
+) -> [Vec<[f64; 3]>; 2] {
+    let mut acc = [[[0.0f64; 3]; NB]; 2];
+    let pairs = links.pairs_of(i);
+    for (x, &p) in pairs.iter().enumerate() {
+        if let Some(&ahead) = pairs.get(x + PREFETCH_ROW_PAIRS) {
+            let (shooter, slot) = links.slot(ahead, i);
+            for l in 0..NB {
+                crate::simd::prefetch(&links.shooter_column(shooter as ElementId, l)[slot * NB..][..NB]);
+            }
+        }
+        let (j, slot) = links.slot(p, i);
+        let (vj, wj) = (&v[j * NB..][..NB], &w[j * NB..][..NB]);
+        for l in 0..NB {
+            let g = &links.shooter_column(j as ElementId, l)[slot * NB..][..NB];
+            for k in 0..NB {
+                let g = g[k] as f64;
+                for c in 0..3 {
+                    acc[0][k][c] += g * vj[l][c];
+                    acc[1][k][c] += g * wj[l][c];
+                }
+            }
+        }
+    }
+    acc.map(|a| a.to_vec())
+}
+
+/// Shooter ranges [`gather_rows`] splits the store into, summed in range order: a fixed number,
+/// so that its sums do not depend on the thread count.
+const GATHER_CHUNKS: usize = 8;
+
+/// [`gather_row_pair`] for many receivers `rows` at once: the store streamed shooter by shooter
+/// (its layout, as a shot reads it), each shooter's columns read once for every row. A receiver's
+/// sum then runs in shooter order instead of its pairs' order, so it equals
+/// [`gather_row_pair`]'s up to rounding (billiard, 8 frames: within 2.8e-18 of the peak). Reading
+/// the whole store pays when the rows are many: the billiard's ~630 of 1,189 hemisphere bounds a
+/// frame, pair by pair, were memory stalls on a scattered read (one column slice per `l`).
+pub fn gather_rows(links: &LinkStore, rows: &[ElementId], v: [&[[f64; 3]]; 2]) -> Vec<[Vec<[f64; 3]>; 2]> {
+    use rayon::prelude::*;
+    let nb = links.nb();
+    let n = v[0].len() / nb;
+    let mut pos = vec![u32::MAX; n];
+    for (q, &i) in rows.iter().enumerate() {
+        pos[i as usize] = q as u32;
+    }
+    // Per row: `[vector][c][k]`.
+    let width = 2 * 3 * nb;
+    let step = n.div_ceil(GATHER_CHUNKS).max(1);
+    let starts: Vec<usize> = (0..n).step_by(step).collect();
+    let parts: Vec<Vec<f64>> = starts
+        .into_par_iter()
+        .map(|lo| {
+            let mut acc = vec![0.0; rows.len() * width];
+            gather_shooters(links, lo, (lo + step).min(n), &pos, v[0], v[1], &mut acc);
+            acc
+        })
+        .collect();
+    let mut total = vec![0.0; rows.len() * width];
+    for part in &parts {
+        for (t, x) in total.iter_mut().zip(part) {
+            *t += x;
+        }
+    }
+    total
+        .chunks_exact(width)
+        .map(|a| {
+            std::array::from_fn(|h| {
+                (0..nb).map(|k| std::array::from_fn(|c| a[(h * 3 + c) * nb + k])).collect()
+            })
+        })
+        .collect()
+}
+
+crate::simd::multiversion! {
+    /// Adds what shooters `lo..hi` send the rows marked in `pos` (their index, `u32::MAX`
+    /// elsewhere) from `v` and `w` into `acc` (`[row][vector][c][k]`), for [`gather_rows`].
+    fn gather_shooters(
+        links: &LinkStore,
+        lo: usize,
+        hi: usize,
+        pos: &[u32],
+        v: &[[f64; 3]],
+        w: &[[f64; 3]],
+        acc: &mut [f64],
+    ) {
+        match links.nb() {
+            1 => gather_shooters_nb::<1>(links, lo..hi, pos, [v, w], acc),
+            4 => gather_shooters_nb::<4>(links, lo..hi, pos, [v, w], acc),
+            9 => gather_shooters_nb::<9>(links, lo..hi, pos, [v, w], acc),
+            16 => gather_shooters_nb::<16>(links, lo..hi, pos, [v, w], acc),
+            nb => unreachable!("{nb} basis functions"),
+        }
+    }
+}
+
+#[inline(always)]
+fn gather_shooters_nb<const NB: usize>(
+    links: &LinkStore,
+    shooters: std::ops::Range<usize>,
+    pos: &[u32],
+    [v, w]: [&[[f64; 3]]; 2],
+    acc: &mut [f64],
+) {
+    let (acc, _) = acc.as_chunks_mut::<NB>();
+    for j in shooters {
+        let cols: [&[[f32; NB]]; NB] =
+            std::array::from_fn(|l| links.shooter_column(j as ElementId, l).as_chunks::<NB>().0);
+        let (vj, wj) = (&v[j * NB..][..NB], &w[j * NB..][..NB]);
+        for (r, &i) in links.receivers_of(j as ElementId).iter().enumerate() {
+            let q = pos[i as usize];
+            if q == u32::MAX {
+                continue;
+            }
+            let a = &mut acc[q as usize * 6..][..6];
+            for l in 0..NB {
+                let g: [f64; NB] = std::array::from_fn(|k| cols[l][r][k] as f64);
+                for c in 0..3 {
+                    for k in 0..NB {
+                        a[c][k] += g[k] * vj[l][c];
+                        a[3 + c][k] += g[k] * wj[l][c];
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// Gauss-Seidel on eq. (5) until no coefficient moves by more than `tol` (absolute); returns `b`.
 pub fn gauss_seidel(links: &LinkStore, reflectance: &[[f64; 3]], e: &[[f64; 3]], tol: f64) -> Vec<[f64; 3]> {
     let nb = links.nb();
