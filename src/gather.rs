@@ -418,16 +418,15 @@ impl CornerGather {
             union_eps: union_eps(&patches, &swept, 1e-9 * scale.max(1e-300)),
             eps: 1e-9 * scale.max(1e-300),
             links: (0..patches.len()).map(|_| std::sync::OnceLock::new()).collect(),
-            kinds: sys
-                .links
-                .pairs()
-                .par_iter()
-                .map(|p| match p.visibility {
+            kinds: {
+                let mut kinds = crate::budget::try_vec(sys.links.len(), "the corner gather's link kinds")?;
+                kinds.par_extend(sys.links.pairs().par_iter().map(|p| match p.visibility {
                     Visibility::Full => VisKind::Full,
                     Visibility::Blocked => VisKind::Blocked,
                     Visibility::Partial(_) => VisKind::Partial,
-                })
-                .collect(),
+                }));
+                kinds
+            },
         };
         let kept_rows: Vec<Option<Row>> = match previous {
             Some(p) => p.rows.into_iter().map(Some).collect(),
@@ -435,13 +434,15 @@ impl CornerGather {
         };
         // Four points at a time: their rows, then their values, the four sums interleaved (each
         // in its own order, as one at a time); reading kept moments overlaps other chunks' rays.
-        let gathered: Result<Vec<(Row, usize, [f64; 3])>> = points
-            .par_chunks(4)
-            .zip(kept_rows.into_par_iter().chunks(4))
-            .flat_map_iter(|(points, kept)| {
+        // (Reserved whole first, so the allocator's refusal of the results is an error; a chunk
+        // cut short by a stop adds nothing, and the stop is checked below.)
+        let mut gathered: Vec<(Row, usize, [f64; 3])> =
+            crate::budget::try_vec(points.len(), "the corner gather's results")?;
+        gathered.par_extend(points.par_chunks(4).zip(kept_rows.into_par_iter().chunks(4)).flat_map_iter(
+            |(points, kept)| {
                 stop.done.fetch_add(points.len(), std::sync::atomic::Ordering::Relaxed);
                 if stop.stopped() {
-                    return vec![Err(Error::Cancelled)];
+                    return Vec::new();
                 }
                 let rows: Vec<(Row, usize)> = points
                     .iter()
@@ -472,18 +473,18 @@ impl CornerGather {
                     }
                 }
                 sys.add_direct_light(points.iter().map(|p| p.at.map(|at| (at, p.normal))), &mut values);
-                rows.into_iter().zip(values).map(|((row, n), v)| Ok((row, n, v))).collect()
-            })
-            .collect::<Result<_>>();
+                rows.into_iter().zip(values).map(|((row, n), v)| (row, n, v)).collect::<Vec<_>>()
+            },
+        ));
         if let Some(e) = stop.failed.lock().unwrap_or_else(|p| p.into_inner()).take() {
             return Err(e);
         }
-        let gathered = gathered?;
         // A cancel seen inside a row cut it short without an error.
         if stop.cancelled.load(std::sync::atomic::Ordering::Relaxed) {
             return Err(Error::Cancelled);
         }
-        let mut values: Vec<[f64; 3]> = gathered.iter().map(|g| g.2).collect();
+        let mut values: Vec<[f64; 3]> = crate::budget::try_vec(points.len(), "the corner gather's results")?;
+        values.extend(gathered.iter().map(|g| g.2));
         // A point inside another closed surface receives nothing (crate::solids); which points
         // are is decided again only when something moved.
         let buried = match kept_buried {
@@ -1040,7 +1041,9 @@ impl Gather<'_> {
             let (pairs, others) =
                 (sys.links.pairs_of(i as ElementId), sys.links.receivers_of(i as ElementId));
             assert_eq!(pairs.len(), others.len());
-            let mut out: Vec<Linked> = Vec::with_capacity(pairs.len());
+            // (A refused allocation stops the gather, which returns the error: this element's
+            // corners are not used.)
+            let Some(mut out) = self.stop.vec::<Linked>(pairs.len()) else { return Vec::new() };
             // (`receivers_of` lists the other element of each pair, in `pairs_of` order: read
             // in sequence, with the kinds, instead of from the pair records all over the store)
             for (&p, &j) in pairs.iter().zip(others) {
