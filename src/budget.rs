@@ -122,29 +122,67 @@ pub fn check(scene: &Scene, frames: u64) -> Result<()> {
     )))
 }
 
-/// Bytes per input face a hierarchical bake plans for ([`check_hierarchical`]): measured peaks
-/// were 16-50 KB per face at order 1-2 (docs/benchmarks.md, "Hierarchy"); links and nodes grow
-/// about linearly with the faces, so this is a per-face allowance rather than a pair count.
-const HIERARCHY_BYTES_PER_FACE: u64 = 96 << 10;
+/// Links per face a hierarchical bake plans for at accuracy 1e-3 ([`hierarchical_estimate`]):
+/// measured 127 on the full monastery (15.9M links, 124,707 faces), 158 on the modelled Cornell
+/// box (2,521 links, 16 faces), 60 on the decimated monastery at order 2 (docs/benchmarks.md,
+/// "Hierarchy").
+const HIERARCHY_LINKS_PER_FACE: f64 = 160.0;
 
-/// [`check`] for [`crate::session::Method::Hierarchical`]: links grow about linearly with the
-/// faces there, not with their pairs, so the estimate is a per-face allowance (scaled by the
-/// basis size) plus the results.
-pub fn check_hierarchical(scene: &Scene, frames: u64) -> Result<()> {
-    let Some(budget) = budget_bytes(scene.settings.memory_budget_mb) else { return Ok(()) };
+/// How the links grow as the accuracy tightens: the Cornell box's 390, 2,521 and 13,187 links at
+/// 1e-2, 1e-3 and 1e-4 are a power of 0.76 of 1 / accuracy.
+const HIERARCHY_LINK_GROWTH: f64 = 0.76;
+
+/// What a hierarchical bake ([`crate::session::Method::Hierarchical`]) will need. Its links grow
+/// about linearly with the faces, not with their pairs, and how many there are is known only
+/// once the oracle has decided them: the links are `faces x` [`HIERARCHY_LINKS_PER_FACE`] scaled
+/// by `(1e-3 / accuracy)^`[`HIERARCHY_LINK_GROWTH`], each its record, both `nb x nb` f32
+/// transfers (as if every link joined two surfaces), its allocation and its two entries of the
+/// solve's incoming lists, twice over (the link vector's growth room, and a batch of computed
+/// links held before they are stored). Nodes are two per face (the face and its share of the
+/// clusters) and one per four links (the quadrants split for them: 2,217 nodes for 3,572 links
+/// on the 91-face Cornell box at order 2, about 250k for 15.9M on the monastery), each its
+/// record, moments and the solve's three coefficient vectors. Elements and results as
+/// [`estimate`]; no corner gather (the hierarchy's corners come from its leaves). Against the
+/// measured peaks: the full monastery at order 1, 5.8 GB (about 12 GB estimated); the decimated
+/// one at order 2, 56 MB (0.3 GB estimated).
+pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
     let s = &scene.settings;
     let nb = ((s.basis_order + 1) * (s.basis_order + 1)) as u64;
-    let faces = scene.face_count() as u64;
-    let need = faces.saturating_mul(HIERARCHY_BYTES_PER_FACE).saturating_mul(nb) / 4
-        + estimate(scene, frames).results;
-    if need <= budget {
+    let flat = estimate(scene, frames);
+    let faces = (scene.face_count() - scene.degenerate_faces.len()) as u64;
+    let growth = (1e-3 / s.accuracy.clamp(1e-12, 1.0)).powf(HIERARCHY_LINK_GROWTH);
+    let links_per_face = (HIERARCHY_LINKS_PER_FACE * growth).max(1.0) as u64;
+    let per_link = size_of::<crate::hierarchy::coupling::Link>() as u64 + 16 + 2 * nb * nb * 4 + 2 * 8;
+    let link_count = faces.saturating_mul(links_per_face);
+    let links = link_count.saturating_mul(per_link).saturating_mul(2);
+    let nodes = faces.saturating_mul(2).saturating_add(link_count / 4);
+    let per_node = size_of::<crate::hierarchy::tree::Node>() as u64 + 16 + nb * 8 + 3 * nb * 3 * 8 + 64;
+    let elements = flat.elements.saturating_add(nodes.saturating_mul(per_node));
+    Estimate { links, gather: 0, elements, results: flat.results }
+}
+
+/// [`check`] for [`crate::session::Method::Hierarchical`], with [`hierarchical_estimate`].
+pub fn check_hierarchical(scene: &Scene, frames: u64) -> Result<()> {
+    let Some(budget) = budget_bytes(scene.settings.memory_budget_mb) else { return Ok(()) };
+    let e = hierarchical_estimate(scene, frames);
+    if e.total() <= budget {
         return Ok(());
     }
+    let mb = |b: u64| b.div_ceil(MIB);
+    let source = if scene.settings.memory_budget_mb > 0 {
+        "settings.memory_budget_mb".to_owned()
+    } else {
+        format!("{:.0}% of the memory available", DEFAULT_SHARE * 100.0)
+    };
     Err(Error::OverBudget(format!(
-        "this hierarchical bake may need up to {} MB but the budget is {} MB; use fewer faces, a larger \
-         settings.accuracy or a lower settings.basis_order, or raise memory_budget_mb",
-        need.div_ceil(MIB),
-        budget.div_ceil(MIB),
+        "this hierarchical bake may need up to {} MB (links {} MB, nodes and elements {} MB, results {} MB) \
+         but the budget is {} MB ({source}); use fewer faces, a larger settings.accuracy or a lower \
+         settings.basis_order, bake fewer frames at once, or raise memory_budget_mb",
+        mb(e.total()),
+        mb(e.links),
+        mb(e.elements),
+        mb(e.results),
+        mb(budget),
     )))
 }
 
@@ -208,6 +246,21 @@ mod tests {
             (scene.face_count() as f64, scenes::cornell_box(8, Settings::default()).face_count() as f64);
         let ratio = big.links as f64 / e.links as f64;
         assert!((ratio - m * (m - 1.0) / (n * (n - 1.0))).abs() < 1e-9 * ratio, "{ratio}");
+    }
+
+    #[test]
+    fn the_hierarchical_estimate_bounds_a_frame_of_the_cornell_box() {
+        let scene = scenes::cornell_box(4, Settings::default());
+        let e = hierarchical_estimate(&scene, 1);
+        let hs = crate::hierarchy::HierarchySettings::of(&scene.settings);
+        let frame = crate::hierarchy::solve_frame(&scene, 0.0, &hs, &crate::system::no_progress).unwrap();
+        let s = &frame.stats;
+        assert!(s.link_bytes as u64 * 2 <= e.links, "{s:?} vs {e:?}");
+        let nodes = s.nodes as u64 * size_of::<crate::hierarchy::tree::Node>() as u64;
+        assert!(nodes <= e.elements, "{s:?} vs {e:?}");
+        // Linear in the faces: at 60,000 faces, under a fiftieth of the flat method's pairs.
+        let big = scenes::cornell_box(100, Settings::default());
+        assert!(hierarchical_estimate(&big, 1).total() * 50 < estimate(&big, 1).total());
     }
 
     #[test]

@@ -444,16 +444,15 @@ impl CornerGather {
             union_eps: union_eps(&patches, &swept, 1e-9 * scale.max(1e-300)),
             eps: 1e-9 * scale.max(1e-300),
             links: (0..patches.len()).map(|_| std::sync::OnceLock::new()).collect(),
-            kinds: sys
-                .links
-                .pairs()
-                .par_iter()
-                .map(|p| match p.visibility {
+            kinds: {
+                let mut kinds = crate::budget::try_vec(sys.links.len(), "the corner gather's link kinds")?;
+                kinds.par_extend(sys.links.pairs().par_iter().map(|p| match p.visibility {
                     Visibility::Full => VisKind::Full,
                     Visibility::Blocked => VisKind::Blocked,
                     Visibility::Partial(_) => VisKind::Partial,
-                })
-                .collect(),
+                }));
+                kinds
+            },
         };
         let kept_rows: Vec<Option<Row>> = match previous {
             Some(p) => p.rows.into_iter().map(Some).collect(),
@@ -461,15 +460,17 @@ impl CornerGather {
         };
         // Four points at a time: their rows, then their values, the four sums interleaved (each
         // in its own order, as one at a time); reading kept moments overlaps other chunks' rays.
-        // Per point: its row, how many moments were computed, and `[B, H]`.
+        // Per point: its row, how many moments were computed, and `[B, H]`. (Reserved whole
+        // first, so the allocator's refusal of the results is an error; a chunk cut short by a
+        // stop adds nothing, and the stop is checked below.)
         type Gathered = (Row, usize, [[f64; 3]; 2]);
-        let gathered: Result<Vec<Gathered>> = points
-            .par_chunks(4)
-            .zip(kept_rows.into_par_iter().chunks(4))
-            .flat_map_iter(|(points, kept)| {
+        let mut gathered: Vec<Gathered> =
+            crate::budget::try_vec(points.len(), "the corner gather's results")?;
+        gathered.par_extend(points.par_chunks(4).zip(kept_rows.into_par_iter().chunks(4)).flat_map_iter(
+            |(points, kept)| {
                 stop.done.fetch_add(points.len(), std::sync::atomic::Ordering::Relaxed);
                 if stop.stopped() {
-                    return vec![Err(Error::Cancelled)];
+                    return Vec::new();
                 }
                 let rows: Vec<(Row, usize)> = points
                     .iter()
@@ -515,14 +516,15 @@ impl CornerGather {
                 rows.into_iter()
                     .zip(values)
                     .zip(light)
-                    .map(|(((row, n), v), h)| Ok((row, n, [v, h])))
-                    .collect()
-            })
-            .collect::<Result<_>>();
+                    .map(|(((row, n), v), h)| (row, n, [v, h]))
+                    .collect::<Vec<_>>()
+            },
+        ));
         stop.outcome()?;
-        let gathered = gathered?;
-        let mut values: Vec<[f64; 3]> = gathered.iter().map(|g| g.2[0]).collect();
-        let mut light: Vec<[f64; 3]> = gathered.iter().map(|g| g.2[1]).collect();
+        let mut values: Vec<[f64; 3]> = crate::budget::try_vec(points.len(), "the corner gather's results")?;
+        values.extend(gathered.iter().map(|g| g.2[0]));
+        let mut light: Vec<[f64; 3]> = crate::budget::try_vec(points.len(), "the corner gather's results")?;
+        light.extend(gathered.iter().map(|g| g.2[1]));
         // A point inside another closed surface receives nothing (crate::solids); which points
         // are is decided again only when something moved.
         let buried = match kept_buried {
@@ -1107,7 +1109,9 @@ impl Gather<'_> {
             let (pairs, others) =
                 (sys.links.pairs_of(i as ElementId), sys.links.receivers_of(i as ElementId));
             assert_eq!(pairs.len(), others.len());
-            let mut out: Vec<Linked> = Vec::with_capacity(pairs.len());
+            // (A refused allocation stops the gather, which returns the error: this element's
+            // corners are not used.)
+            let Some(mut out) = self.stop.vec::<Linked>(pairs.len()) else { return Vec::new() };
             // (`receivers_of` lists the other element of each pair, in `pairs_of` order: read
             // in sequence, with the kinds, instead of from the pair records all over the store)
             for (&p, &j) in pairs.iter().zip(others) {

@@ -493,6 +493,19 @@ impl Session {
         start: Instant,
         progress: Progress,
     ) -> Result<FrameStats> {
+        // Nothing with area to link: the flat path's frame of exitances (as a flat session bakes
+        // an empty scene), not an error.
+        if crate::system::build_elements(placed, frame, crate::basis::Basis::new(0)).is_empty() {
+            let (system, _, _) = self.rebuild(placed, frame, false, progress)?;
+            self.hierarchical = None;
+            self.keep_rebuilt(system, frame);
+            return Ok(FrameStats {
+                frame,
+                seconds: start.elapsed().as_secs_f64(),
+                full_rebuild: true,
+                ..Default::default()
+            });
+        }
         let mut settings = crate::hierarchy::HierarchySettings::of(&placed.settings);
         // A preview reads the leaves, as the flat path's preview skips its gather.
         settings.corner_gather &= !self.preview;

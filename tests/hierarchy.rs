@@ -161,3 +161,17 @@ fn the_bunny_gathered_through_the_hierarchy_agrees_with_cycles_per_corner() {
         assert!((ratio - 1.0).abs() < 0.02, "{}: mean ratio {ratio}", o.name);
     }
 }
+
+/// A scene with nothing of area (no objects) bakes on the hierarchy as on the flat path: a frame
+/// with no values, not an error (found by the C ABI fuzz, tests/ffi_props.rs).
+#[test]
+fn an_empty_scene_bakes_on_the_hierarchy_as_on_the_flat_path() {
+    let mut scene = closed_box(1, 0.5, 1.0, Settings::default());
+    scene.objects.clear();
+    scene.surfaces.clear();
+    for method in [Method::Full, Method::Hierarchical] {
+        let mut session = Session::new(scene.clone(), method).unwrap();
+        session.solve_frame(0.0, &no_progress).unwrap_or_else(|e| panic!("{method:?}: {e}"));
+        assert!(session.face_results().unwrap().is_empty(), "{method:?}");
+    }
+}

@@ -48,6 +48,37 @@ fn the_cli_refuses_a_scene_over_the_default_budget() {
     assert_eq!(code, 2, "{err}");
 }
 
+/// The hierarchical method has its own estimate (links per face, nodes), checked as the flat
+/// one is: over the budget, refused in one line before anything is built (without the check the
+/// CLI went on to link 60,000 faces).
+#[test]
+fn the_cli_refuses_a_hierarchical_bake_over_its_budget() {
+    let dir = std::env::temp_dir().join(format!("gr-budget-h-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = dir.join("huge.json");
+    std::fs::write(&input, galerkin_radiosity::scene::json::scene_to_json(&huge())).unwrap();
+    let out = dir.join("out.json");
+    // Not --quiet: a bake that started would print its progress.
+    let o = Command::new(env!("CARGO_BIN_EXE_galerkin-radiosity"))
+        .args(["bake", input.to_str().unwrap(), "-o", out.to_str().unwrap()])
+        .args(["--hierarchy", "--memory-budget", "64"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("over the memory budget: this hierarchical bake may need up to"), "{err}");
+    assert!(err.contains("but the budget is 64 MB (settings.memory_budget_mb)"), "{err}");
+    assert!(err.contains("a larger settings.accuracy"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(!out.exists());
+    // A tighter accuracy plans for more links.
+    let mut scene = huge();
+    let loose = budget::hierarchical_estimate(&scene, 1);
+    scene.settings.accuracy = 1e-4;
+    let tight = budget::hierarchical_estimate(&scene, 1);
+    assert!(tight.links > 5 * loose.links, "{loose:?} {tight:?}");
+}
+
 #[test]
 fn the_c_abi_refuses_it_in_gr_session_new() {
     let scene = huge();

@@ -111,7 +111,7 @@ pub fn corners(
     if !progress(0.0, "corner gather") {
         return Err(crate::error::Error::Cancelled);
     }
-    let gather = Gather::new(inputs, &stop);
+    let gather = Gather::new(inputs, &stop)?;
     let solids = inputs
         .occluders
         .is_some()
@@ -182,7 +182,7 @@ struct Gather<'a> {
 }
 
 impl<'a> Gather<'a> {
-    fn new(inputs: &'a Inputs<'a>, stop: &'a Stop<'a>) -> Self {
+    fn new(inputs: &'a Inputs<'a>, stop: &'a Stop<'a>) -> Result<Self> {
         let tree = inputs.tree;
         let mut parent: Vec<NodeId> = (0..tree.nodes.len() as NodeId).collect();
         for (id, node) in tree.nodes.iter().enumerate() {
@@ -194,15 +194,15 @@ impl<'a> Gather<'a> {
                 parent[c as usize] = id as NodeId;
             }
         }
-        Self {
+        Ok(Self {
             inputs,
             stop,
-            incoming: Incoming::new(tree.nodes.len(), inputs.links),
-            blocked: Incoming::of_pairs(tree.nodes.len(), inputs.blocked),
+            incoming: Incoming::new(tree.nodes.len(), inputs.links)?,
+            blocked: Incoming::of_pairs(tree.nodes.len(), inputs.blocked)?,
             parent,
             rule: GaussLegendre::new(GAUSS_POINTS),
             far_rule: GaussLegendre::new(FAR_POINTS),
-        }
+        })
     }
 
     /// `B` and `H` at `(s,t)` of face `f` (its patch's parameters), gathered with the shading normal

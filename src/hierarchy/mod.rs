@@ -159,11 +159,11 @@ pub fn solve_frame(
         let t = Instant::now();
         let mut radiosity = state.radiosity_estimate();
         if round == 0 {
-            hierarchy.link_all(&ctx, &mut radiosity);
-        } else if hierarchy.relink(&ctx, &mut radiosity).relinked == 0 {
+            hierarchy.link_all(&ctx, &mut radiosity)?;
+        } else if hierarchy.relink(&ctx, &mut radiosity)?.relinked == 0 {
             break;
         }
-        state.grow(&hierarchy.tree);
+        state.grow(&hierarchy.tree)?;
         state.add_sources(&hierarchy.tree, &emission, lights.as_ref());
         stats.link_seconds += t.elapsed().as_secs_f64();
         let t = Instant::now();

@@ -14,6 +14,12 @@ use rayon::prelude::*;
 
 pub use super::coupling::Link;
 use super::coupling::{self, LinkContext};
+use crate::budget;
+use crate::error::Result;
+
+/// What [`budget`]'s errors name.
+const LINKS: &str = "the hierarchy's links";
+const NODES: &str = "the hierarchy's nodes";
 use super::tree::{Kind, NodeId, Tree};
 
 /// What the oracle needs to know.
@@ -163,17 +169,19 @@ impl Hierarchy {
 
     /// Builds the links from the root's interaction with itself, `radiosity` per node (it grows
     /// with the tree: new nodes take their parent's).
-    pub fn link_all(&mut self, ctx: &LinkContext, radiosity: &mut Vec<f64>) -> RefineStats {
+    /// [`Error::OutOfMemory`](crate::Error::OutOfMemory) when the links or nodes cannot be
+    /// had.
+    pub fn link_all(&mut self, ctx: &LinkContext, radiosity: &mut Vec<f64>) -> Result<RefineStats> {
         let root = self.tree.root;
         let mut stats = RefineStats::default();
-        self.refine_pairs(ctx, radiosity, vec![(root, root)], &mut stats);
+        self.refine_pairs(ctx, radiosity, vec![(root, root)], &mut stats)?;
         stats.links = self.links.len();
-        stats
+        Ok(stats)
     }
 
     /// Tests every link again with the current `radiosity` and refines those that now carry too
     /// much (Hanrahan's re-refinement after a solve).
-    pub fn relink(&mut self, ctx: &LinkContext, radiosity: &mut Vec<f64>) -> RefineStats {
+    pub fn relink(&mut self, ctx: &LinkContext, radiosity: &mut Vec<f64>) -> Result<RefineStats> {
         let mut stats = RefineStats::default();
         let bar = self.oracle.threshold;
         let mut work = Vec::new();
@@ -188,9 +196,9 @@ impl Hierarchy {
             keep
         });
         stats.relinked = work.len();
-        self.refine_pairs(ctx, radiosity, work, &mut stats);
+        self.refine_pairs(ctx, radiosity, work, &mut stats)?;
         stats.links = self.links.len();
-        stats
+        Ok(stats)
     }
 
     /// Refines `work` into links: decide (splitting nodes) one pair at a time, compute the
@@ -201,7 +209,7 @@ impl Hierarchy {
         radiosity: &mut Vec<f64>,
         mut work: Vec<(NodeId, NodeId)>,
         stats: &mut RefineStats,
-    ) {
+    ) -> Result<()> {
         let bar = self.oracle.threshold;
         while !work.is_empty() {
             let mut accepted = Vec::new();
@@ -219,12 +227,20 @@ impl Hierarchy {
                 match self.oracle.decide(&self.tree, radiosity, a, b, bar) {
                     Verdict::Skip => {}
                     Verdict::Link => accepted.push((a, b)),
-                    Verdict::Split(s) => self.split_pair(s, if s == a { b } else { a }, radiosity, &mut work),
+                    Verdict::Split(s) => {
+                        self.split_pair(s, if s == a { b } else { a }, radiosity, &mut work)?
+                    }
                 }
             }
             let tree = &self.tree;
-            let computed: Vec<coupling::Computed> =
-                accepted.par_iter().map(|&(a, b)| coupling::compute(ctx, tree, a, b)).collect();
+            // The batch and the links it adds are reserved first: the allocator's refusal of the
+            // large vectors is an error (each link's own transfers are small allocations).
+            let mut computed: Vec<coupling::Computed> = budget::try_vec(accepted.len(), LINKS)?;
+            accepted
+                .par_iter()
+                .map(|&(a, b)| coupling::compute(ctx, tree, a, b))
+                .collect_into_vec(&mut computed);
+            budget::try_reserve(&mut self.links, computed.len(), LINKS)?;
             for (&(a, b), c) in accepted.iter().zip(computed) {
                 let Some(coupling) = c.coupling else {
                     if c.blocked {
@@ -238,12 +254,13 @@ impl Hierarchy {
                 if refine_shadow {
                     stats.split_for_shadows += 1;
                     let s = self.larger_splittable(a, b);
-                    self.split_pair(s, if s == a { b } else { a }, radiosity, &mut work);
+                    self.split_pair(s, if s == a { b } else { a }, radiosity, &mut work)?;
                 } else {
                     self.links.push(Link { a, b, coupling });
                 }
             }
         }
+        Ok(())
     }
 
     /// Pairs each child of `s` (split now if it is a surface leaf) with `other`, onto `work`; new
@@ -254,17 +271,21 @@ impl Hierarchy {
         other: NodeId,
         radiosity: &mut Vec<f64>,
         work: &mut Vec<(NodeId, NodeId)>,
-    ) {
+    ) -> Result<()> {
         let children = match self.tree.node(s).kind {
             Kind::Cluster { children } => children.to_vec(),
             Kind::Surface(_) => {
+                budget::try_reserve(&mut self.tree.nodes, 4, NODES)?;
+                budget::try_reserve(radiosity, 4, NODES)?;
                 let c = self.tree.split(s);
                 let r = radiosity[s as usize];
                 radiosity.resize(self.tree.nodes.len(), r);
                 c.to_vec()
             }
         };
+        budget::try_reserve(work, children.len(), NODES)?;
         work.extend(children.into_iter().map(|c| (c, other)));
+        Ok(())
     }
 
     fn larger_splittable(&self, a: NodeId, b: NodeId) -> NodeId {

@@ -15,6 +15,7 @@ use super::coupling::{Coupling, Link};
 use super::lobes::{self, Lobes};
 use super::tree::{Kind, NodeId, Tree};
 use super::two_scale::TwoScale;
+use crate::budget;
 use crate::error::{Error, Result};
 use crate::lights::direct::DirectLight;
 
@@ -41,13 +42,19 @@ pub struct Incoming {
 }
 
 impl Incoming {
-    pub fn new(nodes: usize, links: &[Link]) -> Self {
-        Self::of_pairs(nodes, &links.iter().map(|l| (l.a, l.b)).collect::<Vec<_>>())
+    /// [`crate::Error::OutOfMemory`] when its lists cannot be had.
+    pub fn new(nodes: usize, links: &[Link]) -> Result<Self> {
+        let pairs: Vec<(NodeId, NodeId)> = budget::try_vec(links.len(), "the hierarchy's incoming links")?;
+        let mut pairs = pairs;
+        pairs.extend(links.iter().map(|l| (l.a, l.b)));
+        Self::of_pairs(nodes, &pairs)
     }
 
-    /// Per node, the pairs `(a, b)` of `pairs` it is an end of: `(pair, side)`.
-    pub fn of_pairs(nodes: usize, pairs: &[(NodeId, NodeId)]) -> Self {
-        let mut count = vec![0usize; nodes + 1];
+    /// Per node, the pairs `(a, b)` of `pairs` it is an end of: `(pair, side)`;
+    /// [`crate::Error::OutOfMemory`] when its lists cannot be had.
+    pub fn of_pairs(nodes: usize, pairs: &[(NodeId, NodeId)]) -> Result<Self> {
+        let what = "the hierarchy's incoming links";
+        let mut count = budget::try_filled(nodes + 1, 0usize, what)?;
         for &(a, b) in pairs {
             count[a as usize + 1] += 1;
             count[b as usize + 1] += 1;
@@ -55,15 +62,16 @@ impl Incoming {
         for i in 0..nodes {
             count[i + 1] += count[i];
         }
-        let mut fill = count.clone();
-        let mut entries = vec![(0u32, 0u8); 2 * pairs.len()];
+        let mut fill = budget::try_vec(count.len(), what)?;
+        fill.extend_from_slice(&count);
+        let mut entries = budget::try_filled(2 * pairs.len(), (0u32, 0u8), what)?;
         for (k, &(a, b)) in pairs.iter().enumerate() {
             for (node, side) in [(a, 0u8), (b, 1u8)] {
                 entries[fill[node as usize]] = (k as u32, side);
                 fill[node as usize] += 1;
             }
         }
-        Self { offsets: count, entries }
+        Ok(Self { offsets: count, entries })
     }
 
     pub(crate) fn of(&self, node: usize) -> &[(u32, u8)] {
@@ -96,12 +104,20 @@ impl State {
 
     /// Takes in nodes the tree gained since: each new surface starts from its parent's polynomial
     /// restricted to it, so a refined state is the state it refines.
-    pub fn grow(&mut self, tree: &Tree) {
+    /// [`crate::Error::OutOfMemory`] when the larger state cannot be had (the state is then as
+    /// it was).
+    pub fn grow(&mut self, tree: &Tree) -> Result<()> {
         let (nb, old) = (self.nb, self.mean.len());
         let n = tree.nodes.len();
         if n == old {
-            return;
+            return Ok(());
         }
+        let what = "the hierarchy's solution";
+        budget::try_reserve_exact(&mut self.b, (n - old) * nb, what)?;
+        budget::try_reserve_exact(&mut self.sources, (n - old) * nb, what)?;
+        budget::try_reserve_exact(&mut self.has_sources, n - old, what)?;
+        budget::try_reserve_exact(&mut self.mean, n - old, what)?;
+        budget::try_reserve_exact(&mut self.lobes, n - old, what)?;
         self.b.resize(n * nb, [0.0; 3]);
         self.sources.resize(n * nb, [0.0; 3]);
         self.has_sources.resize(n, false);
@@ -126,6 +142,7 @@ impl State {
                 self.push_from(id, q, c as usize);
             }
         }
+        Ok(())
     }
 
     fn push_from(&mut self, parent: usize, q: usize, child: usize) {
@@ -213,14 +230,14 @@ impl State {
         max_sweeps: usize,
         cancel: &(dyn Fn() -> bool + Sync),
     ) -> Result<SolveStats> {
-        let incoming = Incoming::new(tree.nodes.len(), links);
+        let incoming = Incoming::new(tree.nodes.len(), links)?;
         let mut stats = SolveStats::default();
         let first = self.source_power(tree).max(1e-300);
         for sweep in 0..max_sweeps {
             if cancel() {
                 return Err(Error::Cancelled);
             }
-            let gathered = self.gather(tree, links, &incoming);
+            let gathered = self.gather(tree, links, &incoming)?;
             let change = self.push_pull(tree, &gathered, true);
             stats.sweeps = sweep + 1;
             stats.last_change = change;
@@ -235,10 +252,11 @@ impl State {
     }
 
     /// What every node receives through its own links from the current state.
-    fn gather(&self, tree: &Tree, links: &[Link], incoming: &Incoming) -> Gathered {
+    fn gather(&self, tree: &Tree, links: &[Link], incoming: &Incoming) -> Result<Gathered> {
         let (nb, n) = (self.nb, tree.nodes.len());
-        let mut h = vec![[0.0; 3]; n * nb];
-        let mut lobes_in = vec![lobes::ZERO; n];
+        let what = "the hierarchy's gathered light";
+        let mut h = budget::try_filled(n * nb, [0.0; 3], what)?;
+        let mut lobes_in = budget::try_filled(n, lobes::ZERO, what)?;
         h.par_chunks_mut(nb).zip(lobes_in.par_iter_mut()).enumerate().for_each(|(r, (hr, lr))| {
             for &(l, side) in incoming.of(r) {
                 let link = &links[l as usize];
@@ -295,7 +313,7 @@ impl State {
                 }
             }
         });
-        Gathered { h, lobes: lobes_in }
+        Ok(Gathered { h, lobes: lobes_in })
     }
 
     /// Pushes `gathered` to the leaves, sets `b = e + rho H` there (when `solve`; else keeps the

@@ -83,6 +83,38 @@ def test_sigint_keeps_complete_frames_and_resume_matches_an_uninterrupted_bake(b
             np.testing.assert_allclose(y, x, rtol=1e-5, atol=1e-7, err_msg=f"frame {f} {name}")
 
 
+def test_a_killed_bake_keeps_its_last_checkpoint(blender, tmp_path):
+    """SIGKILL (nothing can be saved then): the file saved at the last ``--checkpoint`` holds the
+    frames before it, and ``--resume`` solves only the frames after them. (Saving only at the end
+    lost every frame: the resume solved all twelve.)"""
+    src = tmp_path / "in.blend"
+    scenes.cornell_box(blender, n=4, light_frames=(1, 12))
+    blender.ops.wm.save_as_mainfile(filepath=str(src))
+    out = tmp_path / "out.blend"
+    common = ["--blend", str(src), "--frames", "1-12", "--order", "1", "--quality", "draft",
+              "--method", "full", "--checkpoint", "3", "--save", str(out)]
+    proc = subprocess.Popen(_cmd(common), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=_env(tmp_path))
+    lines = []
+    deadline = time.monotonic() + 300
+    for line in proc.stdout:
+        lines.append(line)
+        # Frames 1-3 are the first chunk, saved before frame 4 is solved.
+        if "Radiosity: frame 4 done" in line:
+            proc.kill()
+            break
+        assert time.monotonic() < deadline, "".join(lines)
+    proc.communicate(timeout=120)
+    assert proc.returncode == -signal.SIGKILL, "".join(lines)
+    assert out.exists(), "no checkpoint was saved"
+    resumed = subprocess.run(_cmd([*common, "--resume"]), capture_output=True, text=True,
+                             timeout=600, env=_env(tmp_path))
+    assert resumed.returncode == 0, resumed.stderr
+    after = _solved(resumed.stdout)
+    assert after and min(after) >= 4, after
+    assert "colours for frames 1-12" in resumed.stdout, resumed.stdout
+
+
 def test_memory_limit_refuses_a_bake_at_once_in_one_line(blender, tmp_path):
     src = tmp_path / "in.blend"
     scenes.cornell_box(blender, n=4)
