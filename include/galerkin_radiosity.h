@@ -690,9 +690,9 @@ GrStatus gr_session_corner_radiosity(const struct GrSession *s,
  * solved frame, laid out as `gr_session_corner_radiosity`'s values: the light the surface
  * receives (the lights' direct light, the World, the other surfaces), without its own emission
  * `E` and reflectance `rho`, so that `B = E + rho H` at each corner. A host multiplies it with a
- * material's own (textured) reflectance. Gathered with the corners; where the corners come from
- * the face polynomials (corner gather off, a preview, the hierarchical method) it is
- * `(B - E) / rho` per channel, 0 where `rho` is below 1e-4.
+ * material's own (textured) reflectance. Gathered with the corners (by either method); where the
+ * corners come from the face polynomials (corner gather off, a preview) it is `(B - E) / rho`
+ * per channel, 0 where `rho` is below 1e-4.
  *
  * # Safety
  * `s` is NULL or a live session; `out` is NULL or points to `len` writable floats.

@@ -502,15 +502,12 @@ impl CornerGather {
                     let (rho, emission) = (sys.surface_reflectance[e], sys.emission[e * nb]);
                     values[k] = std::array::from_fn(|c| emission[c] + rho[c] * light[k][c]);
                 }
-                if let Some(lights) = &sys.lights {
-                    for (k, p) in points.iter().enumerate() {
-                        let Some((e, s, t)) = p.at else { continue };
-                        let (x, n) = shading_point(&sys.elements[e].patch, s, t, p.normal);
-                        let direct = lights.irradiance(x, n, e as u32);
-                        for c in 0..3 {
-                            light[k][c] += direct[c];
-                            values[k][c] += sys.surface_reflectance[e][c] * direct[c];
-                        }
+                for (k, p) in points.iter().enumerate() {
+                    let Some(at) = p.at else { continue };
+                    let Some(direct) = sys.direct_irradiance(at, p.normal) else { break };
+                    for c in 0..3 {
+                        light[k][c] += direct[c];
+                        values[k][c] += sys.surface_reflectance[at.0][c] * direct[c];
                     }
                 }
                 rows.into_iter()

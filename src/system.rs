@@ -296,16 +296,27 @@ impl System {
         at: impl Iterator<Item = Option<((usize, f64, f64), Option<DVec3>)>>,
         values: &mut [[f64; 3]],
     ) {
-        let Some(lights) = &self.lights else { return };
+        if self.lights.is_none() {
+            return;
+        }
         for (v, at) in values.iter_mut().zip(at) {
-            if let Some(((e, s, t), normal)) = at {
-                let (x, n) = crate::gather::shading_point(&self.elements[e].patch, s, t, normal);
-                let irr = lights.irradiance(x, n, e as u32);
+            if let Some((at, normal)) = at
+                && let Some(irr) = self.direct_irradiance(at, normal)
+            {
                 for c in 0..3 {
-                    v[c] += self.surface_reflectance[e][c] * irr[c];
+                    v[c] += self.surface_reflectance[at.0][c] * irr[c];
                 }
             }
         }
+    }
+
+    /// The lights' direct irradiance `E_d` at the face point `(e, s, t)` (gathered with the
+    /// shading normal `normal` where it is not the element's own), with its own shadow rays;
+    /// `None` without lights.
+    pub fn direct_irradiance(&self, (e, s, t): (usize, f64, f64), normal: Option<DVec3>) -> Option<[f64; 3]> {
+        let lights = self.lights.as_ref()?;
+        let (x, n) = crate::gather::shading_point(&self.elements[e].patch, s, t, normal);
+        Some(lights.irradiance(x, n, e as u32))
     }
 
     /// Element areas, in element order.

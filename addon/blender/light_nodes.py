@@ -28,6 +28,7 @@ node (and with it the links it added): the node tree is as before ``apply``.
 from __future__ import annotations
 
 from ..core.frames import LIGHT_ATTRIBUTE
+from .materials import output_node, through_reroutes
 
 GROUP = "Radiosity Light"
 NODE_TAG = "radiosity_light"
@@ -97,25 +98,6 @@ def node_group(bpy):
     return ng
 
 
-def _output(tree):
-    out = None
-    try:
-        out = tree.get_output_node("ALL")
-    except (AttributeError, TypeError):
-        out = None
-    if out is None:
-        outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
-        out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
-    return out
-
-
-def _through_reroutes(socket):
-    node = socket.node
-    while node is not None and node.bl_idname == "NodeReroute":
-        node = node.inputs[0].links[0].from_node if node.inputs[0].is_linked else None
-    return node
-
-
 def inserted(mat):
     """The group node ``apply`` inserted into `mat`, or None."""
     tree = mat.node_tree
@@ -133,7 +115,7 @@ def apply(bpy, mat) -> str | None:
     if tree is None or (bpy.app.version < (5, 0, 0) and not mat.use_nodes):
         return "does not use nodes"
     remove(mat)
-    out = _output(tree)
+    out = output_node(tree)
     if out is None:
         return "has no Material Output"
     surface = out.inputs["Surface"]
@@ -141,7 +123,7 @@ def apply(bpy, mat) -> str | None:
         return "has no shader on its Material Output"
     link = surface.links[0]
     source = link.from_socket
-    shader = _through_reroutes(source)
+    shader = through_reroutes(source)
     names = SHADERS.get(shader.bl_idname) if shader is not None else None
     if names is None:
         return f"its shader {shader.bl_label if shader else 'nothing'} is not read"

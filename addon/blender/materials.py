@@ -19,10 +19,8 @@ from . import textures
 NODES_ALWAYS = bpy.app.version >= (5, 0, 0)  # Material.use_nodes is deprecated in 5.0
 
 
-def _surface_node(mat):
-    tree = mat.node_tree
-    if tree is None:
-        return None
+def output_node(tree):
+    """The node tree's active Material Output (the first one when none is marked), or None."""
     out = None
     try:
         out = tree.get_output_node("ALL")
@@ -31,12 +29,25 @@ def _surface_node(mat):
     if out is None:
         outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
         out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
-    if out is None or not out.inputs["Surface"].is_linked:
-        return None
-    node = out.inputs["Surface"].links[0].from_node
+    return out
+
+
+def through_reroutes(socket):
+    """The node that feeds `socket`'s node through any Reroute nodes (None: a dangling one)."""
+    node = socket.node
     while node is not None and node.bl_idname == "NodeReroute":
         node = node.inputs[0].links[0].from_node if node.inputs[0].is_linked else None
     return node
+
+
+def _surface_node(mat):
+    tree = mat.node_tree
+    if tree is None:
+        return None
+    out = output_node(tree)
+    if out is None or not out.inputs["Surface"].is_linked:
+        return None
+    return through_reroutes(out.inputs["Surface"].links[0].from_socket)
 
 
 def _value(node, name, problems, what, textured: bool = False):

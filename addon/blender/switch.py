@@ -18,6 +18,7 @@ Frames outside the baked range hold the first or last baked frame.
 
 from __future__ import annotations
 
+from ..core import frames
 from .export import SWITCH_GROUP, SWITCH_MODIFIER, is_switch_modifier
 
 VERSION = 2  # 2: the irradiance (Irr_NNNN -> Radiosity Light)
@@ -30,6 +31,32 @@ INPUTS = (
     ("Preview", "NodeSocketBool"),
     ("Preview Material", "NodeSocketMaterial"),
 )
+
+
+def _store_switched(nodes, links, digits, geometry, prefix, stored, row):
+    """Nodes storing the corner attribute `prefix` + `digits` of `geometry` as `stored`; returns
+    the Store Named Attribute node. (String Join joins its multi-input in reverse link order:
+    the digits are linked first, then the prefix.)"""
+    dy = 250 * row
+    head = nodes.new("FunctionNodeInputString")
+    head.string = prefix
+    head.location = (100, 550 + dy)
+    join = nodes.new("GeometryNodeStringJoin")
+    join.location = (300, 450 + dy)
+    links.new(digits.outputs[0], join.inputs["Strings"])
+    links.new(head.outputs[0], join.inputs["Strings"])
+    named = nodes.new("GeometryNodeInputNamedAttribute")
+    named.data_type = "FLOAT_COLOR"
+    named.location = (450 + 100 * row, 300)
+    links.new(join.outputs[0], named.inputs["Name"])
+    store = nodes.new("GeometryNodeStoreNamedAttribute")
+    store.data_type = "FLOAT_COLOR"
+    store.domain = "CORNER"
+    store.inputs["Name"].default_value = stored
+    store.location = (450 + 100 * row, 0)
+    links.new(geometry.outputs[0], store.inputs["Geometry"])
+    links.new(named.outputs["Attribute"], store.inputs["Value"])
+    return store
 
 
 def node_group(bpy):
@@ -87,46 +114,10 @@ def node_group(bpy):
     digits.inputs["Length"].default_value = 4
     digits.location = (100, 400)
     links.new(text.outputs[0], digits.inputs["String"])
-    prefix = nodes.new("FunctionNodeInputString")
-    prefix.string = "Rad_"
-    prefix.location = (100, 550)
-    join = nodes.new("GeometryNodeStringJoin")
-    join.location = (300, 450)
-    links.new(digits.outputs[0], join.inputs["Strings"])   # reverse link order: digits first,
-    links.new(prefix.outputs[0], join.inputs["Strings"])   # then the prefix, joins "Rad_" + digits
-
-    named = nodes.new("GeometryNodeInputNamedAttribute")
-    named.data_type = "FLOAT_COLOR"
-    named.location = (450, 300)
-    links.new(join.outputs[0], named.inputs["Name"])
-    store = nodes.new("GeometryNodeStoreNamedAttribute")
-    store.data_type = "FLOAT_COLOR"
-    store.domain = "CORNER"
-    store.inputs["Name"].default_value = "Radiosity"
-    store.location = (450, 0)
-    links.new(source.outputs[0], store.inputs["Geometry"])
-    links.new(named.outputs["Attribute"], store.inputs["Value"])
-
-    # The irradiance: "Irr_" + the same digits, stored as "Radiosity Light".
-    light_prefix = nodes.new("FunctionNodeInputString")
-    light_prefix.string = "Irr_"
-    light_prefix.location = (100, 700)
-    light_join = nodes.new("GeometryNodeStringJoin")
-    light_join.location = (300, 650)
-    links.new(digits.outputs[0], light_join.inputs["Strings"])
-    links.new(light_prefix.outputs[0], light_join.inputs["Strings"])
-    light_named = nodes.new("GeometryNodeInputNamedAttribute")
-    light_named.data_type = "FLOAT_COLOR"
-    light_named.location = (550, 300)
-    links.new(light_join.outputs[0], light_named.inputs["Name"])
-    light_store = nodes.new("GeometryNodeStoreNamedAttribute")
-    light_store.data_type = "FLOAT_COLOR"
-    light_store.domain = "CORNER"
-    light_store.inputs["Name"].default_value = "Radiosity Light"
-    light_store.location = (550, 0)
-    links.new(store.outputs[0], light_store.inputs["Geometry"])
-    links.new(light_named.outputs["Attribute"], light_store.inputs["Value"])
-    store = light_store
+    # B / pi from "Rad_" + the frame's digits as "Radiosity", then the irradiance from "Irr_" +
+    # the same digits as "Radiosity Light".
+    store = _store_switched(nodes, links, digits, source, frames.ATTRIBUTE_PREFIX, frames.RESULT_ATTRIBUTE, 0)
+    store = _store_switched(nodes, links, digits, store, frames.LIGHT_PREFIX, frames.LIGHT_ATTRIBUTE, 1)
 
     setmat = nodes.new("GeometryNodeSetMaterial")
     setmat.location = (650, -150)

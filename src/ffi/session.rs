@@ -711,19 +711,8 @@ pub unsafe extern "C" fn gr_session_corner_radiosity(
     out: *mut f32,
     len: usize,
 ) -> GrStatus {
-    boundary("gr_session_corner_radiosity", || {
-        let s = unsafe { session(s) }?;
-        let o = s.object(object)?;
-        let need = 3 * s.corners[o] as usize;
-        if len < need {
-            return Err(Failure::invalid(format!(
-                "out holds {len} floats, object {object} needs {need} (3 per corner)"
-            )));
-        }
-        check_array(out.cast_const(), need, "out")?;
-        let state = s.read()?;
-        let r = &state.results()?[o];
-        unsafe { write_out(out, len, r.corner_radiosity.as_flattened(), "out") }
+    boundary("gr_session_corner_radiosity", || unsafe {
+        write_corners(s, object, out, len, |r| &r.corner_radiosity)
     })
 }
 
@@ -731,9 +720,9 @@ pub unsafe extern "C" fn gr_session_corner_radiosity(
 /// solved frame, laid out as `gr_session_corner_radiosity`'s values: the light the surface
 /// receives (the lights' direct light, the World, the other surfaces), without its own emission
 /// `E` and reflectance `rho`, so that `B = E + rho H` at each corner. A host multiplies it with a
-/// material's own (textured) reflectance. Gathered with the corners; where the corners come from
-/// the face polynomials (corner gather off, a preview, the hierarchical method) it is
-/// `(B - E) / rho` per channel, 0 where `rho` is below 1e-4.
+/// material's own (textured) reflectance. Gathered with the corners (by either method); where the
+/// corners come from the face polynomials (corner gather off, a preview) it is `(B - E) / rho`
+/// per channel, 0 where `rho` is below 1e-4.
 ///
 /// # Safety
 /// `s` is NULL or a live session; `out` is NULL or points to `len` writable floats.
@@ -744,20 +733,36 @@ pub unsafe extern "C" fn gr_session_corner_irradiance(
     out: *mut f32,
     len: usize,
 ) -> GrStatus {
-    boundary("gr_session_corner_irradiance", || {
-        let s = unsafe { session(s) }?;
-        let o = s.object(object)?;
-        let need = 3 * s.corners[o] as usize;
-        if len < need {
-            return Err(Failure::invalid(format!(
-                "out holds {len} floats, object {object} needs {need} (3 per corner)"
-            )));
-        }
-        check_array(out.cast_const(), need, "out")?;
-        let state = s.read()?;
-        let r = &state.results()?[o];
-        unsafe { write_out(out, len, r.corner_irradiance.as_flattened(), "out") }
+    boundary("gr_session_corner_irradiance", || unsafe {
+        write_corners(s, object, out, len, |r| &r.corner_irradiance)
     })
+}
+
+/// Writes the per-corner values `pick` selects of object `object` at the last solved frame to
+/// `out` (`len` floats, 3 per corner): the body of `gr_session_corner_radiosity` and
+/// `gr_session_corner_irradiance`.
+///
+/// # Safety
+/// As those functions.
+unsafe fn write_corners(
+    s: *const GrSession,
+    object: u32,
+    out: *mut f32,
+    len: usize,
+    pick: fn(&ObjectResult) -> &Vec<[f32; 3]>,
+) -> Result<(), Failure> {
+    let s = unsafe { session(s) }?;
+    let o = s.object(object)?;
+    let need = 3 * s.corners[o] as usize;
+    if len < need {
+        return Err(Failure::invalid(format!(
+            "out holds {len} floats, object {object} needs {need} (3 per corner)"
+        )));
+    }
+    check_array(out.cast_const(), need, "out")?;
+    let state = s.read()?;
+    let r = &state.results()?[o];
+    unsafe { write_out(out, len, pick(r).as_flattened(), "out") }
 }
 
 /// Evaluates the radiosity (RGB, W/m^2) of the last solved frame at `count` points: point `i` is
@@ -780,36 +785,7 @@ pub unsafe extern "C" fn gr_session_eval(
     st: *const f32,
     out: *mut f32,
 ) -> GrStatus {
-    boundary("gr_session_eval", || {
-        let s = unsafe { session(s) }?;
-        let n2 = count.checked_mul(2).ok_or_else(|| Failure::invalid("count is too large"))?;
-        let n3 = count.checked_mul(3).ok_or_else(|| Failure::invalid("count is too large"))?;
-        check_array(out.cast_const(), n3, "out")?;
-        let values = {
-            let objects = unsafe { array(objects, count, "objects") }?;
-            let faces = unsafe { array(faces, count, "faces") }?;
-            let st = unsafe { array(st, n2, "st") }?;
-            let state = s.read()?;
-            if state.session.frame().is_none() {
-                return Err(Failure::new(GrStatus::NotSolved, "no frame has been solved yet"));
-            }
-            let mut values = Vec::with_capacity(n3);
-            for i in 0..count {
-                let b = state
-                    .session
-                    .eval(
-                        objects[i] as usize,
-                        faces[i] as usize,
-                        f64::from(st[2 * i]),
-                        f64::from(st[2 * i + 1]),
-                    )
-                    .map_err(|e| Failure::from(e).prefixed(&format!("point {i}: ")))?;
-                values.extend(b.map(|x| x as f32));
-            }
-            values
-        };
-        unsafe { write_out(out, n3, &values, "out") }
-    })
+    boundary("gr_session_eval", || unsafe { eval_points(s, count, (objects, faces, st), out, Session::eval) })
 }
 
 /// As `gr_session_eval`, the irradiance `H` (RGB, W/m^2) at the points: `(B - E) / rho` per
@@ -827,36 +803,45 @@ pub unsafe extern "C" fn gr_session_eval_irradiance(
     st: *const f32,
     out: *mut f32,
 ) -> GrStatus {
-    boundary("gr_session_eval_irradiance", || {
-        let s = unsafe { session(s) }?;
-        let n2 = count.checked_mul(2).ok_or_else(|| Failure::invalid("count is too large"))?;
-        let n3 = count.checked_mul(3).ok_or_else(|| Failure::invalid("count is too large"))?;
-        check_array(out.cast_const(), n3, "out")?;
-        let values = {
-            let objects = unsafe { array(objects, count, "objects") }?;
-            let faces = unsafe { array(faces, count, "faces") }?;
-            let st = unsafe { array(st, n2, "st") }?;
-            let state = s.read()?;
-            if state.session.frame().is_none() {
-                return Err(Failure::new(GrStatus::NotSolved, "no frame has been solved yet"));
-            }
-            let mut values = Vec::with_capacity(n3);
-            for i in 0..count {
-                let h = state
-                    .session
-                    .eval_irradiance(
-                        objects[i] as usize,
-                        faces[i] as usize,
-                        f64::from(st[2 * i]),
-                        f64::from(st[2 * i + 1]),
-                    )
-                    .map_err(|e| Failure::from(e).prefixed(&format!("point {i}: ")))?;
-                values.extend(h.map(|x| x as f32));
-            }
-            values
-        };
-        unsafe { write_out(out, n3, &values, "out") }
+    boundary("gr_session_eval_irradiance", || unsafe {
+        eval_points(s, count, (objects, faces, st), out, Session::eval_irradiance)
     })
+}
+
+/// The body of `gr_session_eval` and `gr_session_eval_irradiance`: `eval` at each of the
+/// `count` points, 3 floats per point to `out`.
+///
+/// # Safety
+/// As those functions.
+unsafe fn eval_points(
+    s: *const GrSession,
+    count: usize,
+    (objects, faces, st): (*const u32, *const u32, *const f32),
+    out: *mut f32,
+    eval: fn(&Session, usize, usize, f64, f64) -> crate::error::Result<[f64; 3]>,
+) -> Result<(), Failure> {
+    let s = unsafe { session(s) }?;
+    let n2 = count.checked_mul(2).ok_or_else(|| Failure::invalid("count is too large"))?;
+    let n3 = count.checked_mul(3).ok_or_else(|| Failure::invalid("count is too large"))?;
+    check_array(out.cast_const(), n3, "out")?;
+    let values = {
+        let objects = unsafe { array(objects, count, "objects") }?;
+        let faces = unsafe { array(faces, count, "faces") }?;
+        let st = unsafe { array(st, n2, "st") }?;
+        let state = s.read()?;
+        if state.session.frame().is_none() {
+            return Err(Failure::new(GrStatus::NotSolved, "no frame has been solved yet"));
+        }
+        let mut values = Vec::with_capacity(n3);
+        for i in 0..count {
+            let (o, f) = (objects[i] as usize, faces[i] as usize);
+            let v = eval(&state.session, o, f, f64::from(st[2 * i]), f64::from(st[2 * i + 1]))
+                .map_err(|e| Failure::from(e).prefixed(&format!("point {i}: ")))?;
+            values.extend(v.map(|x| x as f32));
+        }
+        values
+    };
+    unsafe { write_out(out, n3, &values, "out") }
 }
 
 /// Frees a session. NULL is ignored. No call on `s` may be running or follow.

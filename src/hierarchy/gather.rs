@@ -353,11 +353,12 @@ impl<'a> Gather<'a> {
         if cos == 0.0 {
             return;
         }
-        let t = self.point_transmittance(rx, source);
-        if t == 0.0 {
+        // The intensity first: a dark cluster costs no rays.
+        let intensity = super::lobes::eval(self.inputs.state.lobes(source), w);
+        if intensity == [0.0; 3] {
             return;
         }
-        let intensity = super::lobes::eval(self.inputs.state.lobes(source), w);
+        let t = self.point_transmittance(rx, source);
         for c in 0..3 {
             h[c] += intensity[c] * t * cos / d2;
         }
