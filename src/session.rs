@@ -29,8 +29,10 @@ pub enum Method {
     Exact,
     /// Every frame from scratch: all links recomputed, fresh solve.
     Full,
-    /// Every frame from scratch on the hierarchy of clusters and elements below faces
-    /// ([`crate::hierarchy`]): what scenes of 10^4 faces and more need. Corners are gathered
+    /// On the hierarchy of clusters and elements below faces ([`crate::hierarchy`]): what
+    /// scenes of 10^4 faces and more need. The first frame is solved from scratch, each later
+    /// one from the frame before ([`crate::hierarchy::update`]: only the pairs a move touched
+    /// are linked again, the solve starts from the last solution). Corners are gathered
     /// through the links ([`crate::hierarchy::gather`]) with `corner_gather` on, else read from
     /// the leaves' polynomials (as in a preview).
     Hierarchical,
@@ -509,9 +511,21 @@ impl Session {
         let mut settings = crate::hierarchy::HierarchySettings::of(&placed.settings);
         // A preview reads the leaves, as the flat path's preview skips its gather.
         settings.corner_gather &= !self.preview;
-        let solved =
-            self.pool.install(|| crate::hierarchy::solve_frame(placed, frame, &settings, progress))?;
-        check_results(&solved.face_results(placed, frame), placed, frame)?;
+        // A later frame starts from the last one's hierarchy and solution, unless an update
+        // failed on its way (it took the links) or the surfaces were replaced since.
+        let previous = self.hierarchical.as_mut().filter(|_| !self.stale);
+        let solved = self.pool.install(|| match previous {
+            Some(previous) => {
+                crate::hierarchy::update::update_frame(previous, placed, frame, &settings, progress)
+            }
+            None => crate::hierarchy::solve_frame(placed, frame, &settings, progress),
+        });
+        let solved = solved.inspect_err(|_| self.stale = true)?;
+        if let Err(e) = check_results(&solved.face_results(placed, frame), placed, frame) {
+            self.stale = true;
+            return Err(e);
+        }
+        self.stale = false;
         let h = &solved.stats;
         let stats = FrameStats {
             frame,
@@ -520,9 +534,9 @@ impl Session {
             solve_seconds: h.solve_seconds,
             elements: h.leaves,
             pairs: h.links,
-            links_recomputed: h.links,
+            links_recomputed: h.links - h.kept_links,
             gather_seconds: h.gather_seconds,
-            full_rebuild: true,
+            full_rebuild: !h.updated,
             preview: self.preview,
             ..Default::default()
         };

@@ -9,6 +9,9 @@ use galerkin_radiosity::scenes::{closed_box, cornell_box};
 use galerkin_radiosity::session::{Method, Session};
 use galerkin_radiosity::system::{System, no_progress};
 
+#[path = "hierarchy/update.rs"]
+mod update;
+
 /// A closed box that emits `E = 1` everywhere with `rho = 0.5` has `B = E / (1 - rho) = 2`
 /// on every face, whatever the links: clusters must neither lose nor make light.
 #[test]

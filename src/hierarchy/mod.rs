@@ -15,6 +15,7 @@ pub mod refine;
 pub mod solve;
 pub mod tree;
 pub mod two_scale;
+pub mod update;
 
 use std::time::Instant;
 
@@ -97,6 +98,12 @@ pub struct HierarchyStats {
     /// Distinct corner points gathered, and the gather's time (0 without it).
     pub gather_points: usize,
     pub gather_seconds: f64,
+    /// The frame was updated from the frame before ([`update`]), not solved from scratch: its
+    /// faces that moved, the pairs it linked again, and the links it kept as they were.
+    pub updated: bool,
+    pub moved_faces: usize,
+    pub touched_pairs: usize,
+    pub kept_links: usize,
 }
 
 /// One frame solved on the hierarchy.
@@ -117,60 +124,153 @@ pub fn solve_frame(
     hs: &HierarchySettings,
     progress: Progress,
 ) -> Result<HierarchicalFrame> {
-    let s = &scene.settings;
-    let basis = Basis::new(s.basis_order);
-    let rule = GaussLegendre::new(s.quadrature_order);
+    let basis = Basis::new(scene.settings.basis_order);
     let faces = build_elements(scene, frame, basis);
     if faces.is_empty() {
         return Err(Error::InvalidScene("the scene has no faces with area".into()));
     }
-    let patches: Vec<Patch> = faces.iter().map(|e| e.patch).collect();
-    let reflectance: Vec<[f64; 3]> =
-        faces.iter().map(|e| scene.reflectance_of(e.object as usize, e.face as usize, e.material)).collect();
-    let emission: Vec<[f64; 3]> =
-        faces.iter().map(|e| scene.emission_at(e.material as usize, frame)).collect();
+    let reflectance = face_reflectance(scene, &faces);
+    let lit = Lighting::new(scene, frame, &faces);
     let total_area: f64 = faces.iter().map(|e| e.area).sum();
-    let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
-    let lights = DirectLight::new(scene, frame, &faces);
     let tree = Tree::new(faces, reflectance, basis);
     let mut state = State::new(&tree);
-    state.add_sources(&tree, &emission, lights.as_ref());
+    state.add_sources(&tree, &lit.emission, lit.lights.as_ref());
     state.start_from_sources(&tree);
-    let power = state.source_power(&tree);
-    let oracle = Oracle {
-        threshold: hs.accuracy * power,
-        min_area: hs.min_area * total_area,
-        max_depth: hs.max_depth,
-        clusters: hs.clusters,
-    };
+    let oracle = Oracle::of(hs, state.source_power(&tree), total_area);
+    let mut hierarchy = Hierarchy::new(tree, oracle);
+    let mut stats = HierarchyStats { faces: hierarchy.tree.faces.len(), ..Default::default() };
+    let rule = GaussLegendre::new(scene.settings.quadrature_order);
+    let ctx = link_context(scene, hs, &rule, lit.occluders.as_ref());
+    link_and_solve(&mut hierarchy, &mut state, &ctx, &lit, hs, Start::Root, &mut stats, progress)?;
+    finish(hierarchy, state, stats, &lit, scene, frame, hs, progress)
+}
+
+/// Each face's reflectance, in `faces`' order.
+fn face_reflectance(scene: &Scene, faces: &[crate::system::Element]) -> Vec<[f64; 3]> {
+    faces.iter().map(|e| scene.reflectance_of(e.object as usize, e.face as usize, e.material)).collect()
+}
+
+/// What lights one frame's faces and what stands between them.
+pub struct Lighting {
+    /// Each face's exitance.
+    pub emission: Vec<[f64; 3]>,
+    pub occluders: Option<Occluders>,
+    pub lights: Option<DirectLight>,
+    /// The source power's share a sweep may still change the leaves by when the solve stops.
+    tolerance: f64,
+}
+
+impl Lighting {
+    pub fn new(scene: &Scene, frame: f64, faces: &[crate::system::Element]) -> Self {
+        let s = &scene.settings;
+        let patches: Vec<Patch> = faces.iter().map(|e| e.patch).collect();
+        Self {
+            emission: faces.iter().map(|e| scene.emission_at(e.material as usize, frame)).collect(),
+            occluders: s.visibility.then(|| Occluders::new(&patches, s.visibility_samples)),
+            lights: DirectLight::new(scene, frame, faces),
+            tolerance: s.tolerance,
+        }
+    }
+}
+
+impl Oracle {
+    /// The settings' oracle for sources of `power` (W) in a scene of `total_area`.
+    fn of(hs: &HierarchySettings, power: f64, total_area: f64) -> Self {
+        Oracle {
+            threshold: hs.accuracy * power,
+            min_area: hs.min_area * total_area,
+            max_depth: hs.max_depth,
+            clusters: hs.clusters,
+        }
+    }
+}
+
+pub fn link_context<'a>(
+    scene: &Scene,
+    hs: &HierarchySettings,
+    rule: &'a GaussLegendre,
+    occluders: Option<&'a Occluders>,
+) -> LinkContext<'a> {
+    let s = &scene.settings;
     let mut ctx = LinkContext::new(
-        PairContext { basis, rule: &rule, vis_axis: s.visibility_samples, adaptive: s.adaptive_quadrature },
-        occluders.as_ref(),
+        PairContext {
+            basis: Basis::new(s.basis_order),
+            rule,
+            vis_axis: s.visibility_samples,
+            adaptive: s.adaptive_quadrature,
+        },
+        occluders,
     );
     ctx.near = hs.near;
-    let mut hierarchy = Hierarchy::new(tree, oracle);
-    let mut stats = HierarchyStats { faces: patches.len(), ..Default::default() };
+    ctx
+}
+
+/// Where a frame's first round of links starts.
+enum Start {
+    /// The root's interaction with itself: every link made anew.
+    Root,
+    /// These pairs (a move touched them); the other links are kept.
+    Pairs(Vec<(tree::NodeId, tree::NodeId)>),
+}
+
+/// The link-and-solve rounds: link (from `start` in the first round, then where the solution's
+/// brightness asks for it), solve, until no link changes or `hs.rounds` are done.
+#[allow(clippy::too_many_arguments)]
+fn link_and_solve(
+    hierarchy: &mut Hierarchy,
+    state: &mut State,
+    ctx: &LinkContext,
+    lit: &Lighting,
+    hs: &HierarchySettings,
+    start: Start,
+    stats: &mut HierarchyStats,
+    progress: Progress,
+) -> Result<()> {
     let cancel = || !progress(0.0, "hierarchy");
-    let stop = s.tolerance * power;
+    let stop = lit.tolerance * state.source_power(&hierarchy.tree);
+    let mut start = Some(start);
     for round in 0..hs.rounds.max(1) {
         if !progress(round as f64 / hs.rounds as f64, "links") {
             return Err(Error::Cancelled);
         }
         let t = Instant::now();
         let mut radiosity = state.radiosity_estimate();
-        if round == 0 {
-            hierarchy.link_all(&ctx, &mut radiosity)?;
-        } else if hierarchy.relink(&ctx, &mut radiosity)?.relinked == 0 {
-            break;
+        match start.take() {
+            Some(Start::Root) => {
+                hierarchy.link_all(ctx, &mut radiosity)?;
+            }
+            Some(Start::Pairs(work)) => {
+                hierarchy.link_pairs(ctx, &mut radiosity, work)?;
+            }
+            None => {
+                if hierarchy.relink(ctx, &mut radiosity)?.relinked == 0 {
+                    break;
+                }
+            }
         }
         state.grow(&hierarchy.tree)?;
-        state.add_sources(&hierarchy.tree, &emission, lights.as_ref());
+        state.add_sources(&hierarchy.tree, &lit.emission, lit.lights.as_ref());
         stats.link_seconds += t.elapsed().as_secs_f64();
         let t = Instant::now();
         let solved = state.solve(&hierarchy.tree, &hierarchy.links, stop, hs.max_sweeps, &cancel)?;
         stats.sweeps += solved.sweeps;
         stats.solve_seconds += t.elapsed().as_secs_f64();
     }
+    Ok(())
+}
+
+/// The frame's counts and, with `hs.corner_gather`, its gathered corners.
+#[allow(clippy::too_many_arguments)]
+fn finish(
+    hierarchy: Hierarchy,
+    state: State,
+    mut stats: HierarchyStats,
+    lit: &Lighting,
+    scene: &Scene,
+    frame: f64,
+    hs: &HierarchySettings,
+    progress: Progress,
+) -> Result<HierarchicalFrame> {
     stats.nodes = hierarchy.tree.nodes.len();
     let mut leaves = Vec::new();
     hierarchy.tree.leaves_below(hierarchy.tree.root, &mut leaves);
@@ -197,9 +297,9 @@ pub fn solve_frame(
             links: &hierarchy.links,
             blocked: &hierarchy.blocked,
             state: &state,
-            emission: &emission,
-            occluders: occluders.as_ref(),
-            lights: lights.as_ref(),
+            emission: &lit.emission,
+            occluders: lit.occluders.as_ref(),
+            lights: lit.lights.as_ref(),
         };
         let (radiosity, irradiance, points) = gather::corners(&inputs, scene, frame, progress)?;
         stats.gather_points = points;

@@ -151,6 +151,11 @@ pub struct Hierarchy {
     /// Pairs the oracle accepted whose sampled rays were all blocked ([`coupling::Computed`]):
     /// no link for the solve, sources the corner gather tries with its own rays.
     pub blocked: Vec<(NodeId, NodeId)>,
+    /// Pairs of different faces that exchange nothing as they stand: one behind the other's
+    /// plane, facing away, or no sample between them arriving. Kept so that a later frame in
+    /// which they move can link them ([`super::update`]): with `links` and `blocked` they
+    /// partition every pair of leaves of different faces.
+    pub idle: Vec<(NodeId, NodeId)>,
     pub oracle: Oracle,
 }
 
@@ -164,7 +169,48 @@ pub struct RefineStats {
 
 impl Hierarchy {
     pub fn new(tree: Tree, oracle: Oracle) -> Self {
-        Self { tree, links: Vec::new(), blocked: Vec::new(), oracle }
+        Self { tree, links: Vec::new(), blocked: Vec::new(), idle: Vec::new(), oracle }
+    }
+
+    /// Refines the node pairs of `work` into links, as [`Hierarchy::link_all`] refines the
+    /// root's: what a later frame does with the pairs a move touched ([`super::update`]).
+    pub fn link_pairs(
+        &mut self,
+        ctx: &LinkContext,
+        radiosity: &mut Vec<f64>,
+        work: Vec<(NodeId, NodeId)>,
+    ) -> Result<RefineStats> {
+        let mut stats = RefineStats::default();
+        self.refine_pairs(ctx, radiosity, work, &mut stats)?;
+        stats.links = self.links.len();
+        Ok(stats)
+    }
+
+    /// Takes out of the links, the blocked and the idle pairs every pair `touched` says a change
+    /// may have altered, and returns them (as pairs, to be linked again).
+    pub fn take_touched(&mut self, touched: impl Fn(NodeId, NodeId) -> bool) -> Vec<(NodeId, NodeId)> {
+        let mut out = Vec::new();
+        self.links.retain(|l| {
+            let hit = touched(l.a, l.b);
+            if hit {
+                out.push((l.a, l.b));
+            }
+            !hit
+        });
+        for list in [&mut self.blocked, &mut self.idle] {
+            list.retain(|&(a, b)| {
+                let hit = touched(a, b);
+                if hit {
+                    out.push((a, b));
+                }
+                !hit
+            });
+        }
+        out
+    }
+
+    fn same_face(&self, a: NodeId, b: NodeId) -> bool {
+        matches!((self.tree.node(a).surface(), self.tree.node(b).surface()), (Some(x), Some(y)) if x.face == y.face)
     }
 
     /// Builds the links from the root's interaction with itself, `radiosity` per node (it grows
@@ -225,7 +271,12 @@ impl Hierarchy {
                     continue;
                 }
                 match self.oracle.decide(&self.tree, radiosity, a, b, bar) {
-                    Verdict::Skip => {}
+                    Verdict::Skip => {
+                        if !self.same_face(a, b) {
+                            budget::try_reserve(&mut self.idle, 1, LINKS)?;
+                            self.idle.push((a, b));
+                        }
+                    }
                     Verdict::Link => accepted.push((a, b)),
                     Verdict::Split(s) => {
                         self.split_pair(s, if s == a { b } else { a }, radiosity, &mut work)?
@@ -241,10 +292,14 @@ impl Hierarchy {
                 .map(|&(a, b)| coupling::compute(ctx, tree, a, b))
                 .collect_into_vec(&mut computed);
             budget::try_reserve(&mut self.links, computed.len(), LINKS)?;
+            budget::try_reserve(&mut self.idle, computed.len(), LINKS)?;
+            budget::try_reserve(&mut self.blocked, computed.len(), LINKS)?;
             for (&(a, b), c) in accepted.iter().zip(computed) {
                 let Some(coupling) = c.coupling else {
                     if c.blocked {
                         self.blocked.push((a, b));
+                    } else if !self.same_face(a, b) {
+                        self.idle.push((a, b));
                     }
                     continue;
                 };

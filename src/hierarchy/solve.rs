@@ -20,6 +20,7 @@ use crate::error::{Error, Result};
 use crate::lights::direct::DirectLight;
 
 /// The radiosity state of every node.
+#[derive(Clone)]
 pub struct State {
     nb: usize,
     /// `b^k` per surface node (`nodes x nb`): solved at leaves, pulled above.
@@ -204,6 +205,21 @@ impl State {
     /// Largest channel of each node's mean radiosity: the oracle's `B`.
     pub fn radiosity_estimate(&self) -> Vec<f64> {
         self.mean.iter().map(|m| m.iter().copied().fold(0.0, f64::max)).collect()
+    }
+
+    /// Forgets every leaf's sources, for a frame whose emission, lights or geometry changed
+    /// ([`State::add_sources`] computes them again).
+    pub fn clear_sources(&mut self) {
+        self.has_sources.iter_mut().for_each(|h| *h = false);
+        self.sources.iter_mut().for_each(|s| *s = [0.0; 3]);
+    }
+
+    /// Pulls the leaves' current `b` up the tree (means, cluster lobes) without solving: after
+    /// faces moved, so that the next sweep shoots from their new normals and areas. A later
+    /// frame's solve starts here, from the last frame's solution.
+    pub fn refresh(&mut self, tree: &Tree) {
+        let gathered = Gathered { h: vec![[0.0; 3]; 0], lobes: Vec::new() };
+        self.push_pull(tree, &gathered, false);
     }
 
     /// Sets every leaf to its sources and pulls: the state before any light has bounced.

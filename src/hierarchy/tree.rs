@@ -6,7 +6,9 @@
 //! longest axis); below them each face's parameter domain is split into quadrants on demand, and
 //! a sub-rectangle of a bilinear patch is again a bilinear patch
 //! ([`crate::geometry::Patch::sub_patch`]), so every kernel sees only patches. Node ids are
-//! indices that are only appended while a tree lives: a frame builds its own tree.
+//! indices that are only appended while a tree lives. A later frame of an animation keeps the
+//! tree and re-places the faces that moved ([`Tree::place_faces`]): the clusters keep their
+//! members and refit their bounds, the quadtrees keep their splits.
 
 use glam::DVec3;
 
@@ -78,6 +80,7 @@ impl Node {
 }
 
 /// Clusters, faces and their sub-elements.
+#[derive(Clone)]
 pub struct Tree {
     pub basis: Basis,
     pub nodes: Vec<Node>,
@@ -162,6 +165,95 @@ impl Tree {
         };
         self.nodes.push(node);
         (self.nodes.len() - 1) as NodeId
+    }
+
+    /// Takes this frame's `faces` (the same faces in the same order, some moved) and
+    /// `reflectance`: every node of a face whose patch changed is placed again from the face's
+    /// new patch (its quadtree's splits kept), and the clusters refit their bounds, areas and
+    /// normals to their members' new places, as [`Tree::new`] would compute them for the same
+    /// membership. Returns which faces moved.
+    pub fn place_faces(&mut self, faces: Vec<Element>, reflectance: Vec<[f64; 3]>) -> Vec<bool> {
+        assert_eq!(faces.len(), self.faces.len(), "the same faces, placed again");
+        let moved: Vec<bool> =
+            faces.iter().zip(&self.faces).map(|(new, old)| new.patch != old.patch).collect();
+        self.faces = faces;
+        self.reflectance = reflectance;
+        let rho_max: Vec<f64> =
+            self.reflectance.iter().map(|r| r.iter().copied().fold(0.0, f64::max)).collect();
+        // Face and sub-face nodes first (any order: each depends on its face only), then the
+        // clusters in id order, which puts every cluster after its children ([`Tree::cluster`]).
+        let mut boxes = vec![Aabb::EMPTY; self.nodes.len()];
+        for id in 0..self.nodes.len() {
+            let Kind::Surface(s) = &self.nodes[id].kind else { continue };
+            let (face, depth, domain) = (s.face, s.depth, s.domain);
+            let f = face as usize;
+            self.nodes[id].rho_max = rho_max[f];
+            if moved[f] {
+                let face_patch = self.faces[f].patch;
+                let (patch, moments, area) = if depth == 0 {
+                    (face_patch, self.faces[f].moments.clone(), self.faces[f].area)
+                } else {
+                    let patch = face_patch.sub_patch(&domain);
+                    let e = crate::system::element(0, face, domain, patch, 0, self.basis, &self.rule);
+                    (patch, e.moments, e.area)
+                };
+                let (centre, radius) = patch.bounding_sphere();
+                let normal = patch.centre_normal();
+                let node = &mut self.nodes[id];
+                (node.centre, node.radius, node.area) = (centre, radius, area);
+                node.plane_normal = Some(normal);
+                node.normal_sum = normal * area;
+                if let Kind::Surface(s) = &mut node.kind {
+                    (s.patch, s.normal, s.moments) = (patch, normal, moments);
+                }
+            }
+            if depth == 0 {
+                boxes[id] = self.faces[f].patch.bounds();
+            }
+        }
+        for id in 0..self.nodes.len() {
+            let Kind::Cluster { children: [a, b] } = self.nodes[id].kind else { continue };
+            let all = boxes[a as usize].union(boxes[b as usize]);
+            boxes[id] = all;
+            let (na, nb) = (&self.nodes[a as usize], &self.nodes[b as usize]);
+            let area = na.area + nb.area;
+            let normal_sum = na.normal_sum + nb.normal_sum;
+            let rho = na.rho_max.max(nb.rho_max);
+            let node = &mut self.nodes[id];
+            node.centre = all.centre();
+            node.radius = 0.5 * all.diagonal().length();
+            node.area = area;
+            node.rho_max = rho;
+            node.normal_sum = normal_sum;
+            node.plane_normal =
+                (normal_sum.length() >= PLANAR * area && area > 0.0).then(|| normal_sum.normalize());
+        }
+        moved
+    }
+
+    /// Which nodes hold a face of `faces_moved` (a surface of such a face, or a cluster above
+    /// one).
+    pub fn nodes_holding(&self, faces_moved: &[bool]) -> Vec<bool> {
+        let mut out = vec![false; self.nodes.len()];
+        for id in 0..self.nodes.len() {
+            out[id] = match &self.nodes[id].kind {
+                Kind::Surface(s) => faces_moved[s.face as usize],
+                Kind::Cluster { children: [a, b] } => out[*a as usize] || out[*b as usize],
+            };
+        }
+        out
+    }
+
+    /// A box around everything below node `id`: a surface's patch bounds, a cluster's sphere.
+    pub fn bounds(&self, id: NodeId) -> Aabb {
+        let node = self.node(id);
+        match &node.kind {
+            Kind::Surface(s) => s.patch.bounds(),
+            Kind::Cluster { .. } => {
+                let r = DVec3::splat(node.radius);
+                Aabb { min: node.centre - r, max: node.centre + r }
+            }
+        }
     }
 
     pub fn node(&self, id: NodeId) -> &Node {

@@ -371,7 +371,7 @@ pub fn read_scene(path: &std::path::Path) -> Result<Scene> {
 }
 
 /// One object's radiosity at one frame, as written to the result file.
-#[derive(Serialize, Deserialize, Clone, Debug)]
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct ObjectResult {
     pub name: String,
     /// Area-mean radiosity per face (W/m^2, RGB).

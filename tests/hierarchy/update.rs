@@ -1,0 +1,256 @@
+//! Frames after the first on the hierarchy (issue 21): a frame updated from the one before keeps
+//! only links that a fresh computation on its own geometry gives, its pairs still partition
+//! every pair of leaves, its warm-started solve equals a cold one on the same links, and it
+//! agrees with a frame solved from scratch.
+
+use galerkin_radiosity::hierarchy::coupling::{self, Coupling};
+use galerkin_radiosity::hierarchy::solve::State;
+use galerkin_radiosity::hierarchy::tree::NodeId;
+use galerkin_radiosity::hierarchy::update::update_frame;
+use galerkin_radiosity::hierarchy::{
+    HierarchicalFrame, HierarchySettings, Lighting, link_context, solve_frame,
+};
+use galerkin_radiosity::quadrature::GaussLegendre;
+use galerkin_radiosity::scene::{Scene, Settings};
+use galerkin_radiosity::scenes::{cornell_box_animated, emission_ramp, seed_room};
+use galerkin_radiosity::session::{Method, Session};
+use galerkin_radiosity::system::no_progress;
+
+fn settings() -> Settings {
+    Settings { basis_order: 1, tolerance: 1e-6, ..Default::default() }
+}
+
+/// The demo animation (light and short block sliding) over 8 frames, 2x2 per wall.
+fn animated() -> Scene {
+    cornell_box_animated(2, 8, settings())
+}
+
+/// Every link of `h` recomputed from scratch on `scene` at `frame` (new occluders, new context)
+/// gives the very coupling the link holds; every blocked pair is still blocked and every idle
+/// pair still carries nothing. Returns how many of each were checked.
+fn check_pairs(
+    h: &HierarchicalFrame,
+    scene: &Scene,
+    frame: f64,
+    hs: &HierarchySettings,
+) -> (usize, usize, usize) {
+    let tree = &h.hierarchy.tree;
+    let lit = Lighting::new(scene, frame, &tree.faces);
+    let rule = GaussLegendre::new(scene.settings.quadrature_order);
+    let ctx = link_context(scene, hs, &rule, lit.occluders.as_ref());
+    for l in &h.hierarchy.links {
+        let c = coupling::compute(&ctx, tree, l.a, l.b);
+        let fresh =
+            c.coupling.unwrap_or_else(|| panic!("link {}-{} carries nothing when computed again", l.a, l.b));
+        match (&l.coupling, &fresh) {
+            (Coupling::Surfaces(x), Coupling::Surfaces(y)) => {
+                assert_eq!(x, y, "frame {frame}: surface link {}-{} is stale", l.a, l.b)
+            }
+            (Coupling::Clusters { transmittance: x }, Coupling::Clusters { transmittance: y }) => {
+                assert_eq!(x, y, "frame {frame}: cluster link {}-{} is stale", l.a, l.b)
+            }
+            _ => panic!("frame {frame}: link {}-{} changed kind", l.a, l.b),
+        }
+    }
+    for &(a, b) in &h.hierarchy.blocked {
+        let c = coupling::compute(&ctx, tree, a, b);
+        assert!(c.coupling.is_none() && c.blocked, "frame {frame}: blocked pair {a}-{b} is not blocked now");
+    }
+    for &(a, b) in &h.hierarchy.idle {
+        let c = coupling::compute(&ctx, tree, a, b);
+        assert!(c.coupling.is_none(), "frame {frame}: idle pair {a}-{b} carries light now");
+    }
+    (h.hierarchy.links.len(), h.hierarchy.blocked.len(), h.hierarchy.idle.len())
+}
+
+/// Links, blocked and idle pairs together cover every pair of leaves of different faces exactly
+/// once (as a pair of a node above each): nothing is linked twice, nothing is lost.
+fn check_partition(h: &HierarchicalFrame) {
+    let tree = &h.hierarchy.tree;
+    let mut leaves = Vec::new();
+    tree.leaves_below(tree.root, &mut leaves);
+    let mut index = vec![usize::MAX; tree.nodes.len()];
+    for (i, &l) in leaves.iter().enumerate() {
+        index[l as usize] = i;
+    }
+    // Each pair adds one to every pair of leaves below its two ends: a dense count, L^2 work in
+    // all when the pairs partition.
+    let n = leaves.len();
+    let mut count = vec![0u8; n * n];
+    let pairs = h.hierarchy.links.iter().map(|l| (l.a, l.b)).chain(h.hierarchy.blocked.iter().copied());
+    let (mut below_a, mut below_b) = (Vec::new(), Vec::new());
+    for (a, b) in pairs.chain(h.hierarchy.idle.iter().copied()) {
+        below_a.clear();
+        below_b.clear();
+        tree.leaves_below(a, &mut below_a);
+        tree.leaves_below(b, &mut below_b);
+        for &p in &below_a {
+            for &q in &below_b {
+                // A node paired with itself (a cluster's own interactions) covers each pair once.
+                if a == b && p >= q {
+                    continue;
+                }
+                let (i, j) =
+                    (index[p as usize].min(index[q as usize]), index[p as usize].max(index[q as usize]));
+                count[i * n + j] = count[i * n + j].saturating_add(1);
+            }
+        }
+    }
+    let face = |id: NodeId| tree.node(id).surface().unwrap().face;
+    for i in 0..n {
+        for j in i + 1..n {
+            let want = u8::from(face(leaves[i]) != face(leaves[j]));
+            let got = count[i * n + j];
+            assert_eq!(got, want, "leaves {} and {} are covered {got} times", leaves[i], leaves[j]);
+        }
+    }
+}
+
+fn face_means(h: &HierarchicalFrame) -> Vec<f64> {
+    (0..h.hierarchy.tree.faces.len()).map(|f| h.face_mean(f)[0]).collect()
+}
+
+/// Relative RMS of `a - b` over the faces, against `b`'s mean.
+fn relative_rms(a: &[f64], b: &[f64]) -> f64 {
+    let mean = b.iter().sum::<f64>() / b.len() as f64;
+    (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt() / mean
+}
+
+/// Over the demo animation, each frame updated from the one before holds only links a fresh
+/// computation gives (bit for bit), its pairs still partition every pair of leaves, and only a
+/// part of the links was computed again.
+#[test]
+fn an_updated_frame_holds_the_links_of_its_own_geometry() {
+    let scene = animated();
+    let hs = HierarchySettings::default();
+    let mut h = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
+    check_partition(&h);
+    for frame in 2..=4 {
+        let f = frame as f64;
+        let next = update_frame(&mut h, &scene, f, &hs, &no_progress).unwrap();
+        assert!(next.stats.updated && next.stats.moved_faces > 0, "frame {frame}: nothing moved");
+        let (links, blocked, idle) = check_pairs(&next, &scene, f, &hs);
+        assert!(links > 0 && idle > 0, "frame {frame}: {links} links, {blocked} blocked, {idle} idle");
+        check_partition(&next);
+        h = next;
+    }
+}
+
+/// In the seed's room (a ceiling light and a panel moving, a wall light still) a frame touches
+/// the pairs of the moving objects and those whose shafts they cross: most links are kept.
+#[test]
+fn a_local_move_keeps_most_links() {
+    let scene = seed_room(2.0, 60, settings());
+    let hs = HierarchySettings::default();
+    let mut h = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
+    for frame in 2..=3 {
+        let f = frame as f64;
+        let next = update_frame(&mut h, &scene, f, &hs, &no_progress).unwrap();
+        let s = &next.stats;
+        assert!(s.moved_faces > 0 && s.touched_pairs > 0, "frame {frame}: nothing moved");
+        assert!(
+            s.kept_links > s.touched_pairs,
+            "frame {frame}: {} links kept, {} pairs touched: the update redid most of it",
+            s.kept_links,
+            s.touched_pairs
+        );
+        check_pairs(&next, &scene, f, &hs);
+        h = next;
+    }
+}
+
+/// The update's warm start changes only where the solve begins: the same links solved from the
+/// sources alone give the same solution.
+#[test]
+fn an_updated_frame_solves_as_a_cold_start_on_its_links() {
+    let scene = animated();
+    let hs = HierarchySettings::default();
+    let mut h = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
+    let next = update_frame(&mut h, &scene, 3.0, &hs, &no_progress).unwrap();
+    let tree = &next.hierarchy.tree;
+    let lit = Lighting::new(&scene, 3.0, &tree.faces);
+    let mut cold = State::new(tree);
+    cold.add_sources(tree, &lit.emission, lit.lights.as_ref());
+    cold.start_from_sources(tree);
+    let stop = 1e-9 * cold.source_power(tree);
+    cold.solve(tree, &next.hierarchy.links, stop, 2000, &|| false).unwrap();
+    let warm = face_means(&next);
+    let cold: Vec<f64> = (0..tree.faces.len()).map(|f| cold.mean[f][0]).collect();
+    let peak = cold.iter().copied().fold(0.0, f64::max);
+    for (f, (w, c)) in warm.iter().zip(&cold).enumerate() {
+        // The settings' tolerance 1e-6 of the power against the cold solve's 1e-9.
+        assert!((w - c).abs() < 1e-4 * peak, "face {f}: updated {w}, cold start {c}");
+    }
+}
+
+/// Frame by frame through a session, the updated frames agree with frames solved from scratch
+/// as closely as two hierarchies of the same accuracy can (their links differ where brightness
+/// refined them), and an emission change alone touches no pair.
+#[test]
+fn updated_frames_agree_with_frames_solved_from_scratch() {
+    let mut scene = animated();
+    // The light also dims over the animation.
+    let light = scene.materials.iter().position(|m| m.emission[0] > 0.0).unwrap();
+    let e = scene.materials[light].emission;
+    scene.emission_keys[light] = emission_ramp((1.0, e), (8.0, e.map(|x| 0.5 * x)));
+    let hs = HierarchySettings::of(&scene.settings);
+    let mut session = Session::new(scene.clone(), Method::Hierarchical).unwrap();
+    let mut worst: f64 = 0.0;
+    for frame in 1..=8 {
+        let f = frame as f64;
+        let stats = session.solve_frame(f, &no_progress).unwrap();
+        assert_eq!(stats.full_rebuild, frame == 1, "frame {frame}");
+        let fresh = solve_frame(&scene, f, &hs, &no_progress).unwrap();
+        let got: Vec<f64> = session
+            .face_results()
+            .unwrap()
+            .iter()
+            .flat_map(|o| o.face_radiosity.iter().map(|v| v[0] as f64))
+            .collect();
+        let want: Vec<f64> = fresh
+            .face_results(&scene, f)
+            .iter()
+            .flat_map(|o| o.face_radiosity.iter().map(|v| v[0] as f64))
+            .collect();
+        let err = relative_rms(&got, &want);
+        println!(
+            "frame {frame}: updated vs from scratch {:.3}% rms, {} links recomputed of {}",
+            100.0 * err,
+            stats.links_recomputed,
+            stats.pairs
+        );
+        worst = worst.max(err);
+    }
+    assert!(worst < 0.01, "updated frames off the fresh ones by {worst} rms");
+
+    // The light's emission alone: nothing moves, no pair is linked again.
+    let mut still = scene.clone();
+    for o in &mut still.objects {
+        o.animation.clear();
+    }
+    let mut h = solve_frame(&still, 1.0, &hs, &no_progress).unwrap();
+    let next = update_frame(&mut h, &still, 5.0, &hs, &no_progress).unwrap();
+    assert_eq!((next.stats.moved_faces, next.stats.touched_pairs), (0, 0));
+    let fresh = solve_frame(&still, 5.0, &hs, &no_progress).unwrap();
+    let err = relative_rms(&face_means(&next), &face_means(&fresh));
+    assert!(err < 0.01, "dimmed light: updated off the fresh frame by {err} rms");
+}
+
+/// A cancelled update leaves the last frame readable as it was, and the next frame is solved
+/// from scratch (the cancelled update took the links).
+#[test]
+fn a_cancelled_update_keeps_the_last_frame() {
+    let scene = animated();
+    let mut session = Session::new(scene, Method::Hierarchical).unwrap();
+    session.solve_frame(1.0, &no_progress).unwrap();
+    let before = session.face_results().unwrap();
+    let calls = std::sync::atomic::AtomicUsize::new(0);
+    let cancel_late = |_: f64, _: &str| calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed) < 3;
+    let err = session.solve_frame(2.0, &cancel_late).unwrap_err();
+    assert!(matches!(err, galerkin_radiosity::Error::Cancelled), "{err}");
+    assert_eq!(session.face_results().unwrap(), before, "the readable frame changed");
+    let stats = session.solve_frame(2.0, &no_progress).unwrap();
+    assert!(stats.full_rebuild, "after a cancelled update the frame must be solved afresh");
+    let stats = session.solve_frame(3.0, &no_progress).unwrap();
+    assert!(!stats.full_rebuild, "and the one after updated again");
+}
