@@ -19,8 +19,16 @@
 use crate::links::{ElementId, LinkStore};
 
 /// `S_i = sum_j G_ij^00`: the mean over element `i` (in its parameter domain) of the form factors
-/// from its points to everything it is linked with.
+/// from its points to everything it is linked with. Kept by the store through every write
+/// ([`LinkStore::row_sum`], exact and order-free), so O(1): an animation frame re-bounds each
+/// receiver whose links changed at the cost of its changed pairs, not of its row.
 pub fn row_sum(links: &LinkStore, i: ElementId) -> f64 {
+    links.row_sum(i)
+}
+
+/// [`row_sum`] summed over the row in adjacency order (f64, sequential): what the store keeps,
+/// up to the f64 rounding of a sequential sum; for tests.
+pub fn row_sum_from_scratch(links: &LinkStore, i: ElementId) -> f64 {
     links.pairs_of(i).iter().map(|&p| links.column(p, i, 0)[0] as f64).sum()
 }
 

@@ -16,6 +16,16 @@
 //! per column its *transfer* `T_j^l = sum_i area_i sum_k |G_ij^{kl}|`: the power one unit of
 //! `b_j^l` delivers in one bounce, which the solver ranks shots by. Every write of coefficients
 //! updates it for the columns it touches.
+//!
+//! It also keeps per element `i` the sum `S_i = sum_j G_ij^00` of its row (the hemisphere bound's
+//! sum, [`crate::hemisphere`]), updated by every write, so that an animation frame costs the bound
+//! O(changed pairs) instead of a pass over each changed receiver's row. The sum is held exactly,
+//! as an integer: each f32 `G^00` is taken on a fixed grid of `2^-G00_FRACTION_BITS` (exact for
+//! every value above ~7e-18, the rest truncated deterministically) and the grid values are added
+//! and subtracted as `i128`. Integer sums do not depend on order, so a sum kept through any
+//! sequence of writes equals the sum of the store's current values recomputed from scratch, bit
+//! for bit (no drift, whatever the frames); [`LinkStore::row_sum`] rounds it once to f64, i.e.
+//! correctly rounded, which is within a few ulps of a sequential f64 sum.
 
 use crate::budget;
 use crate::error::Result;
@@ -30,6 +40,20 @@ const GROWTH_ROOM: usize = 16;
 
 /// What the store is called in an out-of-memory message.
 const STORE: &str = "the link store";
+
+/// The grid of the kept row sums (module docs): `G^00` in units of `2^-80`.
+const G00_FRACTION_BITS: i32 = 80;
+
+/// Magnitudes above this are clamped on the grid, so that `2^20` pairs of a row cannot overflow
+/// the `i128` (`2^(27 + 80 + 20) = 2^127`). A mean form factor is at most a few units.
+const G00_CLAMP: f64 = (1u64 << 27) as f64;
+
+/// `g` on the row sums' grid: exact for f32 values whose last bit is at least `2^-80`.
+#[inline]
+fn g00_fixed(g: f32) -> i128 {
+    // (Scaling by a power of two is exact in f64; the cast truncates toward zero, NaN to 0.)
+    ((g as f64).clamp(-G00_CLAMP, G00_CLAMP) * (G00_FRACTION_BITS as f64).exp2()) as i128
+}
 
 /// How many block writes ahead [`LinkStore::replace_blocks`] prefetches.
 const PREFETCH_WRITES: usize = 2;
@@ -72,6 +96,8 @@ pub struct LinkStore {
     transfer: Vec<f64>,
     /// The receiver areas `transfer` is weighted with.
     areas: Vec<f64>,
+    /// Per element `i`: `S_i = sum_j G_ij^00` on the grid of [`g00_fixed`] (module docs).
+    g00_sums: Vec<i128>,
 }
 
 /// `sum_k |G^{kl}|` of one receiver's part of a column: its share of `T` before the area.
@@ -95,7 +121,22 @@ impl LinkStore {
             columns: vec![Vec::new(); n_elements * nb],
             transfer: Vec::new(),
             areas: Vec::new(),
+            g00_sums: vec![0; n_elements],
         }
+    }
+
+    /// `S_i = sum_j G_ij^00` over every pair of element `i` (module docs; the hemisphere bound's
+    /// sum, [`crate::hemisphere::row_sum`]), kept through every write.
+    #[inline]
+    pub fn row_sum(&self, i: ElementId) -> f64 {
+        self.g00_sums[i as usize] as f64 * (-G00_FRACTION_BITS as f64).exp2()
+    }
+
+    /// Moves receiver `i`'s kept row sum from `old` to `new` `G^00`.
+    #[inline]
+    fn move_row_sum(&mut self, i: ElementId, old: f32, new: f32) {
+        let s = &mut self.g00_sums[i as usize];
+        *s = s.wrapping_sub(g00_fixed(old)).wrapping_add(g00_fixed(new));
     }
 
     /// Weights the transfers `T_j^l` with these receiver areas (element order), recomputing them
@@ -170,6 +211,8 @@ impl LinkStore {
         self.pairs.push(Pair { a, b, visibility });
         self.link(a, b, id);
         self.log_visibility_change(id);
+        self.move_row_sum(a, 0.0, ab[0] as f32);
+        self.move_row_sum(b, 0.0, ba[0] as f32);
         let nb = self.nb;
         // G_ab is shot by b, G_ba by a; both go to the end of the shooter's columns.
         for (shooter, receiver, g) in [(b, a, ab), (a, b, ba)] {
@@ -266,6 +309,9 @@ impl LinkStore {
                 self.link(row.a, b, id);
                 self.log_visibility_change(id);
                 origin.push((ri as u32, k as u32));
+                let g = &row.coeffs[k * 2 * n2..];
+                self.move_row_sum(row.a, 0.0, g[0]);
+                self.move_row_sum(b, 0.0, g[n2]);
             }
         }
         let (adjacency, pairs) = (&self.adjacency, &self.pairs);
@@ -380,6 +426,13 @@ impl LinkStore {
         // SAFETY: the parts cover the first `len` spare entries, one `n2` chunk per write, and
         // every chunk had all of its `nb x nb` entries written above.
         unsafe { replaced.old.set_len(len) };
+        // The receivers' row sums, from the entries `G^00` (index 0 of each block) written and
+        // replaced; serial, as one receiver's sum may move in many shooters' tasks.
+        for (k, &(p, r, g)) in items.iter().enumerate() {
+            for (half, receiver) in [(0, r), (1, self.other(p, r))] {
+                self.move_row_sum(receiver, replaced.get(k, half)[0], g[half * n2]);
+            }
+        }
         Ok(())
     }
 
@@ -546,6 +599,62 @@ mod tests {
             assert_eq!(replaced.get(k, 1), &before[2 * k + 1][..]);
         }
         assert_eq!(untouched, (store.block(0, 0), store.block(0, 1), store.block(2, 0), store.block(2, 3)));
+    }
+
+    /// Every row's `S_i` recomputed on the grid over the store as it is.
+    fn fresh_row_sums(store: &LinkStore) -> Vec<i128> {
+        (0..store.receivers.len() as ElementId)
+            .map(|i| store.pairs_of(i).iter().map(|&p| g00_fixed(store.column(p, i, 0)[0])).sum())
+            .collect()
+    }
+
+    /// The kept row sums follow pushes, whole rows and rewrites (one pair emptied, one rewritten
+    /// twice, values spanning 30 orders of magnitude, one below the grid) and equal a recomputation
+    /// from the final values bit for bit, and a sequential f64 sum within its rounding bound.
+    #[test]
+    fn row_sums_follow_every_write_exactly() {
+        let nb = 4;
+        let n2 = nb * nb;
+        let mut store = LinkStore::new(5, nb);
+        // G^00 of pair k's two blocks: a spread of magnitudes, so that an f64 running sum rounds.
+        let g00 = |k: usize, side: usize| 0.37 * 10f64.powi(-(((7 * k + 3 * side) % 31) as i32)) + 1e-3;
+        let with_g00 = |k: usize, side: usize, r: u32| {
+            let mut g = block(nb, k, r, 1e-4);
+            g[0] = g00(k, side);
+            g
+        };
+        store.push(0, 1, &with_g00(0, 0, 0), &with_g00(0, 1, 1), Visibility::Full);
+        store.push(2, 1, &with_g00(1, 0, 2), &with_g00(1, 1, 1), Visibility::Full);
+        let mut rows = Vec::new();
+        for (a, sources) in [(3u32, vec![0u32, 1, 2]), (4, vec![0, 2, 3])] {
+            let mut coeffs = Vec::new();
+            for (k, &b) in sources.iter().enumerate() {
+                let pair = 10 + a as usize * 3 + k;
+                coeffs.extend(with_g00(pair, 0, a).iter().chain(&with_g00(pair, 1, b)).map(|&x| x as f32));
+            }
+            let visibility = vec![Visibility::Full; sources.len()];
+            rows.push(LinkRow { a, sources, coeffs, visibility });
+        }
+        store.extend_rows(rows).unwrap();
+        assert_eq!(store.g00_sums, fresh_row_sums(&store));
+        let mut tiny: Vec<f32> = (0..2 * n2).map(|x| 1e-3 * x as f32).collect();
+        tiny[0] = 1e-30; // below the grid: truncated to 0, in both sums alike
+        let zero = vec![0.0f32; 2 * n2];
+        let big: Vec<f32> = (0..2 * n2).map(|x| 0.5 + 1e-2 * x as f32).collect();
+        let mut replaced = ReplacedBlocks::default();
+        store.replace_blocks(&[(1, 1, &big[..]), (3, 3, &zero[..])], &mut replaced).unwrap();
+        store.replace_blocks(&[(1, 2, &tiny[..]), (5, 0, &big[..])], &mut replaced).unwrap();
+        assert_eq!(store.g00_sums, fresh_row_sums(&store));
+        for i in 0..5 {
+            let terms: Vec<f64> =
+                store.pairs_of(i).iter().map(|&p| store.column(p, i, 0)[0] as f64).collect();
+            let sequential: f64 = terms.iter().sum();
+            let magnitude: f64 = terms.iter().map(|x| x.abs()).sum();
+            let slack = terms.len() as f64 * (f64::EPSILON * magnitude + (-80f64).exp2());
+            let kept = store.row_sum(i);
+            assert!((kept - sequential).abs() <= slack, "row {i}: kept {kept} sequential {sequential}");
+            assert!(kept > 0.0);
+        }
     }
 
     /// `T_j^l` recomputed from scratch over the store as it is.

@@ -206,6 +206,67 @@ fn the_bound_follows_a_moving_object_incrementally() {
     }
 }
 
+/// The row sums the store keeps through the frames of an animation (updated pair by pair, not
+/// recomputed) are those of its current links: within the rounding bound of a sequential f64 sum
+/// over each row, every element at every frame, while a closed box slides through another and
+/// changes most rows (visibility off) and the moving-light box's light changes every row (on);
+/// and the reflectance the solver uses is the surface's bounded by that sum. A write the sums
+/// missed would be off by a whole `G^00`, far above the bound.
+#[test]
+fn kept_row_sums_equal_the_rows_through_an_animation() {
+    use galerkin_radiosity::animation::{self, AnimationState, Outcome};
+    use galerkin_radiosity::hemisphere;
+    let a = scenes::box_mesh("A", DVec3::ZERO, DVec3::ONE, 2, true, 0);
+    let mut b = scenes::box_mesh("B", DVec3::new(0.5, 0.3, 0.2), DVec3::new(1.5, 1.3, 1.2), 2, true, 1);
+    b.animation = scenes::translation_keys(&[(1.0, DVec3::ZERO), (6.0, DVec3::new(0.4, -0.1, 0.2))]);
+    let materials = vec![
+        Material { name: "grey".into(), reflectance: [0.7; 3], emission: [1.0; 3] },
+        Material { name: "dim".into(), reflectance: [0.5; 3], emission: [0.2; 3] },
+    ];
+    let s = Settings { corner_gather: false, visibility: false, ..Settings::default() };
+    let crossing = Scene::new(s, (1, 6), materials, vec![Vec::new(); 2], vec![a, b]).unwrap();
+    let s = Settings { corner_gather: false, ..Settings::default() };
+    let light = scenes::cornell_box_moving_light(4, 6, s);
+    for (label, scene) in [("crossing boxes", crossing), ("moving light", light)] {
+        let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
+        sys.solve(scene.settings.tolerance, &|| false).unwrap();
+        let mut state = AnimationState::new(sys.elements.len(), true);
+        let mut bounded = 0;
+        for f in 2..=6 {
+            let Outcome::Updated(_) =
+                animation::advance(&mut sys, &mut state, &scene, f as f64, &no_progress).unwrap()
+            else {
+                panic!("{label} frame {f}: the topology does not change")
+            };
+            for i in 0..sys.elements.len() as u32 {
+                let row = sys.links.pairs_of(i);
+                let terms = row.iter().map(|&p| sys.links.column(p, i, 0)[0] as f64);
+                let magnitude: f64 = terms.map(f64::abs).sum();
+                let scratch = hemisphere::row_sum_from_scratch(&sys.links, i);
+                let kept = hemisphere::row_sum(&sys.links, i);
+                let slack = row.len() as f64 * (f64::EPSILON * magnitude + 1e-24);
+                assert!(
+                    (kept - scratch).abs() <= slack,
+                    "{label} frame {f} element {i}: {kept} vs {scratch}"
+                );
+                let surface = sys.surface_reflectance[i as usize];
+                let want = surface.map(|r| r * hemisphere::bound(scratch));
+                for (got, want) in sys.reflectance[i as usize].iter().zip(want) {
+                    assert!(
+                        (got - want).abs() <= 1e-14 * want,
+                        "{label} frame {f} element {i}: rho {got} vs {want}"
+                    );
+                }
+                bounded += (scratch > 1.0) as usize;
+            }
+        }
+        eprintln!("{label}: {bounded} element-frames with a bound below 1");
+        if label == "crossing boxes" {
+            assert!(bounded > 20, "{label}: only {bounded} bounded element-frames");
+        }
+    }
+}
+
 /// A rug (a coplanar panel on the floor, same side up) sliding over the floor changes how much
 /// of the floor it covers, hence the floor's weight as a source (crate::overlap), at every frame:
 /// the update rebuilds then, and every frame equals a from-scratch solve.
