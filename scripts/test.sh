@@ -48,8 +48,9 @@ if [ -d tests/python ] && ls tests/python/test_*.py >/dev/null 2>&1; then
     stage "ruff" .venv/bin/ruff check addon tests/python tools
     stage "pytest under bpy" limited 2400 .venv/bin/python -m pytest -q tests/python
     # Blender 4.5 LTS: the add-on's install, headless, bake, progress, cancel, re-bake and live,
-    # export, lights and clear tests under the bpy 4.5 module (.venv45, 1 GB: about 70 s to make
-    # on a fresh clone, 70 s to run). SKIP_BPY45=1 skips it; BPY45_PYTHON names another Python
+    # export, lights and clear tests under the bpy 4.5 module (.venv45, 1 GB: about 40 s to make
+    # on a fresh clone, 55 s to run). The World's Cycles comparison runs under 5.0 only: under
+    # 4.5 it would check Cycles again (24 s), while the World's reading is in the other light tests. SKIP_BPY45=1 skips it; BPY45_PYTHON names another Python
     # with bpy 4.5 (then no venv is made).
     if [ "${SKIP_BPY45:-0}" = 1 ]; then
         echo "-- bpy 4.5: skipped (SKIP_BPY45=1)"
@@ -61,7 +62,8 @@ if [ -d tests/python ] && ls tests/python/test_*.py >/dev/null 2>&1; then
             tests/python/test_headless_and_packaging.py tests/python/test_progress.py \
             tests/python/test_bake.py tests/python/test_cancel_and_errors.py \
             tests/python/test_rebake_and_live.py tests/python/test_export_options.py \
-            tests/python/test_lights.py tests/python/test_clear_leftovers.py
+            tests/python/test_lights.py tests/python/test_clear_leftovers.py \
+            --deselect tests/python/test_lights.py::test_a_room_lit_by_the_world_agrees_with_cycles
     fi
 fi
 echo "== all tests passed in $((SECONDS - START)) s"
