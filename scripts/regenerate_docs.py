@@ -236,6 +236,14 @@ def regenerate(names: list[str], doc: Path = DOC, run=None, quick: bool = False,
         name = m["name"]
         return m.group(1) + bodies[name] + m.group(4) if name in bodies else m.group(0)
 
+    # The commands take minutes, and another regeneration may have rewritten the document
+    # meanwhile: splice into the file as it is now, not the copy read before they ran (a stale
+    # copy once overwrote another section's new block).
+    text = doc.read_text()
+    missing = [name for name in names if name not in {m["name"] for m in BLOCK.finditer(text)}]
+    if missing:
+        raise SystemExit(f"regenerate_docs: error: block(s) {', '.join(missing)} gone from {doc} "
+                         "while the commands ran")
     return BLOCK.sub(replace, text), bodies
 
 

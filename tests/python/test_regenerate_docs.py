@@ -118,3 +118,23 @@ def test_the_test_stages_block_is_the_table_of_the_kept_log(tmp_path):
     script = (REPO / "scripts" / "test.sh").read_text()
     for m in stages:
         assert f'"{m["name"]}"' in script, m["name"]
+
+
+def test_a_block_rewritten_while_the_commands_ran_is_kept(tmp_path):
+    # Another regeneration writes the "validation" block while this one's command runs: the
+    # result must splice into the file as it is after the command, not the copy read before.
+    doc = tmp_path / "benchmarks.md"
+    shutil.copy(regen.DOC, doc)
+    stored_cmd = regen.TABLES["validation"].stored
+    table = subprocess.run(stored_cmd, shell=True, cwd=REPO, capture_output=True, text=True,
+                           check=True).stdout
+    marker = "| written meanwhile |\n|---|\n"
+
+    def run(cmd):
+        text = doc.read_text()
+        body = _blocks(text)["tolerance"]
+        doc.write_text(text.replace(body, f"\n{marker}\n", 1))
+        return table
+
+    new, _ = regen.regenerate(["validation"], doc=doc, stored=True, run=run)
+    assert marker in _blocks(new)["tolerance"]
