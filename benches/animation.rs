@@ -10,6 +10,7 @@
 //! The second table is the hierarchy's (issue 21): each frame updated from the one before
 //! ([`galerkin_radiosity::hierarchy::update::update_frame`]) against the same frames solved from
 //! scratch, and how far the updated frames' face means are from the fresh ones.
+//! `-- --hierarchy` prints the second table alone (about 1 min).
 
 use galerkin_radiosity::scene::{Scene, Settings};
 use galerkin_radiosity::scenes;
@@ -44,7 +45,12 @@ fn run(scene: &Scene, method: Method) -> Run {
 struct HierRun {
     first: f64,
     updated: f64,
+    /// An updated frame's link and solve seconds and Jacobi sweeps (means).
+    link: f64,
+    solve: f64,
+    sweeps: f64,
     fresh: f64,
+    fresh_sweeps: f64,
     kept: f64,
     touched: f64,
     links: f64,
@@ -64,6 +70,7 @@ fn run_hierarchy(scene: &Scene) -> HierRun {
     let mut session = Session::new(scene.clone(), Method::Hierarchical).unwrap();
     let (mut first, mut updated, mut fresh, mut worst) = (0.0, 0.0, 0.0, 0.0f64);
     let (mut kept, mut touched, mut links) = (0.0, 0.0, 0.0);
+    let (mut link, mut solve, mut sweeps, mut fresh_sweeps) = (0.0, 0.0, 0.0, 0.0);
     let frames: Vec<i64> = (scene.frames.0..=scene.frames.1).collect();
     for (k, &f) in frames.iter().enumerate() {
         let stats = session.solve_frame(f as f64, &no_progress).unwrap();
@@ -73,12 +80,16 @@ fn run_hierarchy(scene: &Scene) -> HierRun {
         }
         assert!(!stats.full_rebuild, "frame {f} was not updated");
         updated += stats.seconds;
+        link += stats.kernel_seconds;
+        solve += stats.solve_seconds;
+        sweeps += stats.shots as f64;
         links += stats.pairs as f64;
         kept += (stats.pairs - stats.links_recomputed) as f64;
         touched += stats.links_recomputed as f64;
         let t = std::time::Instant::now();
         let from_scratch = solve_frame(scene, f as f64, &hs, &no_progress).unwrap();
         fresh += t.elapsed().as_secs_f64();
+        fresh_sweeps += from_scratch.stats.sweeps as f64;
         let want = face_means(&from_scratch.face_results(scene, f as f64));
         let got = face_means(&session.face_results().unwrap());
         let peak = want.iter().copied().fold(0.0, f64::max);
@@ -90,7 +101,11 @@ fn run_hierarchy(scene: &Scene) -> HierRun {
     HierRun {
         first,
         updated: updated / n,
+        link: link / n,
+        solve: solve / n,
+        sweeps: sweeps / n,
         fresh: fresh / n,
+        fresh_sweeps: fresh_sweeps / n,
         kept: kept / n,
         touched: touched / n,
         links: links / n,
@@ -100,9 +115,18 @@ fn run_hierarchy(scene: &Scene) -> HierRun {
 
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
+    let hierarchy_only = std::env::args().any(|a| a == "--hierarchy");
     // The solver's methods side by side; the corner gather (the same work for every method) is
     // off here and reported by `gather_seconds` in a bake's frame stats.
     let settings = Settings { basis_order: 2, corner_gather: false, ..Settings::default() };
+    if !hierarchy_only {
+        flat_table(&settings, quick);
+    }
+    hierarchy_table(&settings, quick);
+}
+
+/// The flat methods side by side: docs/benchmarks.md's "animation" block.
+fn flat_table(settings: &Settings, quick: bool) {
     let frames = if quick { 4 } else { 48 };
     let cases: Vec<(&str, Scene, &str)> = vec![
         ("Fig. 5a room", scenes::seed_room(if quick { 2.0 } else { 3.0 }, frames, settings.clone()), "65%"),
@@ -145,8 +169,10 @@ fn main() {
             inc.recomputed,
         );
     }
+}
 
-    // The hierarchy's frames: updated against from scratch, one after the other.
+/// The hierarchy's frames: docs/benchmarks.md's "animation-hierarchy" block.
+fn hierarchy_table(settings: &Settings, quick: bool) {
     let hframes = if quick { 4 } else { 16 };
     let hcases: Vec<(&str, Scene)> = vec![
         ("Fig. 5a room", scenes::seed_room(if quick { 2.0 } else { 3.0 }, hframes, settings.clone())),
@@ -159,19 +185,24 @@ fn main() {
     println!(
         "\nThe hierarchy (issue 21): the same scenes over {hframes} frames, order 2, corner gather off, each frame \
          updated from the one before, then solved from scratch, means over frames 2..{hframes}; rms is the worst \
-         frame's face means against the fresh frame's, of their peak:\n"
+         frame's face means against the fresh frame's, of their peak; an updated frame's time split into linking \
+         and the Jacobi solve, with its sweeps against a fresh frame's:\n"
     );
     println!(
-        "| scene | patches | first frame s | updated s/frame | from scratch s/frame | x faster | links kept / relinked | worst rms vs fresh |"
+        "| scene | patches | first frame s | updated s/frame | link s | solve s | sweeps (fresh) | from scratch s/frame | x faster | links kept / relinked | worst rms vs fresh |"
     );
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for (name, scene) in hcases {
         let h = run_hierarchy(&scene);
         println!(
-            "| {name} | {} | {:.2} | {:.3} | {:.3} | {:.1}x | {:.0} / {:.0} of {:.0} | {:.2}% |",
+            "| {name} | {} | {:.2} | {:.3} | {:.3} | {:.3} | {:.1} ({:.1}) | {:.3} | {:.1}x | {:.0} / {:.0} of {:.0} | {:.2}% |",
             scene.face_count(),
             h.first,
             h.updated,
+            h.link,
+            h.solve,
+            h.sweeps,
+            h.fresh_sweeps,
             h.fresh,
             h.fresh / h.updated,
             h.kept,

@@ -62,6 +62,7 @@ pub struct FrameStats {
     pub recomputed_non_translation: usize,
     /// Pairs with a moved element whose motion is a pure translation.
     pub recomputed_translation: usize,
+    /// Shots of the progressive solve; on the hierarchy, its Jacobi sweeps.
     pub shots: usize,
     /// How much of the last frame's shots the solve replayed first ([`crate::replay`]): near 1
     /// under steady motion, 0 without a replay.
@@ -532,6 +533,7 @@ impl Session {
             seconds: start.elapsed().as_secs_f64(),
             kernel_seconds: h.link_seconds,
             solve_seconds: h.solve_seconds,
+            shots: h.sweeps,
             elements: h.leaves,
             pairs: h.links,
             links_recomputed: h.links - h.kept_links,
