@@ -152,7 +152,14 @@ pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
     let faces = (scene.face_count() - scene.degenerate_faces.len()) as u64;
     let growth = (1e-3 / s.accuracy.clamp(1e-12, 1.0)).powf(HIERARCHY_LINK_GROWTH);
     let links_per_face = (HIERARCHY_LINKS_PER_FACE * growth).max(1.0) as u64;
-    let per_link = size_of::<crate::hierarchy::coupling::Link>() as u64 + 16 + 2 * nb * nb * 4 + 2 * 8;
+    // A link's record, its two blocks, its two incoming entries, and the solve's copy of its
+    // blocks packed by receiver (`hierarchy::solve::ReceivedBlocks`) with their two sources.
+    let per_link = size_of::<crate::hierarchy::coupling::Link>() as u64
+        + 16
+        + 2 * nb * nb * 4
+        + 2 * 8
+        + 2 * nb * nb * 4
+        + 2 * 4;
     let link_count = faces.saturating_mul(links_per_face);
     let links = link_count.saturating_mul(per_link).saturating_mul(2);
     let nodes = faces.saturating_mul(2).saturating_add(link_count / 4);

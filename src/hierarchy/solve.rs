@@ -80,6 +80,50 @@ impl Incoming {
     }
 }
 
+/// Per receiving node, the blocks of its surface links (its side's `nb x nb`, row = its own
+/// function) packed one after the other, with each link's source: a sweep reads them in order.
+pub struct ReceivedBlocks {
+    /// `offsets[r]..offsets[r + 1]`: node `r`'s links in `sources` (and, times `nb^2`, in `blocks`).
+    offsets: Vec<usize>,
+    sources: Vec<NodeId>,
+    blocks: Vec<f32>,
+    nb: usize,
+}
+
+impl ReceivedBlocks {
+    /// The surface links' blocks by receiver, in [`Incoming`]'s order; [`crate::Error::OutOfMemory`]
+    /// when the copy cannot be had.
+    pub fn new(links: &[Link], incoming: &Incoming, nb: usize) -> Result<Self> {
+        let what = "the hierarchy's links packed for the solve";
+        let nodes = incoming.offsets.len() - 1;
+        let surface = |&(l, _): &(u32, u8)| matches!(links[l as usize].coupling, Coupling::Surfaces(_));
+        let count = incoming.entries.iter().filter(|e| surface(e)).count();
+        let mut offsets = budget::try_vec(nodes + 1, what)?;
+        let mut sources = budget::try_vec(count, what)?;
+        let mut blocks = budget::try_vec(count.saturating_mul(nb * nb), what)?;
+        offsets.push(0);
+        for r in 0..nodes {
+            for &(l, side) in incoming.of(r) {
+                let link = &links[l as usize];
+                if let Coupling::Surfaces(both) = &link.coupling {
+                    let side = side as usize;
+                    sources.push(if side == 0 { link.b } else { link.a });
+                    blocks.extend_from_slice(&both[side * nb * nb..(side + 1) * nb * nb]);
+                }
+            }
+            offsets.push(sources.len());
+        }
+        Ok(Self { offsets, sources, blocks, nb })
+    }
+
+    /// Node `r`'s surface links: their sources and their blocks, `nb^2` each.
+    fn of(&self, r: usize) -> (&[NodeId], &[f32]) {
+        let (a, b) = (self.offsets[r], self.offsets[r + 1]);
+        let nb2 = self.nb * self.nb;
+        (&self.sources[a..b], &self.blocks[a * nb2..b * nb2])
+    }
+}
+
 /// Counts of one solve.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct SolveStats {
@@ -247,13 +291,14 @@ impl State {
         cancel: &(dyn Fn() -> bool + Sync),
     ) -> Result<SolveStats> {
         let incoming = Incoming::new(tree.nodes.len(), links)?;
+        let blocks = ReceivedBlocks::new(links, &incoming, self.nb)?;
         let mut stats = SolveStats::default();
         let first = self.source_power(tree).max(1e-300);
         for sweep in 0..max_sweeps {
             if cancel() {
                 return Err(Error::Cancelled);
             }
-            let gathered = self.gather(tree, links, &incoming)?;
+            let gathered = self.gather(tree, links, &incoming, &blocks)?;
             let change = self.push_pull(tree, &gathered, true);
             stats.sweeps = sweep + 1;
             stats.last_change = change;
@@ -268,28 +313,42 @@ impl State {
     }
 
     /// What every node receives through its own links from the current state.
-    fn gather(&self, tree: &Tree, links: &[Link], incoming: &Incoming) -> Result<Gathered> {
+    fn gather(
+        &self,
+        tree: &Tree,
+        links: &[Link],
+        incoming: &Incoming,
+        blocks: &ReceivedBlocks,
+    ) -> Result<Gathered> {
         let (nb, n) = (self.nb, tree.nodes.len());
         let what = "the hierarchy's gathered light";
         let mut h = budget::try_filled(n * nb, [0.0; 3], what)?;
         let mut lobes_in = budget::try_filled(n, lobes::ZERO, what)?;
         h.par_chunks_mut(nb).zip(lobes_in.par_iter_mut()).enumerate().for_each(|(r, (hr, lr))| {
+            // Surface links: their blocks in this receiver's run of the packed copy, read in
+            // order (the per-link boxes are scattered over the heap, and reading them was most
+            // of a sweep's time).
+            let (sources, packed) = blocks.of(r);
+            for (&s, block) in sources.iter().zip(packed.chunks_exact(nb * nb)) {
+                let bs = &self.b[s as usize * nb..(s as usize + 1) * nb];
+                for (k, row) in block.chunks_exact(nb).enumerate() {
+                    let mut sum = [0.0f64; 3];
+                    for (&g, b) in row.iter().zip(bs) {
+                        let g = g as f64;
+                        sum[0] += g * b[0];
+                        sum[1] += g * b[1];
+                        sum[2] += g * b[2];
+                    }
+                    for c in 0..3 {
+                        hr[k][c] += sum[c];
+                    }
+                }
+            }
             for &(l, side) in incoming.of(r) {
                 let link = &links[l as usize];
                 let s = if side == 0 { link.b } else { link.a } as usize;
                 match &link.coupling {
-                    Coupling::Surfaces(blocks) => {
-                        let block = &blocks[side as usize * nb * nb..(side as usize + 1) * nb * nb];
-                        let bs = &self.b[s * nb..(s + 1) * nb];
-                        for k in 0..nb {
-                            let row = &block[k * nb..(k + 1) * nb];
-                            for (l, &g) in row.iter().enumerate() {
-                                for c in 0..3 {
-                                    hr[k][c] += g as f64 * bs[l][c];
-                                }
-                            }
-                        }
-                    }
+                    Coupling::Surfaces(_) => {}
                     Coupling::Clusters { transmittance } => {
                         let (nr, ns) = (&tree.nodes[r], &tree.nodes[s]);
                         let v = nr.centre - ns.centre;
