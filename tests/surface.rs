@@ -29,7 +29,7 @@ fn corners(o: &Object) -> usize {
 }
 
 #[test]
-fn zero_normals_and_material_reflectances_change_nothing_bit_for_bit() {
+fn zero_normals_material_reflectances_and_unit_emission_scales_change_nothing_bit_for_bit() {
     let plain = box_scene();
     let surfaces: Vec<Surface> = plain
         .objects
@@ -41,6 +41,7 @@ fn zero_normals_and_material_reflectances_change_nothing_bit_for_bit() {
                 .iter()
                 .map(|&m| plain.materials[m as usize].reflectance)
                 .collect(),
+            face_emission: vec![[1.0; 3]; o.faces.len()],
         })
         .collect();
     let with = plain.clone().with_surfaces(surfaces).unwrap();
