@@ -764,6 +764,8 @@ GrStatus gr_settings_default(struct GrSettings *out);
  * - `face_reflectance`: 3 floats (RGB, each in [0,1)) per face, overriding the face's
  *   material's reflectance; or NULL with `face_reflectance_len` 0 for the materials'.
  *
+ * The object's emission scale per face (`gr_session_set_object_face_emission`) stays as set.
+ *
  * The lengths are in floats. Returns `GR_STATUS_INVALID_ARGUMENT` for an object out of range
  * or a length that is not 3 x the corners or faces, `GR_STATUS_INVALID_SCENE` for a value out
  * of range; on error nothing changes.
