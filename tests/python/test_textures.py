@@ -16,8 +16,8 @@ or multiplied with a constant by a Mix node) enters the solve per face as its me
   face the checker's mean as its emission scale (the material's emission being strength x
   white), the emitter's faces show their own exitance, a floor under it receives half of what
   the untextured emitter gives it, and matches Cycles' DIFFUSE bake of the floor lit by the
-  textured emitter (3% + twice Cycles' noise). A chain that cannot be read is named, and the
-  emission counts as none.
+  textured emitter (3% + twice Cycles' noise); a keyed Emission Strength scales it frame by frame
+  with the texture kept. A chain that cannot be read is named, and the emission counts as none.
 """
 
 import numpy as np
@@ -298,3 +298,25 @@ def test_an_unreadable_emission_texture_is_named_and_emits_nothing(blender):
     assert line.count("Noise Texture") == 1, line
     _, emission = exp.materials.arrays()
     assert not emission.any(), emission
+
+
+def test_an_animated_strength_keeps_the_emission_texture(blender):
+    # Emission Strength keyed STRENGTH -> 2 x STRENGTH over frames 1-2 under the checker: the
+    # faces keep their scale (black stays black) and the floor's light doubles.
+    bpy = blender
+    img, lin = _checker(bpy, colors=BLACK_WHITE)
+    glow = _emissive(bpy, img)
+    floor, emitter = _lit_floor(bpy, glow)
+    strength = glow.node_tree.nodes["Principled BSDF"].inputs["Emission Strength"]
+    for frame, value in ((1, STRENGTH), (2, 2 * STRENGTH)):
+        strength.default_value = value
+        strength.keyframe_insert("default_value", frame=frame)
+    sc = bpy.context.scene
+    sc.frame_start, sc.frame_end = 1, 2
+    assert bake(bpy, method="INCREMENTAL") == {"FINISHED"}
+    ratio = stored(floor.data, 2).mean() / stored(floor.data, 1).mean()
+    dark = np.repeat(_face_means(emitter, lin)[:, 0] < 0.5, 4)
+    shown = stored(emitter.data, 2)
+    print(f"floor frame 2 / frame 1: {ratio:.4f}")
+    assert abs(ratio - 2.0) < 0.01, ratio
+    assert np.allclose(shown[dark], 0.0, atol=1e-4) and np.allclose(shown[~dark], 2 * STRENGTH, rtol=1e-3)
