@@ -764,6 +764,8 @@ GrStatus gr_settings_default(struct GrSettings *out);
  * - `face_reflectance`: 3 floats (RGB, each in [0,1)) per face, overriding the face's
  *   material's reflectance; or NULL with `face_reflectance_len` 0 for the materials'.
  *
+ * The object's emission scale per face (`gr_session_set_object_face_emission`) stays as set.
+ *
  * The lengths are in floats. Returns `GR_STATUS_INVALID_ARGUMENT` for an object out of range
  * or a length that is not 3 x the corners or faces, `GR_STATUS_INVALID_SCENE` for a value out
  * of range; on error nothing changes.
@@ -777,6 +779,26 @@ GrStatus gr_session_set_object_surface(struct GrSession *s,
                                        size_t corner_normals_len,
                                        const float *face_reflectance,
                                        size_t face_reflectance_len);
+
+/**
+ * Sets object `object`'s emission colour scale per face: 3 floats (RGB, finite, >= 0, at most
+ * 1e6) per face, multiplying the face's material's emission, keys and
+ * `gr_session_set_material_emission` overrides included (an Emission Color texture's mean over
+ * the face, the material's emission then being its strength x white); or NULL with `len` 0 for
+ * 1 everywhere. Keeps the object's other surface data (`gr_session_set_object_surface`); the
+ * next solved frame is built afresh with it.
+ *
+ * `len` is in floats. Returns `GR_STATUS_INVALID_ARGUMENT` for an object out of range or a
+ * `len` that is not 3 x the object's faces, `GR_STATUS_INVALID_SCENE` for a value out of range;
+ * on error nothing changes.
+ *
+ * # Safety
+ * `s` is NULL or a live session; a non-NULL `rgb` points to `len` readable floats.
+ */
+GrStatus gr_session_set_object_face_emission(struct GrSession *s,
+                                             uint32_t object,
+                                             const float *rgb,
+                                             size_t len);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -33,11 +33,11 @@ pub fn corner_sums(scene: &Scene, frame: f64) -> Result<Vec<Vec<f64>>> {
     sys.gather_corners(scene, frame, &no_progress)?;
     let corners = sys.corners.take().expect("gathered");
     let mut out = Vec::with_capacity(corners.len());
-    for (obj, values) in scene.objects.iter().zip(corners) {
+    for (o, (obj, values)) in scene.objects.iter().zip(corners).enumerate() {
         let mut sums = Vec::with_capacity(values.len());
         let mut corner = 0;
         for (f, face) in obj.faces.iter().enumerate() {
-            let e = scene.emission_at(obj.face_materials[f] as usize, frame);
+            let e = scene.emission_of(o, f, obj.face_materials[f], frame);
             for _ in face {
                 sums.push(values[corner][0] - e[0]);
                 corner += 1;

@@ -240,8 +240,18 @@ pub(crate) struct CornerPoint {
     /// The element covering it and the local point (inset), or `None` for a skipped face.
     pub at: Option<(usize, f64, f64)>,
     pub material: u32,
+    /// The object and face it was made for: a skipped face's point shows that face's exitance
+    /// ([`Scene::emission_of`]).
+    pub face: (u32, u32),
     /// The world-space shading normal, where it is not the face's own.
     pub normal: Option<DVec3>,
+}
+
+impl CornerPoint {
+    /// The exitance of the face the point was made for at `frame`.
+    pub fn exitance(&self, scene: &Scene, frame: f64) -> [f64; 3] {
+        scene.emission_of(self.face.0 as usize, self.face.1 as usize, self.material, frame)
+    }
 }
 
 /// One point's sources, sorted by element, with how their visibility was decided and their
@@ -484,7 +494,7 @@ impl CornerGather {
                     .iter()
                     .map(|p| match p.at {
                         Some(_) => [0.0; 3],
-                        None => scene.emission_at(p.material as usize, frame),
+                        None => p.exitance(scene, frame),
                     })
                     .collect();
                 let at: Vec<(usize, usize)> =
@@ -605,18 +615,20 @@ pub(crate) fn corner_points(
                 let at = locate(o, f, si, ti);
                 let material = obj.face_materials[f];
                 let normal = shading.get(first + k).and_then(|&n| world_normal(&world_from_object, n));
-                // Faces with their own reflectance (a texture's means) share a point only with
-                // faces of the same one, as faces of one material do.
-                let rho = scene.surfaces.get(o).and_then(|s| s.face_reflectance.get(f));
-                let rho = rho.map(|r| r.map(f64::to_bits));
+                // Faces with their own reflectance or emission scale (a texture's means) share a
+                // point only with faces of the same ones, as faces of one material do.
+                let own = |pick: fn(&crate::scene::Surface) -> &Vec<[f64; 3]>| {
+                    scene.surfaces.get(o).and_then(|s| pick(s).get(f)).map(|r| r.map(f64::to_bits))
+                };
+                let (rho, scale) = (own(|s| &s.face_reflectance), own(|s| &s.face_emission));
                 let key = at.map(|(e, s, t)| {
                     let n = normal.unwrap_or_else(|| patch(e).area_vector(s, t).normalize_or_zero());
-                    (o, v, material, rho, (n * 1e6).round().as_i64vec3().to_array())
+                    (o, v, material, rho, scale, (n * 1e6).round().as_i64vec3().to_array())
                 });
                 let k = match key.and_then(|k| shared.get(&k)) {
                     Some(&k) => k,
                     None => {
-                        points.push(CornerPoint { at, material, normal });
+                        points.push(CornerPoint { at, material, face: (o as u32, f as u32), normal });
                         if let Some(key) = key {
                             shared.insert(key, points.len() - 1);
                         }

@@ -312,13 +312,25 @@ impl Session {
         Ok(Some(refinement))
     }
 
-    /// Replaces object `o`'s shading normals and per-face reflectance
-    /// ([`crate::scene::Surface`]); the next solved frame is built afresh with them. On error
-    /// nothing changes.
+    /// Replaces object `o`'s surface data ([`crate::scene::Surface`]: shading normals, per-face
+    /// reflectance and emission scale); the next solved frame is built afresh with them. On
+    /// error nothing changes.
     pub fn set_surface(&mut self, o: usize, surface: crate::scene::Surface) -> Result<()> {
         self.scene.set_surface(o, surface)?;
         self.stale = true;
         Ok(())
+    }
+
+    /// Object `o`'s surface data (the default, empty one where it has none).
+    pub fn surface(&self, o: usize) -> crate::scene::Surface {
+        self.scene.surfaces.get(o).cloned().unwrap_or_default()
+    }
+
+    /// Replaces only object `o`'s emission scale per face ([`crate::scene::Surface::face_emission`],
+    /// empty: 1), keeping its other surface data; validated, and on error nothing changes.
+    pub fn set_face_emission(&mut self, o: usize, face_emission: Vec<[f64; 3]>) -> Result<()> {
+        let surface = crate::scene::Surface { face_emission, ..self.surface(o) };
+        self.set_surface(o, surface)
     }
 
     /// Replaces the scene's lights from the next solved frame on (a host sampling its own
@@ -351,6 +363,15 @@ impl Session {
         });
         flags[o] = on;
         Ok(())
+    }
+
+    /// Face `f` of object `o`'s exitance at `frame` as the solved frames see it: the host's
+    /// override of its material's emission where set (else the keyed one), times the face's
+    /// emission scale ([`Scene::emission_scale`]), which an override does not replace.
+    fn face_exitance(&self, o: usize, f: usize, frame: f64) -> [f64; 3] {
+        let m = self.scene.objects[o].face_materials[f] as usize;
+        let e = self.emission[m].unwrap_or_else(|| self.scene.emission_at(m, frame));
+        crate::scene::scaled(e, self.scene.emission_scale(o, f))
     }
 
     /// The scene as placed at `frame`: keys, then host overrides.
@@ -617,7 +638,7 @@ impl Session {
         if !((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&t)) {
             return Err(Error::InvalidArgument(format!("(s, t) = ({s}, {t}) is outside [0,1]^2")));
         }
-        let exitance = || self.scene.emission_at(obj.face_materials[f] as usize, self.frame.unwrap_or(0.0));
+        let exitance = || self.face_exitance(o, f, self.frame.unwrap_or(0.0));
         if let Some(h) = &self.hierarchical {
             return Ok(h
                 .face_index(o, f)
@@ -641,9 +662,8 @@ impl Session {
             if h.face_index(o, f).is_none() {
                 return Ok([0.0; 3]);
             }
-            let frame = self.frame.unwrap_or(0.0);
+            let e = self.face_exitance(o, f, self.frame.unwrap_or(0.0));
             let m = self.scene.objects[o].face_materials[f];
-            let e = self.emission[m as usize].unwrap_or_else(|| self.scene.emission_at(m as usize, frame));
             return Ok(from(b, e, self.scene.reflectance_of(o, f, m)).map(|x| x.max(0.0)));
         }
         let sys = self.solved()?;

@@ -51,6 +51,11 @@ impl Element {
     pub fn reflectance(&self, scene: &Scene) -> [f64; 3] {
         scene.reflectance_of(self.object as usize, self.face as usize, self.material)
     }
+
+    /// The surface's exitance over the element at `frame`: its face's ([`Scene::emission_of`]).
+    pub fn emission(&self, scene: &Scene, frame: f64) -> [f64; 3] {
+        scene.emission_of(self.object as usize, self.face as usize, self.material, frame)
+    }
 }
 
 /// World-space elements of a scene at a frame: one per non-degenerate face.
@@ -440,7 +445,7 @@ impl System {
                     }
                     _ => {
                         // A skipped zero-area face shows its own exitance.
-                        let e = to_f32(scene.emission_at(obj.face_materials[f] as usize, frame));
+                        let e = to_f32(scene.emission_of(o, f, obj.face_materials[f], frame));
                         res.face_radiosity.push(e);
                         if !gathered {
                             res.corner_radiosity.extend(std::iter::repeat_n(e, face.len()));
@@ -477,7 +482,7 @@ pub fn frame_sources(scene: &Scene, frame: f64, elements: &[Element], basis: Bas
     let nb = basis.len();
     let mut emission = vec![[0.0; 3]; elements.len() * nb];
     for (i, e) in elements.iter().enumerate() {
-        emission[i * nb] = scene.emission_at(e.material as usize, frame);
+        emission[i * nb] = e.emission(scene, frame);
     }
     let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
     let Some(lights) = DirectLight::new(scene, frame, elements) else {

@@ -1015,3 +1015,50 @@ fn corner_irradiance_is_the_light_received() {
         unsafe { gr_session_free(s) };
     }
 }
+
+#[test]
+fn face_emission_scales_an_emitter_and_bad_lengths_are_refused() {
+    // The two patches' emitter (object 1, one face) scaled per channel: the receiver, lit only
+    // by it (the emitter is black, so nothing comes back), takes the same scale.
+    let s = Flat::two_patches().new_session(&defaults()).unwrap();
+    let solved = || {
+        assert_eq!(unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) }, GrStatus::Ok);
+        face_radiosity(s, 0).unwrap()
+    };
+    let plain = solved();
+    let scale = [0.5f32, 0.25, 1.0];
+    assert_eq!(unsafe { gr_session_set_object_face_emission(s, 1, scale.as_ptr(), 3) }, GrStatus::Ok);
+    let scaled = solved();
+    for c in 0..3 {
+        let ratio = scaled[c] / plain[c];
+        assert!((ratio - scale[c]).abs() < 1e-5, "channel {c}: {ratio} for {}", scale[c]);
+    }
+    // Setting the other surface data keeps the scale.
+    let st = unsafe { gr_session_set_object_surface(s, 1, null(), 0, null(), 0) };
+    assert_eq!(st, GrStatus::Ok);
+    assert_eq!(solved(), scaled);
+    // Refused, and nothing changes: lengths that are not 3 x the faces, an object out of
+    // range, a NULL array with a length, a NULL session, values out of range.
+    let six = [1.0f32; 6];
+    for len in [2, 6] {
+        let st = unsafe { gr_session_set_object_face_emission(s, 1, six.as_ptr(), len) };
+        assert_eq!(st, GrStatus::InvalidArgument, "len {len}");
+        assert!(last_error().contains(&format!("len {len} is not 3 x the 1 faces")), "{}", last_error());
+    }
+    let st = unsafe { gr_session_set_object_face_emission(s, 2, six.as_ptr(), 3) };
+    assert_eq!(st, GrStatus::InvalidArgument);
+    assert!(last_error().contains("object 2 out of range"), "{}", last_error());
+    assert_eq!(unsafe { gr_session_set_object_face_emission(s, 1, null(), 3) }, GrStatus::NullPointer);
+    let st = unsafe { gr_session_set_object_face_emission(null_mut(), 1, six.as_ptr(), 3) };
+    assert_eq!(st, GrStatus::NullPointer);
+    for bad in [[1.0f32, -0.5, 1.0], [f32::NAN, 1.0, 1.0], [1.0, 1.0, 1e7]] {
+        let st = unsafe { gr_session_set_object_face_emission(s, 1, bad.as_ptr(), 3) };
+        assert_eq!(st, GrStatus::InvalidScene, "{bad:?}");
+        assert!(last_error().contains("face_emission[0]"), "{}", last_error());
+    }
+    assert_eq!(solved(), scaled);
+    // Length 0 (NULL allowed) goes back to the materials' emission.
+    assert_eq!(unsafe { gr_session_set_object_face_emission(s, 1, null(), 0) }, GrStatus::Ok);
+    assert_eq!(solved(), plain);
+    unsafe { gr_session_free(s) };
+}

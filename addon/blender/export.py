@@ -205,6 +205,7 @@ def export(depsgraph, objects, light_objects=()) -> Export:
             normals = read_normals(mesh)
             slots = [s.material for s in ev.material_slots]
             textured = textures.polygon_reflectance(mesh, slots, mats, table_problems)
+            emission_scale = textures.polygon_emission(mesh, slots, mats, table_problems)
         finally:
             ev.to_mesh_clear()
         mult = emitter_multiplier(obj)
@@ -224,6 +225,8 @@ def export(depsgraph, objects, light_objects=()) -> Export:
             data.set_loop_normals(*normals)
         if textured is not None:
             data.set_polygon_reflectance(textured)
+        if emission_scale is not None:
+            data.set_polygon_emission(emission_scale)
         orig = obj.data
         same = len(orig.polygons) == len(sizes) and len(orig.loops) == len(loops)
         if same and len(sizes):

@@ -4,9 +4,12 @@ Readable: the shader plugged into the active Material Output's Surface (through 
 Principled BSDF (Base Color; Emission Color x Emission Strength), a Diffuse BSDF (Color) or an
 Emission shader (Color x Strength, reflectance 0). A texture on Base Color (Color) whose node
 chain ``textures`` can sample is read per face by ``textures.polygon_reflectance`` (the material's
-own reflectance stays the default, unused where the faces are read); any other linked input falls
-back to the default grey, a linked emission to none, and the spec says why (naming the node).
-Any other shader, or no material at all, gives the default (grey 0.8, no emission).
+own reflectance stays the default, unused where the faces are read). A readable texture on the
+emission colour makes the material's emission its strength x white, and
+``textures.polygon_emission`` scales each face by the texture's mean over it (so an animated
+strength keeps applying). Any other linked input falls back to the default grey, a linked
+emission to none, and the spec says why (naming the node). Any other shader, or no material at
+all, gives the default (grey 0.8, no emission).
 """
 
 from __future__ import annotations
@@ -67,15 +70,40 @@ def _value(node, name, problems, what, textured: bool = False):
     return sock.default_value
 
 
-def reflectance_socket(mat):
-    """The input socket that holds `mat`'s diffuse colour (Principled Base Color, Diffuse
-    Color), or None."""
+def _shader_input(mat, names: dict):
+    """The input of `mat`'s surface shader named by ``names[shader node type]``, or None."""
     use_nodes = True if NODES_ALWAYS else mat.use_nodes
     node = _surface_node(mat) if use_nodes else None
     if node is None:
         return None
-    name = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}.get(node.bl_idname)
+    name = names.get(node.bl_idname)
     return node.inputs.get(name) if name else None
+
+
+def reflectance_socket(mat):
+    """The input socket that holds `mat`'s diffuse colour (Principled Base Color, Diffuse
+    Color), or None."""
+    return _shader_input(mat, {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"})
+
+
+def emission_socket(mat):
+    """The input socket that holds `mat`'s emission colour (Principled Emission Color, an
+    Emission shader's Color), or None."""
+    return _shader_input(mat, {"ShaderNodeBsdfPrincipled": "Emission Color", "ShaderNodeEmission": "Color"})
+
+
+def _emission(node, color_name, color, strength, multiplier):
+    """Colour x strength x multiplier as exitance. A readable texture on the colour (`color`
+    None) counts as white: the faces carry its mean (``textures.polygon_emission``). Any other
+    missing value: no emission."""
+    if color is None:
+        sock = node.inputs.get(color_name)
+        if sock is None or not sock.is_linked or textures.is_readable(sock) is not None:
+            return (0.0, 0.0, 0.0)
+        color = (1.0, 1.0, 1.0)
+    if strength is None:
+        return (0.0, 0.0, 0.0)
+    return core.exitance(color, strength, multiplier)
 
 
 def read_material(mat, multiplier: float = 1.0, owner: str = "") -> core.MaterialSpec:
@@ -97,20 +125,18 @@ def read_material(mat, multiplier: float = 1.0, owner: str = "") -> core.Materia
         base = _value(node, "Base Color", problems, "Principled BSDF", textured=True)
         if base is not None:
             rho = core.reflectance(base)
-        color = _value(node, "Emission Color", problems, "Principled BSDF")
+        color = _value(node, "Emission Color", problems, "Principled BSDF", textured=True)
         strength = _value(node, "Emission Strength", problems, "Principled BSDF")
-        if color is not None and strength is not None:
-            emission = core.exitance(color, strength, multiplier)
+        emission = _emission(node, "Emission Color", color, strength, multiplier)
     elif kind == "ShaderNodeBsdfDiffuse":
         base = _value(node, "Color", problems, "Diffuse BSDF", textured=True)
         if base is not None:
             rho = core.reflectance(base)
     elif kind == "ShaderNodeEmission":
         rho = (0.0, 0.0, 0.0)
-        color = _value(node, "Color", problems, "Emission")
+        color = _value(node, "Color", problems, "Emission", textured=True)
         strength = _value(node, "Strength", problems, "Emission")
-        if color is not None and strength is not None:
-            emission = core.exitance(color, strength, multiplier)
+        emission = _emission(node, "Color", color, strength, multiplier)
     else:
         problems.append(f"shader {node.bl_label or kind} is not read")
     return core.MaterialSpec(name=name, reflectance=rho, emission=emission,

@@ -1,16 +1,19 @@
-"""Textured reflectance: a colour that varies over a face enters the solve as its mean over the face.
+"""Textured reflectance and emission: a colour that varies over a face enters the solve as its mean
+over the face.
 
-The library holds one reflectance per element (a face today), and the solve is linear in it,
-so what a face reflects in total is its area-mean reflectance. That mean is computed here by
-sampling the material's colour node chain over each face's UV triangles (Blender's
-``loop_triangles``), area-weighted:
+The library holds one reflectance and one emission per element (a face today), and the solve is
+linear in each, so what a face reflects or emits in total is its area-mean reflectance or
+emission. The emission's mean is a per-face scale of the material's emission (strength x white
+where the Emission Color is textured), so animated strengths keep applying. The means are
+computed here by sampling the material's colour node chain (Base Color, or Emission Color) over
+each face's UV triangles (Blender's ``loop_triangles``), area-weighted:
 
 - Readable chains, evaluated per sample with numpy: an Image Texture (flat projection; Linear,
   Closest or Cubic (read as Linear) interpolation; Repeat, Extend, Clip or Mirror extension; its
   UV map from a UV Map node or the mesh's active render map), an RGB node, a Mix Color node
   (Mix, Multiply, Add, Subtract, Screen, Darken, Lighten; the legacy MixRGB too), Reroutes, and
   unlinked inputs. Anything else (a Mapping node, a procedural texture, ...) is reported by node
-  type, and the material keeps its default reflectance.
+  type, and the material keeps its default reflectance (an unreadable emission counts as none).
 - Colour images are read as Blender does: an 8-bit or float image whose colour space is sRGB is
   decoded with the sRGB transfer function to scene-linear; Non-Color and linear spaces are used as
   stored. The alpha output reads the image's alpha as grey.
@@ -295,37 +298,53 @@ def socket_means(sampler: Sampler, socket, tri_loops: np.ndarray) -> np.ndarray:
     return out
 
 
-def polygon_reflectance(mesh, slots, polygon_slots, problems: list) -> np.ndarray | None:
-    """(P, 3) reflectance per polygon of `mesh` (its slot materials' textured colour averaged
-    over the polygon, untextured materials their constant), or None when no slot material has
-    a readable textured colour. What cannot be read is appended to `problems`, once per material
-    and reason."""
-    from .materials import reflectance_socket
+def _loop_triangles(mesh):
+    """The mesh's loop triangles: (T, 3) loops, (T,) polygon and (T,) area of each."""
+    mesh.calc_loop_triangles()
+    n_t = len(mesh.loop_triangles)
+    tri_loops = np.empty(n_t * 3, np.int32)
+    mesh.loop_triangles.foreach_get("loops", tri_loops)
+    tri_poly = np.empty(n_t, np.int32)
+    mesh.loop_triangles.foreach_get("polygon_index", tri_poly)
+    area = np.empty(n_t, np.float32)
+    mesh.loop_triangles.foreach_get("area", area)
+    return tri_loops.reshape(-1, 3).astype(np.int64), tri_poly, area
 
+
+def _area_means(means: np.ndarray, polys: np.ndarray, w: np.ndarray, out: np.ndarray) -> None:
+    """Writes into `out` (P, 3) each polygon's area-weighted mean of its triangles' `means`."""
+    n_p = len(out)
+    total = np.bincount(polys, weights=w, minlength=n_p)
+    has = total > 0
+    for c in range(3):
+        s = np.bincount(polys, weights=w * means[:, c], minlength=n_p)
+        out[has, c] = s[has] / total[has]
+    # A zero-area polygon keeps its mean over the samples alone.
+    for p in np.unique(polys[total[polys] == 0]):
+        out[p] = means[polys == p].mean(axis=0)
+
+
+def polygon_socket_means(mesh, slots, polygon_slots, socket_of, untextured, problems: list):
+    """Per polygon of `mesh`, the mean over it of the colour its slot material feeds into the
+    socket ``socket_of(mat)`` where that socket is linked to a chain the sampler reads, else
+    ``untextured(mat, linked)`` (`mat` may be None; `linked`: the socket is linked but could not
+    be read). Returns ((P, 3) float64, whether any polygon was read), or None when no slot
+    material has that socket linked. What cannot be read is appended to `problems`, once per
+    material and reason."""
     textured = {}
     for k, mat in enumerate(slots or []):
-        sock = reflectance_socket(mat) if mat is not None else None
+        sock = socket_of(mat) if mat is not None else None
         if sock is not None and sock.is_linked:
             textured[k] = (mat, sock)
     if not textured:
         return None
     n_p = len(mesh.polygons)
     slot = np.clip(np.asarray(polygon_slots, np.int64), 0, max(len(slots) - 1, 0))
-    mesh.calc_loop_triangles()
-    n_t = len(mesh.loop_triangles)
-    tri_loops = np.empty(n_t * 3, np.int32)
-    mesh.loop_triangles.foreach_get("loops", tri_loops)
-    tri_loops = tri_loops.reshape(-1, 3).astype(np.int64)
-    tri_poly = np.empty(n_t, np.int32)
-    mesh.loop_triangles.foreach_get("polygon_index", tri_poly)
-    area = np.empty(n_t, np.float32)
-    mesh.loop_triangles.foreach_get("area", area)
-    from .materials import read_material
-
-    rho = np.empty((n_p, 3), np.float64)
+    tri_loops, tri_poly, area = _loop_triangles(mesh)
+    values = np.empty((n_p, 3), np.float64)
     for k in range(len(slots) or 1):
         mat = slots[k] if slots else None
-        rho[slot == k] = read_material(mat).reflectance if mat is not None else core.DEFAULT_REFLECTANCE
+        values[slot == k] = untextured(mat, k in textured)
     sampler = Sampler(mesh)
     any_read = False
     for k, (mat, sock) in textured.items():
@@ -340,20 +359,44 @@ def polygon_reflectance(mesh, slots, polygon_slots, problems: list) -> np.ndarra
                 problems.append(line)
             continue
         any_read = True
-        w = area[tris].astype(np.float64)
-        polys = tri_poly[tris]
-        total = np.bincount(polys, weights=w, minlength=n_p)
-        for c in range(3):
-            s = np.bincount(polys, weights=w * means[:, c], minlength=n_p)
-            has = total > 0
-            rho[has, c] = s[has] / total[has]
-        # A zero-area polygon keeps its mean over the samples alone.
-        zero = np.unique(polys[total[polys] == 0])
-        for p in zero:
-            rho[p] = means[polys == p].mean(axis=0)
-    if not any_read:
+        _area_means(means, tri_poly[tris], area[tris].astype(np.float64), values)
+    return values, any_read
+
+
+def polygon_reflectance(mesh, slots, polygon_slots, problems: list) -> np.ndarray | None:
+    """(P, 3) reflectance per polygon of `mesh` (its slot materials' textured colour averaged
+    over the polygon, untextured materials their constant), or None when no slot material has
+    a readable textured colour. What cannot be read is appended to `problems`, once per material
+    and reason."""
+    from .materials import read_material, reflectance_socket
+
+    def untextured(mat, _linked):
+        # A linked colour that could not be read: the material's own, the default grey.
+        return read_material(mat).reflectance if mat is not None else core.DEFAULT_REFLECTANCE
+
+    found = polygon_socket_means(mesh, slots, polygon_slots, reflectance_socket, untextured, problems)
+    if found is None or not found[1]:
         return None
-    return np.array([core.reflectance(r) for r in rho], np.float64) if n_p else np.zeros((0, 3))
+    rho = found[0]
+    return np.array([core.reflectance(r) for r in rho], np.float64) if len(rho) else np.zeros((0, 3))
+
+
+def polygon_emission(mesh, slots, polygon_slots, problems: list) -> np.ndarray | None:
+    """(P, 3) emission colour scale per polygon of `mesh`: where its slot material's emission
+    colour is textured, the texture's mean over the polygon (the material's emission being its
+    strength x white, ``materials.read_material``); 1 where it is constant (already in the
+    material's emission); 0 where it is linked but could not be read (a linked emission counts
+    as none, as before). None when no slot material has its emission colour linked."""
+    from .materials import emission_socket
+
+    def untextured(_mat, linked):
+        return (0.0, 0.0, 0.0) if linked else (1.0, 1.0, 1.0)
+
+    found = polygon_socket_means(mesh, slots, polygon_slots, emission_socket, untextured, problems)
+    if found is None:
+        return None
+    scale = np.where(np.isfinite(found[0]), found[0], 0.0)
+    return np.maximum(scale, 0.0)
 
 
 def is_readable(socket) -> str | None:

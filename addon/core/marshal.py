@@ -43,6 +43,7 @@ class ObjectData:
     degenerate: np.ndarray      # library faces of zero area
     corner_normals: np.ndarray | None = None     # (C', 3) float32 per library corner; zero: flat
     face_reflectance: np.ndarray | None = None   # (F', 3) float32 per library face (textures)
+    face_emission: np.ndarray | None = None      # (F', 3) float32 emission scale per library face
 
     @classmethod
     def from_mesh(cls, name, vertices, polygon_sizes, loop_vertices, polygon_materials, matrix) -> ObjectData:
@@ -84,6 +85,11 @@ class ObjectData:
         """Reflectance per mesh polygon (a texture's mean over it) as the library's per face."""
         self.face_reflectance = np.asarray(polygon_rho, np.float32).reshape(-1, 3)[self.split.source_face]
 
+    def set_polygon_emission(self, polygon_scale) -> None:
+        """Emission colour scale per mesh polygon (an emission texture's mean over it, multiplying
+        its material's emission) as the library's per face."""
+        self.face_emission = np.asarray(polygon_scale, np.float32).reshape(-1, 3)[self.split.source_face]
+
     @property
     def loop_count(self) -> int:
         return self.split.n_loops
@@ -98,11 +104,15 @@ class ObjectData:
             "matrix": self.matrix,
             "corner_normals": self.corner_normals,
             "face_reflectance": self.face_reflectance,
+            "face_emission": self.face_emission,
         }
 
     def topology_key(self) -> str:
         """Changes when faces, corners or materials change (not when vertices move)."""
         extra = [a for a in (self.corner_normals, self.face_reflectance) if a is not None]
+        if self.face_emission is not None:
+            # Tagged, so that the same values as an emission scale or a reflectance differ.
+            extra += [np.frombuffer(b"face_emission", np.uint8), self.face_emission]
         return digest(self.split.face_sizes, self.split.face_indices, self.face_materials, *extra, decimals=6)
 
     def geometry_key(self) -> str:

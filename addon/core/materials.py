@@ -83,4 +83,6 @@ class MaterialTable:
         return rho, e
 
     def problems(self) -> list[str]:
-        return [f"{s.name} ({s.problem})" for s in self.specs if s.problem] + list(self.texture_problems)
+        # A chain both the material and the texture sampler failed to read is named once.
+        lines = [f"{s.name} ({s.problem})" for s in self.specs if s.problem] + list(self.texture_problems)
+        return list(dict.fromkeys(lines))

@@ -183,6 +183,7 @@ def _declare(lib: ctypes.CDLL) -> None:
         "gr_session_set_world": ([_SESSION, POINTER(c_double), c_double, _F32, c_uint32, c_uint32], c_uint32),
         "gr_session_set_two_sided": ([_SESSION, c_uint32, c_uint32], c_uint32),
         "gr_session_set_object_surface": ([_SESSION, c_uint32, _F32, c_size_t, _F32, c_size_t], c_uint32),
+        "gr_session_set_object_face_emission": ([_SESSION, c_uint32, _F32, c_size_t], c_uint32),
         "gr_session_solve_frame": ([_SESSION, c_double, _PROGRESS, c_void_p], c_uint32),
         "gr_session_set_preview": ([_SESSION, c_uint32], c_uint32),
         "gr_session_refine": ([_SESSION, _PROGRESS, c_void_p, _U32], c_uint32),
@@ -351,7 +352,7 @@ class Session:
     (N, 3), ``face_sizes`` (F,) of 3 or 4, ``face_indices`` (sum of face_sizes,) local to the
     object, ``face_materials`` (F,), and optionally ``matrix`` (4, 4) row-major world-from-object
     (Blender's ``np.array(obj.matrix_world)``), ``corner_normals`` and ``face_reflectance``
-    (see ``set_object_surface``).
+    (see ``set_object_surface``) and ``face_emission`` (see ``set_object_face_emission``).
     """
 
     def __init__(self, settings: dict, reflectance, emission, objects: list[dict]):
@@ -407,6 +408,8 @@ class Session:
             for i, o in enumerate(objects):
                 if o.get("corner_normals") is not None or o.get("face_reflectance") is not None:
                     self.set_object_surface(i, o.get("corner_normals"), o.get("face_reflectance"))
+                if o.get("face_emission") is not None:
+                    self.set_object_face_emission(i, o["face_emission"])
         except RadiosityError:
             self.close()
             raise
@@ -484,6 +487,14 @@ class Session:
                     "face_reflectance")
         self._call("gr_session_set_object_surface", _u32(index, "object"),
                    _ptr(n, _F32) if n.size else None, n.size, _ptr(r, _F32) if r.size else None, r.size)
+
+    def set_object_face_emission(self, index: int, face_emission=None) -> None:
+        """Object ``index``'s emission colour scale per face, (F, 3), >= 0, multiplying its faces'
+        material emission (an Emission Color texture's mean); None for 1 everywhere. Its other
+        surface data (``set_object_surface``) stays."""
+        e = _floats(np.zeros((0, 3)) if face_emission is None else face_emission, (-1, 3), "face_emission")
+        self._call("gr_session_set_object_face_emission", _u32(index, "object"),
+                   _ptr(e, _F32) if e.size else None, e.size)
 
     def set_lights(self, lights) -> None:
         """Replaces the lights from the next frame on. ``lights``: dicts with ``type`` (POINT, SPOT,

@@ -10,7 +10,8 @@
 //! - [`lights`]: `GrLight` and `gr_session_set_lights` (Blender Light objects).
 //! - [`builder`]: `GrSceneBuilder` and `GrMesh`, the scene one call at a time (ABI version 2).
 //! - `sized`: the `struct_size` rule by which structs grow without breaking.
-//! - [`surface`]: `gr_session_set_object_surface` (smooth-shading normals, per-face reflectance).
+//! - [`surface`]: `gr_session_set_object_surface` (smooth-shading normals, per-face reflectance),
+//!   `gr_session_set_object_face_emission` (per-face emission colour scale).
 
 pub mod builder;
 pub mod error;
@@ -42,7 +43,7 @@ pub use session::{
     gr_session_set_object_matrix, gr_session_set_preview, gr_session_solve_frame,
 };
 pub use settings::{GrMethod, GrSettings, gr_settings_default};
-pub use surface::gr_session_set_object_surface;
+pub use surface::{gr_session_set_object_face_emission, gr_session_set_object_surface};
 
 /// The version of this C ABI. It changes only when a declaration in this header changes
 /// incompatibly; check it after loading the library. Version 2: `GrSettings` begins with

@@ -126,7 +126,7 @@ pub fn corners(
             }
             match p.at {
                 Some(at) => gather.point(at, p.normal, solids.as_ref(), true),
-                None => [scene.emission_at(p.material as usize, frame), [0.0; 3]],
+                None => [p.exitance(scene, frame), [0.0; 3]],
             }
         })
         .collect();

@@ -165,7 +165,7 @@ impl Lighting {
         let s = &scene.settings;
         let patches: Vec<Patch> = faces.iter().map(|e| e.patch).collect();
         Self {
-            emission: faces.iter().map(|e| scene.emission_at(e.material as usize, frame)).collect(),
+            emission: faces.iter().map(|e| e.emission(scene, frame)).collect(),
             occluders: s.visibility.then(|| Occluders::new(&patches, s.visibility_samples)),
             lights: DirectLight::new(scene, frame, faces),
             tolerance: s.tolerance,
@@ -380,7 +380,7 @@ impl HierarchicalFrame {
                         res.face_radiosity.push(to_f32(self.face_mean(f)));
                         let material = obj.face_materials[fi];
                         let rho = scene.reflectance_of(o, fi, material);
-                        let emission = scene.emission_at(material as usize, frame);
+                        let emission = scene.emission_of(o, fi, material, frame);
                         for (s, t) in corner_params(face.len()) {
                             let v = if face.len() == 3 && t == 1.0 {
                                 self.apex(f)
@@ -392,7 +392,7 @@ impl HierarchicalFrame {
                         }
                     }
                     _ => {
-                        let e = to_f32(scene.emission_at(obj.face_materials[fi] as usize, frame));
+                        let e = to_f32(scene.emission_of(o, fi, obj.face_materials[fi], frame));
                         res.face_radiosity.push(e);
                         res.corner_radiosity.extend(std::iter::repeat_n(e, face.len()));
                         res.corner_irradiance.extend(std::iter::repeat_n([0.0; 3], face.len()));

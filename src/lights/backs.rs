@@ -38,7 +38,7 @@ pub(super) fn emitter_backs(scene: &Scene, frame: f64, elements: &[Element]) -> 
         .enumerate()
         .filter(|(_, e)| scene.two_sided.get(e.object as usize).copied().unwrap_or(false))
         .filter_map(|(i, e)| {
-            let exitance = scene.emission_at(e.material as usize, frame);
+            let exitance = e.emission(scene, frame);
             if exitance.iter().all(|&c| c <= 0.0) {
                 return None;
             }

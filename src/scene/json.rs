@@ -226,6 +226,10 @@ struct ObjectFile {
     /// Reflectance per face, overriding the face's material's (a texture's mean over the face).
     #[serde(default)]
     face_reflectance: Vec<[f64; 3]>,
+    /// Emission colour scale per face, multiplying the face's material's emission (an Emission
+    /// Color texture's mean over the face).
+    #[serde(default)]
+    face_emission: Vec<[f64; 3]>,
 }
 
 #[derive(Deserialize)]
@@ -298,6 +302,7 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
         surfaces.push(super::Surface {
             corner_normals: obj.corner_normals.iter().map(|n| DVec3::from_array(*n)).collect(),
             face_reflectance: obj.face_reflectance.clone(),
+            face_emission: obj.face_emission.clone(),
         });
         let name = obj.name.unwrap_or_else(|| format!("object {o}"));
         let place = format!("object \"{name}\"");
@@ -409,7 +414,7 @@ pub struct ResultFile {
     pub stats: serde_json::Value,
 }
 
-/// An object's `corner_normals` and `face_reflectance`, where it has them.
+/// An object's `corner_normals`, `face_reflectance` and `face_emission`, where it has them.
 fn surface_to_json(object: &mut serde_json::Value, surface: Option<&super::Surface>) {
     let Some(s) = surface else { return };
     if !s.corner_normals.is_empty() {
@@ -418,6 +423,9 @@ fn surface_to_json(object: &mut serde_json::Value, surface: Option<&super::Surfa
     }
     if !s.face_reflectance.is_empty() {
         object["face_reflectance"] = serde_json::json!(s.face_reflectance);
+    }
+    if !s.face_emission.is_empty() {
+        object["face_emission"] = serde_json::json!(s.face_emission);
     }
 }
 

@@ -254,8 +254,24 @@ impl Scene {
         placement::emission_at(self.materials[m].emission, &self.emission_keys[m], frame)
     }
 
+    /// Face `f` of object `o`'s emission colour scale ([`Surface::face_emission`]; 1 without).
+    pub fn emission_scale(&self, o: usize, f: usize) -> [f64; 3] {
+        self.surfaces.get(o).and_then(|s| s.face_emission.get(f)).copied().unwrap_or([1.0; 3])
+    }
+
+    /// The exitance of face `f` of object `o`, whose material is `material`, at `frame`: the
+    /// material's emission (keys included) times the face's scale ([`Scene::emission_scale`]).
+    pub fn emission_of(&self, o: usize, f: usize, material: u32, frame: f64) -> [f64; 3] {
+        scaled(self.emission_at(material as usize, frame), self.emission_scale(o, f))
+    }
+
     /// Total number of faces over all objects.
     pub fn face_count(&self) -> usize {
         self.objects.iter().map(|o| o.faces.len()).sum()
     }
+}
+
+/// `e` times `scale` per channel (a face's emission scale on a material's emission).
+pub fn scaled(e: [f64; 3], scale: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|c| e[c] * scale[c])
 }

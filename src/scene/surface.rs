@@ -1,7 +1,7 @@
 //! What a mesh says about its surface beyond its faces and materials (issue 22): per-corner
-//! shading normals (smooth shading, custom split normals) and per-face reflectance (a texture's
-//! mean over the face). Both are optional per object; without them an object is what it was
-//! before, bit for bit.
+//! shading normals (smooth shading, custom split normals), per-face reflectance and a per-face
+//! emission colour (each a texture's mean over the face). All are optional per object; without
+//! them an object is what it was before, bit for bit.
 
 use glam::{DMat3, DMat4, DVec3};
 
@@ -18,11 +18,19 @@ pub struct Surface {
     /// Diffuse reflectance per face, overriding the face's material's (an image texture's mean
     /// over the face); empty: the materials'.
     pub face_reflectance: Vec<[f64; 3]>,
+    /// Emission colour per face, multiplying the face's material's emission (an Emission Color
+    /// texture's mean over the face, the material's emission being strength x white); empty: 1.
+    /// A scale rather than an exitance, so the material's animated strength keeps applying.
+    pub face_emission: Vec<[f64; 3]>,
 }
+
+/// The largest per-face emission scale: an HDR texture's mean may exceed 1, but not by so much
+/// that a material's emission (at most [`super::MAX_EMISSION`]) times it leaves the f32 range.
+pub const MAX_FACE_EMISSION: f64 = 1e6;
 
 impl Surface {
     pub fn is_empty(&self) -> bool {
-        self.corner_normals.is_empty() && self.face_reflectance.is_empty()
+        self.corner_normals.is_empty() && self.face_reflectance.is_empty() && self.face_emission.is_empty()
     }
 
     /// Checks the lengths against `obj` and every value; `place` names the object in messages.
@@ -48,6 +56,26 @@ impl Surface {
             for (c, &r) in rho.iter().enumerate() {
                 if !(r.is_finite() && (0.0..1.0).contains(&r)) {
                     return Err(invalid_scene!("{place}: face_reflectance[{f}][{c}] = {r} is outside [0,1)"));
+                }
+            }
+        }
+        self.validate_face_emission(obj, place)
+    }
+
+    fn validate_face_emission(&self, obj: &Object, place: &str) -> Result<()> {
+        if !self.face_emission.is_empty() && self.face_emission.len() != obj.faces.len() {
+            return Err(invalid_scene!(
+                "{place}: face_emission has {} entries for {} faces",
+                self.face_emission.len(),
+                obj.faces.len()
+            ));
+        }
+        for (f, scale) in self.face_emission.iter().enumerate() {
+            for (c, &x) in scale.iter().enumerate() {
+                if !(x.is_finite() && (0.0..=MAX_FACE_EMISSION).contains(&x)) {
+                    return Err(invalid_scene!(
+                        "{place}: face_emission[{f}][{c}] = {x} must be finite, >= 0 and at most {MAX_FACE_EMISSION:e}"
+                    ));
                 }
             }
         }

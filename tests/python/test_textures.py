@@ -12,6 +12,12 @@ or multiplied with a constant by a Mix node) enters the solve per face as its me
   loops of that row); the library gathers a vertex once, so the walls are compared with Cycles'
   per-vertex mean (with a plain floor the two readings agree to the noise).
 - What cannot be read is named in the bake's report, by node type.
+- Emission textures likewise: a black/white checker on an emitter's Emission Color gives each
+  face the checker's mean as its emission scale (the material's emission being strength x
+  white), the emitter's faces show their own exitance, a floor under it receives half of what
+  the untextured emitter gives it, and matches Cycles' DIFFUSE bake of the floor lit by the
+  textured emitter (3% + twice Cycles' noise); a keyed Emission Strength scales it frame by frame
+  with the texture kept. A chain that cannot be read is named, and the emission counts as none.
 """
 
 import numpy as np
@@ -30,12 +36,13 @@ def _srgb_encode(c):
     return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
 
 
-def _checker(bpy, size=64, checks=4):
-    """An 8-bit sRGB image of checks x checks squares, red and white (scene-linear RED and 0.8)."""
+def _checker(bpy, size=64, checks=4, colors=(RED, (0.8, 0.8, 0.8))):
+    """An 8-bit sRGB image of checks x checks squares of `colors` (scene-linear; by default red
+    and 0.8 white), the first colour in the corner (u, v) = (0, 0)."""
     img = bpy.data.images.new("Checker", size, size, alpha=False)
     i, j = np.meshgrid(np.arange(size), np.arange(size), indexing="ij")   # rows (v), columns (u)
     red = ((i // (size // checks)) + (j // (size // checks))) % 2 == 0
-    lin = np.where(red[..., None], np.array(RED), np.array([0.8, 0.8, 0.8]))
+    lin = np.where(red[..., None], np.array(colors[0]), np.array(colors[1]))
     px = np.concatenate([_srgb_encode(lin), np.ones((size, size, 1))], axis=2)
     img.pixels.foreach_set(px.astype(np.float32).reshape(-1))
     img.update()
@@ -174,3 +181,142 @@ def test_what_cannot_be_read_is_named(blender):
     objs = _room(bpy, mat)
     line = export.export(bpy.context.evaluated_depsgraph_get(), [objs["Floor"]]).problems_line()
     assert line is not None and "Noise Texture" in line and "Noisy" in line, line
+
+
+STRENGTH = 4.0   # the emitter's Emission Strength (radiance W/(sr m^2))
+BLACK_WHITE = ((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
+
+
+def _uv_map(obj, origin, u, v):
+    """A UV map over `obj` running 0..1 along its grid's u and v edges."""
+    me = obj.data
+    uv = me.uv_layers.new(name="UVMap")
+    loops = np.empty(len(me.loops), np.int32)
+    me.loops.foreach_get("vertex_index", loops)
+    co = np.array([me.vertices[i].co[:] for i in loops], np.float64) - np.asarray(origin, np.float64)
+    u, v = np.asarray(u, np.float64), np.asarray(v, np.float64)
+    st = np.stack([co @ u / (u @ u), co @ v / (v @ v)], 1)
+    uv.uv.foreach_set("vector", st.astype(np.float32).reshape(-1))
+
+
+def _emissive(bpy, img=None):
+    """A Principled emitter (black, no specular) of Emission Strength STRENGTH whose Emission
+    Color is `img` (Closest) or, without one, white."""
+    mat = bpy.data.materials.new("Glow")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    nodes = mat.node_tree.nodes
+    bsdf = nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    bsdf.inputs["Specular IOR Level"].default_value = 0.0
+    bsdf.inputs["Emission Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    bsdf.inputs["Emission Strength"].default_value = STRENGTH
+    if img is not None:
+        tex = nodes.new("ShaderNodeTexImage")
+        tex.image = img
+        tex.interpolation = "Closest"
+        mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Emission Color"])
+    return mat
+
+
+def _lit_floor(bpy, glow, emitter_n=4):
+    """A 2 x 2 white floor of 8 x 8 faces under a 1 x 1 emitter of `emitter_n` x `emitter_n`
+    faces at height 1, facing down, UV-mapped 0..1 (4 faces: one per check of `_checker`)."""
+    sc = bpy.context.scene
+    sc.frame_start = sc.frame_end = 1
+    floor = mesh_object(bpy, "Floor", *grid_quad((-1, -1, 0), (2, 0, 0), (0, 2, 0), 8),
+                        _diffuse(bpy, "White", (0.8, 0.8, 0.8)))
+    origin, u, v = (-0.5, -0.5, 1.0), (0.0, 1.0, 0.0), (1.0, 0.0, 0.0)   # u x v = -z: facing down
+    emitter = mesh_object(bpy, "Emitter", *grid_quad(origin, u, v, emitter_n), glow)
+    _uv_map(emitter, origin, u, v)
+    return floor, emitter
+
+
+def _clear(bpy):
+    for ob in list(bpy.data.objects):
+        bpy.data.objects.remove(ob)
+
+
+def test_the_exported_emission_scale_is_the_textures_mean_over_each_face(blender):
+    bpy = blender
+    from addon.blender import export
+
+    img, lin = _checker(bpy, colors=BLACK_WHITE)
+    for n in (4, 6):   # faces on the checks (scales 0 and 1), and straddling them
+        floor, emitter = _lit_floor(bpy, _emissive(bpy, img), emitter_n=n)
+        exp = export.export(bpy.context.evaluated_depsgraph_get(), [floor, emitter])
+        assert exp.problems_line() is None, exp.problems_line()
+        # The material's emission is strength x white (exitance pi L), the faces carry the image.
+        _, emission = exp.materials.arrays()
+        assert np.allclose(emission.max(axis=0), np.pi * STRENGTH), emission
+        got = exp.objects[1].data.face_emission
+        np.testing.assert_allclose(got, _face_means(emitter, lin), atol=4e-3)
+        if n == 4:
+            assert sorted(np.unique(np.round(got[:, 0], 3))) == [0.0, 1.0]
+        assert exp.objects[0].data.face_emission is None   # the floor has no emission texture
+        _clear(bpy)
+
+
+def test_a_half_black_emission_texture_halves_the_light_as_in_cycles(blender):
+    bpy = blender
+    img, lin = _checker(bpy, colors=BLACK_WHITE)
+    glow = _emissive(bpy, img)
+    floor, emitter = _lit_floor(bpy, glow)
+    bakes.cycles_bake(bpy, [floor], SAMPLES, attr="Cycles", seed=1)
+    bakes.cycles_bake(bpy, [floor], SAMPLES, attr="Cycles2", seed=2)
+    assert bake(bpy, method="FULL") == {"FINISHED"}
+    textured = stored(floor.data, 1)
+    # The emitter's faces show their own exitance: B / pi = strength x the check's colour.
+    shown = stored(emitter.data, 1)
+    dark = np.repeat(_face_means(emitter, lin)[:, 0] < 0.5, 4)
+    assert np.allclose(shown[dark], 0.0, atol=1e-4) and np.allclose(shown[~dark], STRENGTH, rtol=1e-3), shown
+    ref = corner_values(floor, "Cycles")
+    noise = bakes.relative_rmse(corner_values(floor, "Cycles2"), ref) / np.sqrt(2)
+    rmse = bakes.relative_rmse(textured, ref)
+    # The same emitter untextured (white): twice the light.
+    glow.node_tree.links.remove(glow.node_tree.nodes["Principled BSDF"].inputs["Emission Color"].links[0])
+    assert bake(bpy, method="FULL") == {"FINISHED"}
+    plain = stored(floor.data, 1)
+    ratio = textured.mean() / plain.mean()
+    print(f"floor: textured/plain {ratio:.4f}; against Cycles rmse {rmse:.4f}, noise {noise:.4f}")
+    assert abs(ratio - 0.5) < 0.01, ratio
+    assert rmse < 0.03 + 2 * noise, (rmse, noise)
+
+
+def test_an_unreadable_emission_texture_is_named_and_emits_nothing(blender):
+    bpy = blender
+    from addon.blender import export
+
+    glow = _emissive(bpy)
+    noise = glow.node_tree.nodes.new("ShaderNodeTexNoise")
+    color = glow.node_tree.nodes["Principled BSDF"].inputs["Emission Color"]
+    glow.node_tree.links.new(noise.outputs["Color"], color)
+    floor, emitter = _lit_floor(bpy, glow)
+    exp = export.export(bpy.context.evaluated_depsgraph_get(), [floor, emitter])
+    line = exp.problems_line()
+    assert line is not None and "Noise Texture" in line and "Glow" in line, line
+    assert line.count("Noise Texture") == 1, line
+    _, emission = exp.materials.arrays()
+    assert not emission.any(), emission
+
+
+def test_an_animated_strength_keeps_the_emission_texture(blender):
+    # Emission Strength keyed STRENGTH -> 2 x STRENGTH over frames 1-2 under the checker: the
+    # faces keep their scale (black stays black) and the floor's light doubles.
+    bpy = blender
+    img, lin = _checker(bpy, colors=BLACK_WHITE)
+    glow = _emissive(bpy, img)
+    floor, emitter = _lit_floor(bpy, glow)
+    strength = glow.node_tree.nodes["Principled BSDF"].inputs["Emission Strength"]
+    for frame, value in ((1, STRENGTH), (2, 2 * STRENGTH)):
+        strength.default_value = value
+        strength.keyframe_insert("default_value", frame=frame)
+    sc = bpy.context.scene
+    sc.frame_start, sc.frame_end = 1, 2
+    assert bake(bpy, method="INCREMENTAL") == {"FINISHED"}
+    ratio = stored(floor.data, 2).mean() / stored(floor.data, 1).mean()
+    dark = np.repeat(_face_means(emitter, lin)[:, 0] < 0.5, 4)
+    shown = stored(emitter.data, 2)
+    print(f"floor frame 2 / frame 1: {ratio:.4f}")
+    assert abs(ratio - 2.0) < 0.01, ratio
+    assert np.allclose(shown[dark], 0.0, atol=1e-4) and np.allclose(shown[~dark], 2 * STRENGTH, rtol=1e-3)
