@@ -78,7 +78,8 @@ stage "cargo test --release --no-run (compile the test binaries)" limited 1500 c
 stage "cargo test --release (run)" limited 1500 cargo test --release
 
 if [ "$PYTHON_TESTS" = 1 ]; then
-    stage "Python venv with bpy (made in the background)" venv_made 5.0
+    # Waits for the background job: the stage's time is what the Rust stages did not hide.
+    stage "Python venv with bpy" venv_made 5.0
     stage "ruff" .venv/bin/ruff check addon tests/python tools
     stage "pytest under bpy" limited 2400 .venv/bin/python -m pytest -q tests/python
     # Blender 4.5 LTS: the add-on's install, headless, bake, progress, cancel, re-bake and live,
@@ -90,7 +91,7 @@ if [ "$PYTHON_TESTS" = 1 ]; then
         echo "-- bpy 4.5: skipped (SKIP_BPY45=1)"
     else
         if [ -z "${BPY45_PYTHON:-}" ]; then
-            stage "Python venv with bpy 4.5 (made in the background)" venv_made 4.5
+            stage "Python venv with bpy 4.5" venv_made 4.5
         fi
         stage "pytest under bpy 4.5 (subset)" limited 1200 "${BPY45_PYTHON:-.venv45/bin/python}" -m pytest -q \
             tests/python/test_headless_and_packaging.py tests/python/test_progress.py \
