@@ -5,6 +5,9 @@ The library reports ``(fraction, stage)`` per stage ("kernel", "kernel update", 
 ``Meter`` maps each stage onto its share of a frame (the same shares as the CLI's), keeps the
 largest value seen in the frame, and estimates the time left: within a frame by the frame's own
 rate, for the bake by the finished frames' mean (the first frame's estimate while none is done).
+The shares are learned as the library's are: a finished frame's stages, timed, are the shares of
+the next frame of its kind (its first stage), so a frame whose gather is 90% of it (the
+monastery's) is not reported half done when its gather starts.
 
 ``Lines`` turns the events of a bake into the lines the headless script prints: one at most every
 ``interval`` seconds inside a frame, one per finished frame, each with the time spent and left,
@@ -22,10 +25,11 @@ from dataclasses import dataclass
 
 
 def share(stage: str) -> tuple[float, float]:
-    """Where ``stage`` starts in a frame and how much of it it spans (``src/progress.rs``)."""
-    if stage in ("kernel", "kernel update"):
+    """Where ``stage`` starts in a frame and how much of it it spans before a frame of its kind
+    was timed (``src/progress.rs``); "links" and "hierarchy" are the hierarchy's stages."""
+    if stage in ("kernel", "kernel update", "links"):
         return 0.0, 0.45
-    if stage == "solve":
+    if stage in ("solve", "hierarchy"):
         return 0.45, 0.1
     if stage == "corner gather":
         return 0.55, 0.45
@@ -51,18 +55,46 @@ class Meter:
         self.start = self.frame_start = now
         self.fraction = 0.0
         self.finished = 0.0   # the finished frames' total time
+        self.stage_times: dict[str, float] = {}   # this frame's stages, in the order they ran
+        self.running: tuple[str, float] | None = None
+        self.learned: dict[str, dict[str, tuple[float, float]]] = {}   # kind -> stage -> share
 
     def report(self, fraction: float, stage: str, now: float) -> Reading:
-        start, span = share(stage)
+        self._time_stage(stage, now)
+        start, span = self._share(stage)
         f = min(max(start + span * min(max(fraction, 0.0), 1.0), 0.0), 1.0)
         self.fraction = max(self.fraction, f)
         return self.reading(now)
 
     def frame_done(self, now: float) -> None:
+        self._time_stage(None, now)
+        total = sum(self.stage_times.values())
+        if total > 0:
+            shares, start = {}, 0.0
+            for stage, seconds in self.stage_times.items():
+                shares[stage] = (start, seconds / total)
+                start += seconds / total
+            self.learned[next(iter(self.stage_times))] = shares
+        self.stage_times = {}
         self.finished += max(now - self.frame_start, 0.0)
         self.done += 1
         self.frame_start = now
         self.fraction = 0.0
+
+    def _time_stage(self, stage: str | None, now: float) -> None:
+        """Adds the running stage's time up to ``now`` and starts ``stage`` (None: frame ended)."""
+        if self.running is not None:
+            if self.running[0] == stage:
+                return
+            name, since = self.running
+            self.stage_times[name] = self.stage_times.get(name, 0.0) + max(now - since, 0.0)
+        self.running = None if stage is None else (stage, now)
+        if stage is not None:
+            self.stage_times.setdefault(stage, 0.0)
+
+    def _share(self, stage: str) -> tuple[float, float]:
+        kind = next(iter(self.stage_times), stage)
+        return self.learned.get(kind, {}).get(stage) or share(stage)
 
     def reading(self, now: float) -> Reading:
         in_frame = max(now - self.frame_start, 0.0)

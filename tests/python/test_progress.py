@@ -69,6 +69,26 @@ def test_time_left_follows_the_rate_then_the_finished_frames():
     assert (human(3725), human(187), human(12.34), human(None)) == ("1 h 02 m", "3 m 07 s", "12.3 s", "?")
 
 
+def test_the_next_frame_of_a_kind_is_measured_by_the_last_ones_stages():
+    # As src/progress.rs's test: a frame whose gather took 90% of it (the monastery's) makes the
+    # next frame of its kind map the gather onto 90% of the frame.
+    m = Meter(3, now=0.0)
+    m.report(0.0, "kernel", 0.0)
+    m.report(1.0, "kernel", 1.0)
+    m.report(0.0, "solve", 1.0)
+    m.report(0.0, "corner gather", 2.0)
+    m.frame_done(20.0)
+    m.report(0.0, "kernel", 20.0)
+    r = m.report(0.0, "corner gather", 22.0)
+    assert r.frame_fraction == pytest.approx(0.1)
+    assert r.frame_left == pytest.approx(18.0)
+    assert m.report(0.5, "corner gather", 31.0).frame_fraction == pytest.approx(0.55)
+    # An incremental frame, another kind, starts from the fixed shares.
+    m.frame_done(40.0)
+    assert m.report(0.5, "kernel update", 41.0).frame_fraction == pytest.approx(0.5 * 0.45)
+    assert m.report(0.0, "corner gather", 42.0).frame_fraction == pytest.approx(0.55)
+
+
 def test_lines_inside_a_frame_come_at_most_every_interval():
     out = []
 
