@@ -178,3 +178,40 @@ fn an_empty_scene_bakes_on_the_hierarchy_as_on_the_flat_path() {
         assert!(session.face_results().unwrap().is_empty(), "{method:?}");
     }
 }
+
+/// A first frame's links are computed in chunks that report their progress and may cancel it
+/// (issue 24 item 4, issue 23): on a large scene the link phase ran for minutes with no line and
+/// no way to stop it.
+#[test]
+fn the_link_phase_reports_progress_and_cancels_between_chunks() {
+    use std::sync::Mutex;
+    let scene = cornell_box(10, Settings { basis_order: 1, ..Default::default() });
+    let hs = HierarchySettings::default();
+    let seen = Mutex::new(Vec::new());
+    let record = |f: f64, stage: &str| {
+        seen.lock().unwrap().push((f, stage.to_owned()));
+        true
+    };
+    let h = solve_frame(&scene, 0.0, &hs, &record).unwrap();
+    assert!(h.stats.links > 3 * 4096, "{} links: too few chunks to test", h.stats.links);
+    let seen = seen.into_inner().unwrap();
+    let first_round: Vec<f64> = seen
+        .iter()
+        .filter(|(f, s)| s == "links" && *f > 0.0 && *f < 1.0 / hs.rounds as f64)
+        .map(|r| r.0)
+        .collect();
+    assert!(first_round.len() >= 2, "the first round's linking reported {first_round:?}");
+    assert!(first_round.windows(2).all(|w| w[0] <= w[1]), "{first_round:?}");
+
+    // Cancelled at the first chunk after the start: no sweep ran.
+    let swept = Mutex::new(false);
+    let cancel = |f: f64, stage: &str| {
+        if stage == "hierarchy" {
+            *swept.lock().unwrap() = true;
+        }
+        !(stage == "links" && f > 0.0)
+    };
+    let r = solve_frame(&scene, 0.0, &hs, &cancel);
+    assert!(matches!(r, Err(galerkin_radiosity::Error::Cancelled)), "{:?}", r.err());
+    assert!(!*swept.lock().unwrap(), "the solve began before the cancel was heard");
+}

@@ -235,15 +235,17 @@ fn link_and_solve(
         }
         let t = Instant::now();
         let mut radiosity = state.radiosity_estimate();
+        let rounds = hs.rounds.max(1) as f64;
+        let linked = |f: f64| progress((round as f64 + f) / rounds, "links");
         match start.take() {
             Some(Start::Root) => {
-                hierarchy.link_all(ctx, &mut radiosity)?;
+                hierarchy.link_all(ctx, &mut radiosity, &linked)?;
             }
             Some(Start::Pairs(work)) => {
-                hierarchy.link_pairs(ctx, &mut radiosity, work)?;
+                hierarchy.link_pairs(ctx, &mut radiosity, work, &linked)?;
             }
             None => {
-                if hierarchy.relink(ctx, &mut radiosity)?.relinked == 0 {
+                if hierarchy.relink(ctx, &mut radiosity, &linked)?.relinked == 0 {
                     break;
                 }
             }

@@ -33,6 +33,13 @@ pub struct Oracle {
     pub clusters: bool,
 }
 
+/// Hears the share of a batch of links computed (0 to 1); `false` cancels the refinement.
+pub type LinkProgress<'a> = &'a (dyn Fn(f64) -> bool + Sync);
+
+/// Links computed between two progress reports: a few hundred ms on two cores for the costliest
+/// (near, partly visible) pairs, far less than a sweep for the usual ones.
+const LINK_CHUNK: usize = 4096;
+
 /// Partially visible links are split while they can carry more than this share of the threshold.
 const PARTIAL_SHARE: f64 = 0.25;
 
@@ -179,9 +186,10 @@ impl Hierarchy {
         ctx: &LinkContext,
         radiosity: &mut Vec<f64>,
         work: Vec<(NodeId, NodeId)>,
+        progress: LinkProgress,
     ) -> Result<RefineStats> {
         let mut stats = RefineStats::default();
-        self.refine_pairs(ctx, radiosity, work, &mut stats)?;
+        self.refine_pairs(ctx, radiosity, work, &mut stats, progress)?;
         stats.links = self.links.len();
         Ok(stats)
     }
@@ -217,17 +225,27 @@ impl Hierarchy {
     /// with the tree: new nodes take their parent's).
     /// [`Error::OutOfMemory`](crate::Error::OutOfMemory) when the links or nodes cannot be
     /// had.
-    pub fn link_all(&mut self, ctx: &LinkContext, radiosity: &mut Vec<f64>) -> Result<RefineStats> {
+    pub fn link_all(
+        &mut self,
+        ctx: &LinkContext,
+        radiosity: &mut Vec<f64>,
+        progress: LinkProgress,
+    ) -> Result<RefineStats> {
         let root = self.tree.root;
         let mut stats = RefineStats::default();
-        self.refine_pairs(ctx, radiosity, vec![(root, root)], &mut stats)?;
+        self.refine_pairs(ctx, radiosity, vec![(root, root)], &mut stats, progress)?;
         stats.links = self.links.len();
         Ok(stats)
     }
 
     /// Tests every link again with the current `radiosity` and refines those that now carry too
     /// much (Hanrahan's re-refinement after a solve).
-    pub fn relink(&mut self, ctx: &LinkContext, radiosity: &mut Vec<f64>) -> Result<RefineStats> {
+    pub fn relink(
+        &mut self,
+        ctx: &LinkContext,
+        radiosity: &mut Vec<f64>,
+        progress: LinkProgress,
+    ) -> Result<RefineStats> {
         let mut stats = RefineStats::default();
         let bar = self.oracle.threshold;
         let mut work = Vec::new();
@@ -242,19 +260,21 @@ impl Hierarchy {
             keep
         });
         stats.relinked = work.len();
-        self.refine_pairs(ctx, radiosity, work, &mut stats)?;
+        self.refine_pairs(ctx, radiosity, work, &mut stats, progress)?;
         stats.links = self.links.len();
         Ok(stats)
     }
 
     /// Refines `work` into links: decide (splitting nodes) one pair at a time, compute the
     /// accepted links in parallel, and send partially visible ones that carry enough back.
+    /// `progress` hears the share of each batch's links computed, and may cancel between chunks.
     fn refine_pairs(
         &mut self,
         ctx: &LinkContext,
         radiosity: &mut Vec<f64>,
         mut work: Vec<(NodeId, NodeId)>,
         stats: &mut RefineStats,
+        progress: LinkProgress,
     ) -> Result<()> {
         let bar = self.oracle.threshold;
         while !work.is_empty() {
@@ -287,10 +307,19 @@ impl Hierarchy {
             // The batch and the links it adds are reserved first: the allocator's refusal of the
             // large vectors is an error (each link's own transfers are small allocations).
             let mut computed: Vec<coupling::Computed> = budget::try_vec(accepted.len(), LINKS)?;
-            accepted
-                .par_iter()
-                .map(|&(a, b)| coupling::compute(ctx, tree, a, b))
-                .collect_into_vec(&mut computed);
+            // In chunks, so that a batch of millions of links (a first frame of a large scene
+            // takes minutes) reports its progress and can be cancelled.
+            let mut part = Vec::new();
+            for chunk in accepted.chunks(LINK_CHUNK) {
+                if !progress(computed.len() as f64 / accepted.len() as f64) {
+                    return Err(crate::Error::Cancelled);
+                }
+                chunk
+                    .par_iter()
+                    .map(|&(a, b)| coupling::compute(ctx, tree, a, b))
+                    .collect_into_vec(&mut part);
+                computed.append(&mut part);
+            }
             budget::try_reserve(&mut self.links, computed.len(), LINKS)?;
             budget::try_reserve(&mut self.idle, computed.len(), LINKS)?;
             budget::try_reserve(&mut self.blocked, computed.len(), LINKS)?;
