@@ -45,42 +45,51 @@ impl Surface {
         if let Some(k) = self.corner_normals.iter().position(|n| !n.is_finite()) {
             return Err(invalid_scene!("{place}: corner_normals[{k}] is not finite"));
         }
-        if !self.face_reflectance.is_empty() && self.face_reflectance.len() != obj.faces.len() {
-            return Err(invalid_scene!(
-                "{place}: face_reflectance has {} entries for {} faces",
-                self.face_reflectance.len(),
-                obj.faces.len()
-            ));
-        }
-        for (f, rho) in self.face_reflectance.iter().enumerate() {
-            for (c, &r) in rho.iter().enumerate() {
-                if !(r.is_finite() && (0.0..1.0).contains(&r)) {
-                    return Err(invalid_scene!("{place}: face_reflectance[{f}][{c}] = {r} is outside [0,1)"));
-                }
-            }
-        }
-        self.validate_face_emission(obj, place)
+        per_face_rgb(
+            &self.face_reflectance,
+            "face_reflectance",
+            obj,
+            place,
+            |r| (0.0..1.0).contains(&r),
+            "is outside [0,1)",
+        )?;
+        let bound = format!("must be finite, >= 0 and at most {MAX_FACE_EMISSION:e}");
+        per_face_rgb(
+            &self.face_emission,
+            "face_emission",
+            obj,
+            place,
+            |x| (0.0..=MAX_FACE_EMISSION).contains(&x),
+            &bound,
+        )
     }
+}
 
-    fn validate_face_emission(&self, obj: &Object, place: &str) -> Result<()> {
-        if !self.face_emission.is_empty() && self.face_emission.len() != obj.faces.len() {
-            return Err(invalid_scene!(
-                "{place}: face_emission has {} entries for {} faces",
-                self.face_emission.len(),
-                obj.faces.len()
-            ));
-        }
-        for (f, scale) in self.face_emission.iter().enumerate() {
-            for (c, &x) in scale.iter().enumerate() {
-                if !(x.is_finite() && (0.0..=MAX_FACE_EMISSION).contains(&x)) {
-                    return Err(invalid_scene!(
-                        "{place}: face_emission[{f}][{c}] = {x} must be finite, >= 0 and at most {MAX_FACE_EMISSION:e}"
-                    ));
-                }
+/// Checks a per-face RGB list `name`: empty, or one entry per face of `obj`, each channel finite
+/// and `ok` (else the error says it `fails`).
+fn per_face_rgb(
+    values: &[[f64; 3]],
+    name: &str,
+    obj: &Object,
+    place: &str,
+    ok: impl Fn(f64) -> bool,
+    fails: &str,
+) -> Result<()> {
+    if !values.is_empty() && values.len() != obj.faces.len() {
+        return Err(invalid_scene!(
+            "{place}: {name} has {} entries for {} faces",
+            values.len(),
+            obj.faces.len()
+        ));
+    }
+    for (f, rgb) in values.iter().enumerate() {
+        for (c, &x) in rgb.iter().enumerate() {
+            if !(x.is_finite() && ok(x)) {
+                return Err(invalid_scene!("{place}: {name}[{f}][{c}] = {x} {fails}"));
             }
         }
-        Ok(())
     }
+    Ok(())
 }
 
 /// A shading normal placed by `world_from_object`: transformed by the inverse transpose (as
