@@ -123,6 +123,79 @@ fn main() {
         flat_table(&settings, quick);
     }
     hierarchy_table(&settings, quick);
+    mixing_table(&settings, quick);
+}
+
+/// The hierarchical solve with and without the Anderson mixer over the same frames, each chain
+/// of frames updated from its own last one, the two chains alternated frame by frame (which
+/// goes first swaps each frame): docs/benchmarks.md's "solve-mixing" block.
+fn mixing_table(settings: &Settings, quick: bool) {
+    use galerkin_radiosity::hierarchy::update::update_frame;
+    use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
+    let frames = if quick { 3 } else { 8 };
+    let cases: Vec<(&str, Scene)> = vec![
+        ("Fig. 5a room", scenes::seed_room(if quick { 2.0 } else { 3.0 }, frames, settings.clone())),
+        ("Fig. 5b billiard", scenes::billiard(if quick { 1.5 } else { 2.5 }, frames, settings.clone())),
+        (
+            "Cornell box, moving light",
+            scenes::cornell_box_moving_light(if quick { 6 } else { 14 }, frames, settings.clone()),
+        ),
+    ];
+    println!(
+        "\nThe hierarchical solve's sweeps plain (Jacobi with push-pull) and mixed (Anderson, depth {}): the same \
+         scenes over {frames} frames, the first fresh, the others updated; solve seconds and sweeps per frame \
+         (means over the updated frames; the fresh frame's sweeps in brackets), and the two chains' face means \
+         apart, worst frame, of the peak:\n",
+        HierarchySettings::default().anderson_depth
+    );
+    println!(
+        "| scene | plain sweeps (fresh) | mixed sweeps (fresh) | plain solve s | mixed solve s | x faster solve | apart |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for (name, scene) in cases {
+        let mixed = HierarchySettings::of(&scene.settings);
+        let plain = HierarchySettings { anderson_depth: 0, ..mixed };
+        let settings = [plain, mixed];
+        let mut chains: Vec<Option<galerkin_radiosity::hierarchy::HierarchicalFrame>> = vec![None, None];
+        let (mut sweeps, mut fresh, mut seconds, mut apart) = ([0.0; 2], [0usize; 2], [0.0; 2], 0.0f64);
+        for (k, f) in (scene.frames.0..=scene.frames.1).enumerate() {
+            let order = if k % 2 == 0 { [0, 1] } else { [1, 0] };
+            for i in order {
+                let next = match chains[i].as_mut() {
+                    None => solve_frame(&scene, f as f64, &settings[i], &no_progress).unwrap(),
+                    Some(previous) => {
+                        update_frame(previous, &scene, f as f64, &settings[i], &no_progress).unwrap()
+                    }
+                };
+                if k == 0 {
+                    fresh[i] = next.stats.sweeps;
+                } else {
+                    sweeps[i] += next.stats.sweeps as f64;
+                    seconds[i] += next.stats.solve_seconds;
+                }
+                chains[i] = Some(next);
+            }
+            let means: Vec<Vec<f64>> = chains
+                .iter()
+                .map(|c| face_means(&c.as_ref().unwrap().face_results(&scene, f as f64)))
+                .collect();
+            let peak = means[0].iter().copied().fold(0.0, f64::max);
+            let worst = means[0].iter().zip(&means[1]).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            apart = apart.max(worst / peak);
+        }
+        let n = (frames - 1).max(1) as f64;
+        println!(
+            "| {name} | {:.1} ({}) | {:.1} ({}) | {:.3} | {:.3} | {:.2}x | {:.4}% |",
+            sweeps[0] / n,
+            fresh[0],
+            sweeps[1] / n,
+            fresh[1],
+            seconds[0] / n,
+            seconds[1] / n,
+            seconds[0] / seconds[1],
+            100.0 * apart,
+        );
+    }
 }
 
 /// The flat methods side by side: docs/benchmarks.md's "animation" block.

@@ -141,7 +141,7 @@ const HIERARCHY_LINK_GROWTH: f64 = 0.76;
 /// links held before they are stored). Nodes are two per face (the face and its share of the
 /// clusters) and one per four links (the quadrants split for them: 2,217 nodes for 3,572 links
 /// on the 91-face Cornell box at order 2, about 250k for 15.9M on the monastery), each its
-/// record, moments and the solve's three coefficient vectors. Elements and results as
+/// record, moments, the solve's three coefficient vectors and its mixer's columns. Elements and results as
 /// [`estimate`]; no corner gather (the hierarchy's corners come from its leaves). Against the
 /// measured peaks: the full monastery at order 1, 5.8 GB (about 12 GB estimated); the decimated
 /// one at order 2, 56 MB (0.3 GB estimated).
@@ -163,7 +163,11 @@ pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
     let link_count = faces.saturating_mul(links_per_face);
     let links = link_count.saturating_mul(per_link).saturating_mul(2);
     let nodes = faces.saturating_mul(2).saturating_add(link_count / 4);
-    let per_node = size_of::<crate::hierarchy::tree::Node>() as u64 + 16 + nb * 8 + 3 * nb * 3 * 8 + 64;
+    // The solve's Anderson mixer holds `2 depth + 4` copies of the leaves' coefficients
+    // (`hierarchy::solve::Accelerated`); most nodes are leaves.
+    let mixer = (2 * crate::hierarchy::solve::ANDERSON_DEPTH as u64 + 4) * nb * 3 * 8;
+    let per_node =
+        size_of::<crate::hierarchy::tree::Node>() as u64 + 16 + nb * 8 + 3 * nb * 3 * 8 + mixer + 64;
     let elements = flat.elements.saturating_add(nodes.saturating_mul(per_node));
     Estimate { links, gather: 0, elements, results: flat.results }
 }

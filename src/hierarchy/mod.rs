@@ -8,6 +8,7 @@
 //! runs it on one frame of a scene from scratch: link from the sources' brightness, solve,
 //! link again where the solution's brightness asks for it, solve again.
 
+pub mod anderson;
 pub mod coupling;
 pub mod gather;
 pub mod lobes;
@@ -52,6 +53,8 @@ pub struct HierarchySettings {
     pub rounds: usize,
     /// Jacobi sweeps per round at most.
     pub max_sweeps: usize,
+    /// Steps the sweeps' Anderson mixer keeps ([`anderson`]; 0: plain Jacobi sweeps).
+    pub anderson_depth: usize,
     /// Links may end at clusters (off only to test the surface hierarchy alone).
     pub clusters: bool,
     /// How links between near surfaces are integrated.
@@ -75,6 +78,7 @@ impl Default for HierarchySettings {
             min_area: 1e-6,
             rounds: 3,
             max_sweeps: 500,
+            anderson_depth: solve::ANDERSON_DEPTH,
             clusters: true,
             near: coupling::NearRule::Coarse,
             corner_gather: false,
@@ -254,7 +258,7 @@ fn link_and_solve(
         state.add_sources(&hierarchy.tree, &lit.emission, lit.lights.as_ref());
         stats.link_seconds += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let solved = state.solve(&hierarchy.tree, &hierarchy.links, stop, hs.max_sweeps, &cancel)?;
+        let solved = state.solve(&hierarchy.tree, &hierarchy.links, stop, hs, &cancel)?;
         stats.sweeps += solved.sweeps;
         stats.solve_seconds += t.elapsed().as_secs_f64();
     }

@@ -173,7 +173,8 @@ fn an_updated_frame_solves_as_a_cold_start_on_its_links() {
     cold.add_sources(tree, &lit.emission, lit.lights.as_ref());
     cold.start_from_sources(tree);
     let stop = 1e-9 * cold.source_power(tree);
-    cold.solve(tree, &next.hierarchy.links, stop, 2000, &|| false).unwrap();
+    let many = HierarchySettings { max_sweeps: 2000, ..hs };
+    cold.solve(tree, &next.hierarchy.links, stop, &many, &|| false).unwrap();
     let warm = face_means(&next);
     let cold: Vec<f64> = (0..tree.faces.len()).map(|f| cold.mean[f][0]).collect();
     let peak = cold.iter().copied().fold(0.0, f64::max);
