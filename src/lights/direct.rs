@@ -28,6 +28,11 @@ const AREA_SAMPLES: usize = 4;
 /// Sides of the polygon standing for a disk or ellipse (of the same area).
 const ROUND_SIDES: usize = 32;
 
+/// Shadow-ray directions per axis of the cone a sphere light (Point or Spot of radius > 0) or a
+/// sun of angle > 0 subtends: `SOFT_AXIS^2` fixed directions per receiver point, so a bake is
+/// reproducible and an incremental frame equals its full solve.
+const SOFT_AXIS: usize = 4;
+
 /// World strata per axis, per visibility sample per axis of the quality setting
 /// (`Settings::visibility_samples`: 1 Draft .. 4 Ultra): at a gathered corner or foot, whose
 /// value is what the host shows (Medium: 16 x 16 strata, 289 rays and 16 more per stratum on
@@ -50,6 +55,9 @@ struct Placed {
     scale: [f64; 3],
     cos_half: f64,
     smooth: f64,
+    /// Point and Spot: the sphere's radius (0: a point); Sun: half its angular diameter (0:
+    /// parallel rays).
+    extent: f64,
     /// Area: the outline (front = `axis`) and shadow sample points with their areas.
     polygon: Vec<DVec3>,
     samples: Vec<DVec3>,
@@ -99,7 +107,12 @@ impl Placed {
             }
         };
         let smooth = (1.0 - cos_half) * s.spot_blend;
-        Placed { kind: light.kind, position, axis, scale, cos_half, smooth, polygon, samples }
+        let extent = match light.kind {
+            LightKind::Point | LightKind::Spot => light.radius,
+            LightKind::Sun => 0.5 * light.angle,
+            LightKind::Area => 0.0,
+        };
+        Placed { kind: light.kind, position, axis, scale, cos_half, smooth, extent, polygon, samples }
     }
 }
 
@@ -112,6 +125,45 @@ fn smoothstep(f: f64) -> f64 {
     } else {
         (3.0 - 2.0 * f) * f * f
     }
+}
+
+/// A spot's cone and blend along the unit direction `to_light` from the receiver (Cycles'
+/// `spot_attenuation`, taken from the light's centre also for a sphere); 1 for a Point light.
+fn spot_attenuation(l: &Placed, to_light: DVec3) -> f64 {
+    if l.kind != LightKind::Spot {
+        return 1.0;
+    }
+    let off = (-to_light).dot(l.axis);
+    if off <= l.cos_half {
+        return 0.0;
+    }
+    if l.smooth > 0.0 { smoothstep((off - l.cos_half) / l.smooth) } else { 1.0 }
+}
+
+/// The fixed points of the unit disk the soft lights' shadow rays go through: the midpoints of
+/// `SOFT_AXIS x SOFT_AXIS` strata of the square carried onto the disk by Shirley and Chiu's
+/// concentric map ("A low distortion map between disk and square", 1997). The map keeps areas,
+/// so the strata stay equal in area, and it is odd (`-p` maps to minus the image of `p`), so the
+/// points' mean is the disk's centre: [`DirectLight::cone_factor`] relies on that.
+fn soft_disk() -> &'static [(f64, f64)] {
+    static DISK: std::sync::LazyLock<Vec<(f64, f64)>> = std::sync::LazyLock::new(|| {
+        let m = SOFT_AXIS as f64;
+        let mid = |i: usize| 2.0 * (i as f64 + 0.5) / m - 1.0;
+        let mut points = Vec::with_capacity(SOFT_AXIS * SOFT_AXIS);
+        for i in 0..SOFT_AXIS {
+            for j in 0..SOFT_AXIS {
+                let (a, b) = (mid(i), mid(j));
+                let (r, phi) = if a.abs() > b.abs() {
+                    (a, 0.25 * PI * b / a)
+                } else {
+                    (b, 0.5 * PI - 0.25 * PI * a / b)
+                };
+                points.push((r * phi.cos(), r * phi.sin()));
+            }
+        }
+        points
+    });
+    &DISK
 }
 
 /// Every element as shadow casters (the scene's hull too: a sun shines in from outside).
@@ -238,24 +290,23 @@ impl DirectLight {
             LightKind::Point | LightKind::Spot => {
                 let d = l.position - x;
                 let d2 = d.length_squared();
-                let cos = n.dot(d) / d2.sqrt();
-                if cos <= 0.0 || d2 == 0.0 {
+                if d2 == 0.0 {
                     return 0.0;
                 }
-                let spot = if l.kind == LightKind::Spot {
-                    let off = (-d / d2.sqrt()).dot(l.axis);
-                    if off <= l.cos_half {
-                        return 0.0;
-                    }
-                    if l.smooth > 0.0 { smoothstep((off - l.cos_half) / l.smooth) } else { 1.0 }
-                } else {
-                    1.0
-                };
-                if !self.shadows.visible(x, l.position, e) {
+                let spot = spot_attenuation(l, d / d2.sqrt());
+                if spot == 0.0 {
+                    return 0.0;
+                }
+                if l.extent > 0.0 {
+                    return spot * self.sphere_factor(l.position, l.extent, x, n, e);
+                }
+                let cos = n.dot(d) / d2.sqrt();
+                if cos <= 0.0 || !self.shadows.visible(x, l.position, e) {
                     return 0.0;
                 }
                 spot * cos / d2
             }
+            LightKind::Sun if l.extent > 0.0 => self.sun_disk_factor(-l.axis, l.extent, x, n, e),
             LightKind::Sun => {
                 let to_sun = -l.axis;
                 let cos = n.dot(to_sun);
@@ -286,6 +337,70 @@ impl DirectLight {
                 if all > 0.0 { f * seen / all } else { f }
             }
         }
+    }
+
+    /// A sphere light's irradiance at `x` per unit of its intensity `scale`: radiance
+    /// `scale / (pi r^2)` over the cone of half-angle `alpha` (`sin alpha = r / d`) it subtends
+    /// (Cycles' sphere light: its power that of the point light), so that
+    /// `E = (scale / (pi r^2)) integral_cone V max(0, n.w) dw`, which is `scale cos / d^2` when the
+    /// sphere is seen whole above the horizon. A receiver inside the sphere sees a hemisphere.
+    fn sphere_factor(&self, centre: DVec3, r: f64, x: DVec3, n: DVec3, e: u32) -> f64 {
+        let to_centre = centre - x;
+        let d2 = to_centre.length_squared();
+        let sin2 = (r * r / d2).min(1.0);
+        let a = to_centre / d2.sqrt();
+        let along = |w: DVec3| {
+            // The nearer crossing of the sphere along `w` (the farther one from inside).
+            let b = to_centre.dot(w);
+            let c = d2 - r * r;
+            let root = (b * b - c).max(0.0).sqrt();
+            x + w * if c > 0.0 { b - root } else { b + root }
+        };
+        // integral_cone a.w dw = pi sin^2(alpha); the light's radiance is scale / (pi r^2).
+        sin2 / (r * r) * self.cone_factor(a, sin2 / (1.0 + (1.0 - sin2).sqrt()), x, n, e, along)
+    }
+
+    /// A sun of angular radius `half` (half its Angle) towards unit `to_sun`: irradiance `S cos`
+    /// unoccluded (Cycles' distant light: radiance `S / (pi sin^2 half)` over the cone), the
+    /// visibility averaged over the cone.
+    fn sun_disk_factor(&self, to_sun: DVec3, half: f64, x: DVec3, n: DVec3, e: u32) -> f64 {
+        let one_minus_cos = 2.0 * (0.5 * half).sin().powi(2);
+        self.cone_factor(to_sun, one_minus_cos, x, n, e, |w| x + w * self.far)
+    }
+
+    /// `integral_cone V(w) max(0, n.w) dw / integral_cone a.w dw` over the cone of unit axis `a`
+    /// and `1 - cos(alpha) = one_minus_cos`, `V` the visibility from `x` (on element `e`) of the
+    /// light's point `end(w)`: an unoccluded cone above the horizon gives exactly `n.a`, a
+    /// penumbra the cosine-weighted share of the cone that arrives.
+    ///
+    /// The directions are [`soft_disk`]'s points lifted onto the cone by the area-preserving map
+    /// `cos(beta) = 1 - rho^2 (1 - cos alpha)` (uniform in solid angle; equal-area strata stay
+    /// equal in solid angle), about a basis of `a` that depends on `a` alone (Duff et al. 2017),
+    /// so the same point always gets the same rays. Both integrals take the same directions:
+    /// the disk points' mean is the centre, so the cone's side components cancel and the ratio
+    /// is `n.a` exactly, whatever the points' mean `cos(beta)`.
+    fn cone_factor(
+        &self,
+        a: DVec3,
+        one_minus_cos: f64,
+        x: DVec3,
+        n: DVec3,
+        e: u32,
+        end: impl Fn(DVec3) -> DVec3,
+    ) -> f64 {
+        let (b1, b2) = a.any_orthonormal_pair();
+        let (mut seen, mut axial) = (0.0, 0.0);
+        for &(u, v) in soft_disk() {
+            let h = (u * u + v * v) * one_minus_cos;
+            let side = (one_minus_cos * (2.0 - h)).max(0.0).sqrt(); // sin(beta) / rho
+            let w = a * (1.0 - h) + (b1 * u + b2 * v) * side;
+            axial += 1.0 - h;
+            let cos = n.dot(w);
+            if cos > 0.0 && self.shadows.visible(x, end(w), e) {
+                seen += cos;
+            }
+        }
+        seen / axial
     }
 
     /// `rho E_d` projected on each element's basis (eq. 4's parameter-space inner product), `nb`
