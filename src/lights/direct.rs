@@ -28,10 +28,13 @@ const AREA_SAMPLES: usize = 4;
 /// Sides of the polygon standing for a disk or ellipse (of the same area).
 const ROUND_SIDES: usize = 32;
 
-/// Shadow-ray directions per axis of the cone a sphere light (Point or Spot of radius > 0) or a
-/// sun of angle > 0 subtends: `SOFT_AXIS^2` fixed directions per receiver point, so a bake is
-/// reproducible and an incremental frame equals its full solve.
+/// Shadow rays per axis of a round light (Point or Spot of radius > 0) or the cone of a sun of
+/// angle > 0: `SOFT_AXIS^2` fixed rays per receiver point, so a bake is reproducible and an
+/// incremental frame equals its full solve.
 const SOFT_AXIS: usize = 4;
+
+/// The turn (radians) of [`soft_disk`]'s points about the disk's centre.
+const SOFT_TURN: f64 = 0.1;
 
 /// World strata per axis, per visibility sample per axis of the quality setting
 /// (`Settings::visibility_samples`: 1 Draft .. 4 Ultra): at a gathered corner or foot, whose
@@ -55,9 +58,12 @@ struct Placed {
     scale: [f64; 3],
     cos_half: f64,
     smooth: f64,
-    /// Point and Spot: the sphere's radius (0: a point); Sun: half its angular diameter (0:
-    /// parallel rays).
+    /// Point and Spot: the radius (0: a point); Sun: half its angular diameter (0: parallel
+    /// rays).
     extent: f64,
+    /// Point and Spot of radius > 0: a sphere (Soft Falloff off) rather than a disk facing the
+    /// receiver.
+    sphere: bool,
     /// Area: the outline (front = `axis`) and shadow sample points with their areas.
     polygon: Vec<DVec3>,
     samples: Vec<DVec3>,
@@ -112,7 +118,8 @@ impl Placed {
             LightKind::Sun => 0.5 * light.angle,
             LightKind::Area => 0.0,
         };
-        Placed { kind: light.kind, position, axis, scale, cos_half, smooth, extent, polygon, samples }
+        let sphere = !light.soft_falloff;
+        Placed { kind: light.kind, position, axis, scale, cos_half, smooth, extent, sphere, polygon, samples }
     }
 }
 
@@ -127,8 +134,9 @@ fn smoothstep(f: f64) -> f64 {
     }
 }
 
-/// A spot's cone and blend along the unit direction `to_light` from the receiver (Cycles'
-/// `spot_attenuation`, taken from the light's centre also for a sphere); 1 for a Point light.
+/// A spot's cone and blend along the unit direction `to_light` from the receiver to a point of
+/// the light (Cycles' `spot_attenuation`, per sampled point of a disk or sphere); 1 for a Point
+/// light.
 fn spot_attenuation(l: &Placed, to_light: DVec3) -> f64 {
     if l.kind != LightKind::Spot {
         return 1.0;
@@ -144,7 +152,12 @@ fn spot_attenuation(l: &Placed, to_light: DVec3) -> f64 {
 /// `SOFT_AXIS x SOFT_AXIS` strata of the square carried onto the disk by Shirley and Chiu's
 /// concentric map ("A low distortion map between disk and square", 1997). The map keeps areas,
 /// so the strata stay equal in area, and it is odd (`-p` maps to minus the image of `p`), so the
-/// points' mean is the disk's centre: [`DirectLight::cone_factor`] relies on that.
+/// points' mean is the disk's centre: [`DirectLight::cone_factor`] relies on that, and
+/// [`DirectLight::round_factor`] takes them as equal-area points of its disk. The points are
+/// turned by [`SOFT_TURN`] about the centre: unturned they line up in fours along the disk's
+/// axes, which a light straight above an axis-aligned edge shares, and its penumbra went in 6
+/// steps of up to a quarter of the light; turned, their 16 shadows along either axis (or a
+/// diagonal) are distinct and the steps sixteenths.
 fn soft_disk() -> &'static [(f64, f64)] {
     static DISK: std::sync::LazyLock<Vec<(f64, f64)>> = std::sync::LazyLock::new(|| {
         let m = SOFT_AXIS as f64;
@@ -158,7 +171,9 @@ fn soft_disk() -> &'static [(f64, f64)] {
                 } else {
                     (b, 0.5 * PI - 0.25 * PI * a / b)
                 };
-                points.push((r * phi.cos(), r * phi.sin()));
+                let (x, y) = (r * phi.cos(), r * phi.sin());
+                let (c, s) = (SOFT_TURN.cos(), SOFT_TURN.sin());
+                points.push((c * x - s * y, s * x + c * y));
             }
         }
         points
@@ -287,6 +302,7 @@ impl DirectLight {
     /// The light's irradiance at `x` per unit of its `scale`.
     fn factor(&self, l: &Placed, x: DVec3, n: DVec3, e: u32) -> f64 {
         match l.kind {
+            LightKind::Point | LightKind::Spot if l.extent > 0.0 => self.round_factor(l, x, n, e),
             LightKind::Point | LightKind::Spot => {
                 let d = l.position - x;
                 let d2 = d.length_squared();
@@ -296,9 +312,6 @@ impl DirectLight {
                 let spot = spot_attenuation(l, d / d2.sqrt());
                 if spot == 0.0 {
                     return 0.0;
-                }
-                if l.extent > 0.0 {
-                    return spot * self.sphere_factor(l.position, l.extent, x, n, e);
                 }
                 let cos = n.dot(d) / d2.sqrt();
                 if cos <= 0.0 || !self.shadows.visible(x, l.position, e) {
@@ -339,25 +352,70 @@ impl DirectLight {
         }
     }
 
-    /// A sphere light's irradiance at `x` per unit of its intensity `scale`: radiance
-    /// `scale / (pi r^2)` over the cone of half-angle `alpha` (`sin alpha = r / d`) it subtends
-    /// (Cycles' sphere light: its power that of the point light), so that
-    /// `E = (scale / (pi r^2)) integral_cone V max(0, n.w) dw`, which is `scale cos / d^2` when the
-    /// sphere is seen whole above the horizon. A receiver inside the sphere sees a hemisphere.
-    fn sphere_factor(&self, centre: DVec3, r: f64, x: DVec3, n: DVec3, e: u32) -> f64 {
-        let to_centre = centre - x;
-        let d2 = to_centre.length_squared();
-        let sin2 = (r * r / d2).min(1.0);
-        let a = to_centre / d2.sqrt();
-        let along = |w: DVec3| {
-            // The nearer crossing of the sphere along `w` (the farther one from inside).
-            let b = to_centre.dot(w);
-            let c = d2 - r * r;
-            let root = (b * b - c).max(0.0).sqrt();
-            x + w * if c > 0.0 { b - root } else { b + root }
+    /// A Point or Spot light of radius `r > 0`: its irradiance at `x` per unit of its intensity
+    /// `scale`, the light a Lambertian disk of radiance `scale / (pi r^2)` facing `x` (Cycles'
+    /// `eval_fac = 1 / (4 pi r^2 pi)` of the power): of radius `r` about the centre `c` with
+    /// Soft Falloff, or, for a sphere, its tangent circle from `x` (radius `r sqrt(d^2 - r^2) / d`
+    /// about `c + (x - c) r^2 / d^2`, which subtends the sphere's cone). Unoccluded that is
+    /// `pi F / (pi r^2)` with `F` the point-to-disk form factor: `cos r'^2 / (d'^2 + r'^2)` for a
+    /// disk of radius `r'` at distance `d'` seen whole above the horizon (its vector irradiance
+    /// lies along the axis), so `cos / (d^2 + r^2)` (disk) and `cos / d^2` (sphere); a disk
+    /// across the horizon takes [`point_to_polygon`] of its same-area 32-gon. The shadows and
+    /// the spot cone: `F` times the form-factor-weighted share of [`soft_disk`]'s 16 points
+    /// on the disk that are seen, each weighted by the spot's attenuation along its ray. A
+    /// receiver inside a sphere sees its radiance over the hemisphere: `1 / r^2`.
+    fn round_factor(&self, l: &Placed, x: DVec3, n: DVec3, e: u32) -> f64 {
+        let r = l.extent;
+        let from_centre = x - l.position;
+        let d2 = from_centre.length_squared();
+        if d2 == 0.0 || (l.sphere && d2 <= r * r) {
+            return 1.0 / (r * r);
+        }
+        let (centre, rho) = if l.sphere {
+            (l.position + from_centre * (r * r / d2), r * ((d2 - r * r) / d2).sqrt())
+        } else {
+            (l.position, r)
         };
-        // integral_cone a.w dw = pi sin^2(alpha); the light's radiance is scale / (pi r^2).
-        sin2 / (r * r) * self.cone_factor(a, sin2 / (1.0 + (1.0 - sin2).sqrt()), x, n, e, along)
+        let to_disk = centre - x;
+        let dist2 = to_disk.length_squared();
+        let a = to_disk / dist2.sqrt();
+        let cos = n.dot(a);
+        let sin2 = rho * rho / (dist2 + rho * rho); // of the disk's half-angle from `x`
+        let (b1, b2) = a.any_orthonormal_pair();
+        let f = if cos * cos >= sin2 && cos > 0.0 {
+            cos * sin2
+        } else if cos <= 0.0 && cos * cos >= sin2 {
+            return 0.0;
+        } else {
+            let k = ROUND_SIDES as f64;
+            let grow = (2.0 * PI / (k * (2.0 * PI / k).sin())).sqrt(); // the 32-gon of the disk's area
+            let polygon: Vec<DVec3> = (0..ROUND_SIDES)
+                .map(|i| {
+                    let th = 2.0 * PI * i as f64 / k;
+                    centre + (b1 * th.cos() + b2 * th.sin()) * (rho * grow)
+                })
+                .collect();
+            point_to_polygon(x, n, &polygon, -a)
+        };
+        if f <= 0.0 {
+            return 0.0;
+        }
+        let (mut seen, mut all) = (0.0, 0.0);
+        for &(u, v) in soft_disk() {
+            let y = centre + (b1 * u + b2 * v) * rho;
+            let d = y - x;
+            let t2 = d.length_squared();
+            let w = (n.dot(d) * a.dot(d)).max(0.0) / (t2 * t2);
+            if w > 0.0 {
+                all += w;
+                let spot = spot_attenuation(l, d / t2.sqrt());
+                if spot > 0.0 && self.shadows.visible(x, y, e) {
+                    seen += w * spot;
+                }
+            }
+        }
+        let share = if all > 0.0 { seen / all } else { spot_attenuation(l, a) };
+        f * share / (r * r)
     }
 
     /// A sun of angular radius `half` (half its Angle) towards unit `to_sun`: irradiance `S cos`
@@ -365,13 +423,13 @@ impl DirectLight {
     /// visibility averaged over the cone.
     fn sun_disk_factor(&self, to_sun: DVec3, half: f64, x: DVec3, n: DVec3, e: u32) -> f64 {
         let one_minus_cos = 2.0 * (0.5 * half).sin().powi(2);
-        self.cone_factor(to_sun, one_minus_cos, x, n, e, |w| x + w * self.far)
+        self.cone_factor(to_sun, one_minus_cos, x, n, e)
     }
 
     /// `integral_cone V(w) max(0, n.w) dw / integral_cone a.w dw` over the cone of unit axis `a`
     /// and `1 - cos(alpha) = one_minus_cos`, `V` the visibility from `x` (on element `e`) of the
-    /// light's point `end(w)`: an unoccluded cone above the horizon gives exactly `n.a`, a
-    /// penumbra the cosine-weighted share of the cone that arrives.
+    /// sun along `w`: an unoccluded cone above the horizon gives exactly `n.a`, a penumbra the
+    /// cosine-weighted share of the cone that arrives.
     ///
     /// The directions are [`soft_disk`]'s points lifted onto the cone by the area-preserving map
     /// `cos(beta) = 1 - rho^2 (1 - cos alpha)` (uniform in solid angle; equal-area strata stay
@@ -379,15 +437,7 @@ impl DirectLight {
     /// so the same point always gets the same rays. Both integrals take the same directions:
     /// the disk points' mean is the centre, so the cone's side components cancel and the ratio
     /// is `n.a` exactly, whatever the points' mean `cos(beta)`.
-    fn cone_factor(
-        &self,
-        a: DVec3,
-        one_minus_cos: f64,
-        x: DVec3,
-        n: DVec3,
-        e: u32,
-        end: impl Fn(DVec3) -> DVec3,
-    ) -> f64 {
+    fn cone_factor(&self, a: DVec3, one_minus_cos: f64, x: DVec3, n: DVec3, e: u32) -> f64 {
         let (b1, b2) = a.any_orthonormal_pair();
         let (mut seen, mut axial) = (0.0, 0.0);
         for &(u, v) in soft_disk() {
@@ -396,7 +446,7 @@ impl DirectLight {
             let w = a * (1.0 - h) + (b1 * u + b2 * v) * side;
             axial += 1.0 - h;
             let cos = n.dot(w);
-            if cos > 0.0 && self.shadows.visible(x, end(w), e) {
+            if cos > 0.0 && self.shadows.visible(x, x + w * self.far, e) {
                 seen += cos;
             }
         }
