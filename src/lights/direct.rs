@@ -29,12 +29,20 @@ const AREA_SAMPLES: usize = 4;
 const ROUND_SIDES: usize = 32;
 
 /// Shadow rays per axis of a round light (Point or Spot of radius > 0) or the cone of a sun of
-/// angle > 0: `SOFT_AXIS^2` fixed rays per receiver point, so a bake is reproducible and an
-/// incremental frame equals its full solve.
+/// angle > 0, per visibility sample per axis of the quality setting at a gathered corner or
+/// foot (Medium: 8 x 8 = 64 rays), and at each of an element's 6 x 6 projection points (4 x 4 =
+/// 16, whatever the quality: their mean over the element feeds the later bounces). Fixed rays
+/// per point, so a bake is reproducible and an incremental frame equals its full solve. With 16
+/// at the corners, the validation room's block top under the penumbra of a wall's edge (a
+/// 10-degree sun, `tools/validate_lights.py`) came out 6% over Cycles, one ray of 16, the whole
+/// row of corners alike (the edge parallel to it); 64 took the block's mean ratio to Cycles from
+/// 1.022 to 0.997 (the floor's 0.993 to 1.002).
 const SOFT_AXIS: usize = 4;
 
-/// The turn (radians) of [`soft_disk`]'s points about the disk's centre.
-const SOFT_TURN: f64 = 0.1;
+/// The turn (radians) of [`soft_disk`]'s points about the disk's centre, for 1 to 4 visibility
+/// samples per axis (4 x 4 to 16 x 16 points): the turn in steps of 0.001 rad whose points'
+/// shadows along the disk's axes and diagonals lie farthest apart.
+const SOFT_TURNS: [f64; 4] = [0.1, 0.282, 0.3, 0.334];
 
 /// World strata per axis, per visibility sample per axis of the quality setting
 /// (`Settings::visibility_samples`: 1 Draft .. 4 Ultra): at a gathered corner or foot, whose
@@ -148,37 +156,42 @@ fn spot_attenuation(l: &Placed, to_light: DVec3) -> f64 {
     if l.smooth > 0.0 { smoothstep((off - l.cos_half) / l.smooth) } else { 1.0 }
 }
 
-/// The fixed points of the unit disk the soft lights' shadow rays go through: the midpoints of
-/// `SOFT_AXIS x SOFT_AXIS` strata of the square carried onto the disk by Shirley and Chiu's
-/// concentric map ("A low distortion map between disk and square", 1997). The map keeps areas,
-/// so the strata stay equal in area, and it is odd (`-p` maps to minus the image of `p`), so the
-/// points' mean is the disk's centre: [`DirectLight::cone_factor`] relies on that, and
-/// [`DirectLight::round_factor`] takes them as equal-area points of its disk. The points are
-/// turned by [`SOFT_TURN`] about the centre: unturned they line up in fours along the disk's
-/// axes, which a light straight above an axis-aligned edge shares, and its penumbra went in 6
-/// steps of up to a quarter of the light; turned, their 16 shadows along either axis (or a
-/// diagonal) are distinct and the steps sixteenths.
-fn soft_disk() -> &'static [(f64, f64)] {
-    static DISK: std::sync::LazyLock<Vec<(f64, f64)>> = std::sync::LazyLock::new(|| {
-        let m = SOFT_AXIS as f64;
-        let mid = |i: usize| 2.0 * (i as f64 + 0.5) / m - 1.0;
-        let mut points = Vec::with_capacity(SOFT_AXIS * SOFT_AXIS);
-        for i in 0..SOFT_AXIS {
-            for j in 0..SOFT_AXIS {
-                let (a, b) = (mid(i), mid(j));
-                let (r, phi) = if a.abs() > b.abs() {
-                    (a, 0.25 * PI * b / a)
-                } else {
-                    (b, 0.5 * PI - 0.25 * PI * a / b)
-                };
-                let (x, y) = (r * phi.cos(), r * phi.sin());
-                let (c, s) = (SOFT_TURN.cos(), SOFT_TURN.sin());
-                points.push((c * x - s * y, s * x + c * y));
-            }
-        }
-        points
+/// The fixed points of the unit disk the soft lights' shadow rays go through, `v` (1..=4,
+/// clamped) visibility samples per axis: the midpoints of `m x m` strata (`m = SOFT_AXIS v`) of
+/// the square carried onto the disk by Shirley and Chiu's concentric map ("A low distortion map
+/// between disk and square", 1997). The map keeps areas, so the strata stay equal in area, and
+/// it is odd (`-p` maps to minus the image of `p`), so the points' mean is the disk's centre:
+/// [`DirectLight::cone_factor`] relies on that, and [`DirectLight::round_factor`] takes them as
+/// equal-area points of its disk. The points are turned by [`SOFT_TURNS`] about the centre:
+/// unturned they line up along the disk's axes, which a light straight above an axis-aligned
+/// edge shares, and its penumbra went in 6 steps of up to a quarter of the light (4 x 4);
+/// turned, their 16 shadows along either axis (or a diagonal) are distinct, steps of sixteenths.
+fn soft_disk(v: usize) -> &'static [(f64, f64)] {
+    static DISKS: std::sync::LazyLock<Vec<Vec<(f64, f64)>>> = std::sync::LazyLock::new(|| {
+        (1..=SOFT_TURNS.len())
+            .map(|v| {
+                let n = SOFT_AXIS * v;
+                let m = n as f64;
+                let mid = |i: usize| 2.0 * (i as f64 + 0.5) / m - 1.0;
+                let (c, s) = (SOFT_TURNS[v - 1].cos(), SOFT_TURNS[v - 1].sin());
+                let mut points = Vec::with_capacity(n * n);
+                for i in 0..n {
+                    for j in 0..n {
+                        let (a, b) = (mid(i), mid(j));
+                        let (r, phi) = if a.abs() > b.abs() {
+                            (a, 0.25 * PI * b / a)
+                        } else {
+                            (b, 0.5 * PI - 0.25 * PI * a / b)
+                        };
+                        let (x, y) = (r * phi.cos(), r * phi.sin());
+                        points.push((c * x - s * y, s * x + c * y));
+                    }
+                }
+                points
+            })
+            .collect()
     });
-    &DISK
+    &DISKS[v.clamp(1, SOFT_TURNS.len()) - 1]
 }
 
 /// Every element as shadow casters (the scene's hull too: a sun shines in from outside).
@@ -215,6 +228,8 @@ pub struct DirectLight {
     backs: Vec<Back>,
     /// World directions per axis at corners and at projection points.
     world_axis: (usize, usize),
+    /// Visibility samples per axis of the soft lights' rays at corners ([`soft_disk`]).
+    soft_corner: usize,
     shadows: Shadows,
     /// Beyond the scene: how far a ray towards the sun or the sky is followed.
     far: f64,
@@ -239,6 +254,7 @@ impl DirectLight {
             world,
             backs,
             world_axis: (WORLD_CORNER_AXIS * v, WORLD_PROJECTION_AXIS * v),
+            soft_corner: v,
             shadows: Shadows::new(&patches),
             far,
         })
@@ -247,14 +263,15 @@ impl DirectLight {
     /// Direct irradiance (W/m^2, RGB) at `x` on element `e`, front normal `n` (unit): a point
     /// whose value is shown (a corner, a foot), with the World's finer rule.
     pub fn irradiance(&self, x: DVec3, n: DVec3, e: u32) -> [f64; 3] {
-        self.irradiance_with(x, n, e, self.world_axis.0)
+        self.irradiance_with(x, n, e, self.world_axis.0, self.soft_corner)
     }
 
-    /// [`DirectLight::irradiance`] with `m x m` World directions.
-    fn irradiance_with(&self, x: DVec3, n: DVec3, e: u32, m: usize) -> [f64; 3] {
+    /// [`DirectLight::irradiance`] with `m x m` World directions and [`soft_disk`]`(soft)`'s rays
+    /// to soft lights.
+    fn irradiance_with(&self, x: DVec3, n: DVec3, e: u32, m: usize, soft: usize) -> [f64; 3] {
         let mut out = [0.0; 3];
         for l in &self.lights {
-            let k = self.factor(l, x, n, e);
+            let k = self.factor(l, x, n, e, soft);
             for c in 0..3 {
                 out[c] += k * l.scale[c];
             }
@@ -300,9 +317,9 @@ impl DirectLight {
     }
 
     /// The light's irradiance at `x` per unit of its `scale`.
-    fn factor(&self, l: &Placed, x: DVec3, n: DVec3, e: u32) -> f64 {
+    fn factor(&self, l: &Placed, x: DVec3, n: DVec3, e: u32, soft: usize) -> f64 {
         match l.kind {
-            LightKind::Point | LightKind::Spot if l.extent > 0.0 => self.round_factor(l, x, n, e),
+            LightKind::Point | LightKind::Spot if l.extent > 0.0 => self.round_factor(l, x, n, e, soft),
             LightKind::Point | LightKind::Spot => {
                 let d = l.position - x;
                 let d2 = d.length_squared();
@@ -319,7 +336,7 @@ impl DirectLight {
                 }
                 spot * cos / d2
             }
-            LightKind::Sun if l.extent > 0.0 => self.sun_disk_factor(-l.axis, l.extent, x, n, e),
+            LightKind::Sun if l.extent > 0.0 => self.sun_disk_factor(-l.axis, l.extent, x, n, e, soft),
             LightKind::Sun => {
                 let to_sun = -l.axis;
                 let cos = n.dot(to_sun);
@@ -361,10 +378,10 @@ impl DirectLight {
     /// disk of radius `r'` at distance `d'` seen whole above the horizon (its vector irradiance
     /// lies along the axis), so `cos / (d^2 + r^2)` (disk) and `cos / d^2` (sphere); a disk
     /// across the horizon takes [`point_to_polygon`] of its same-area 32-gon. The shadows and
-    /// the spot cone: `F` times the form-factor-weighted share of [`soft_disk`]'s 16 points
+    /// the spot cone: `F` times the form-factor-weighted share of [`soft_disk`]'s points
     /// on the disk that are seen, each weighted by the spot's attenuation along its ray. A
     /// receiver inside a sphere sees its radiance over the hemisphere: `1 / r^2`.
-    fn round_factor(&self, l: &Placed, x: DVec3, n: DVec3, e: u32) -> f64 {
+    fn round_factor(&self, l: &Placed, x: DVec3, n: DVec3, e: u32, soft: usize) -> f64 {
         let r = l.extent;
         let from_centre = x - l.position;
         let d2 = from_centre.length_squared();
@@ -401,7 +418,7 @@ impl DirectLight {
             return 0.0;
         }
         let (mut seen, mut all) = (0.0, 0.0);
-        for &(u, v) in soft_disk() {
+        for &(u, v) in soft_disk(soft) {
             let y = centre + (b1 * u + b2 * v) * rho;
             let d = y - x;
             let t2 = d.length_squared();
@@ -421,9 +438,9 @@ impl DirectLight {
     /// A sun of angular radius `half` (half its Angle) towards unit `to_sun`: irradiance `S cos`
     /// unoccluded (Cycles' distant light: radiance `S / (pi sin^2 half)` over the cone), the
     /// visibility averaged over the cone.
-    fn sun_disk_factor(&self, to_sun: DVec3, half: f64, x: DVec3, n: DVec3, e: u32) -> f64 {
+    fn sun_disk_factor(&self, to_sun: DVec3, half: f64, x: DVec3, n: DVec3, e: u32, soft: usize) -> f64 {
         let one_minus_cos = 2.0 * (0.5 * half).sin().powi(2);
-        self.cone_factor(to_sun, one_minus_cos, x, n, e)
+        self.cone_factor(to_sun, one_minus_cos, x, n, e, soft)
     }
 
     /// `integral_cone V(w) max(0, n.w) dw / integral_cone a.w dw` over the cone of unit axis `a`
@@ -437,10 +454,10 @@ impl DirectLight {
     /// so the same point always gets the same rays. Both integrals take the same directions:
     /// the disk points' mean is the centre, so the cone's side components cancel and the ratio
     /// is `n.a` exactly, whatever the points' mean `cos(beta)`.
-    fn cone_factor(&self, a: DVec3, one_minus_cos: f64, x: DVec3, n: DVec3, e: u32) -> f64 {
+    fn cone_factor(&self, a: DVec3, one_minus_cos: f64, x: DVec3, n: DVec3, e: u32, soft: usize) -> f64 {
         let (b1, b2) = a.any_orthonormal_pair();
         let (mut seen, mut axial) = (0.0, 0.0);
-        for &(u, v) in soft_disk() {
+        for &(u, v) in soft_disk(soft) {
             let h = (u * u + v * v) * one_minus_cos;
             let side = (one_minus_cos * (2.0 - h)).max(0.0).sqrt(); // sin(beta) / rho
             let w = a * (1.0 - h) + (b1 * u + b2 * v) * side;
@@ -485,7 +502,7 @@ impl DirectLight {
         for (s, ws) in rule.iter() {
             for (t, wt) in rule.iter() {
                 let n = p.area_vector(s, t).normalize_or_zero();
-                let irr = self.irradiance_with(p.point(s, t), n, owner, self.world_axis.1);
+                let irr = self.irradiance_with(p.point(s, t), n, owner, self.world_axis.1, 1);
                 if irr.iter().all(|&v| v == 0.0) {
                     continue;
                 }

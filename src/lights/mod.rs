@@ -21,7 +21,8 @@
 //!     about `c + (x - c) r^2 / d^2`); a receiver inside it gets `P / (4 pi r^2)`.
 //!
 //!   Shadows and the horizon are [`direct`]'s: the disk's exact form factor times the share
-//!   of 16 fixed shadow rays to it that arrive.
+//!   of fixed shadow rays to it that arrive (64 at a corner at Medium quality, 16 at each
+//!   projection point).
 //! - Spot: the point's (or disk's, sphere's) radiance inside the cone of full angle
 //!   `spot_size`, faded by `smoothstep((cos a - cos(size/2)) / ((1 - cos(size/2)) blend))` with
 //!   `a` the angle off the axis of the direction from the light's point to the receiver
@@ -29,7 +30,8 @@
 //! - Sun, strength `S` W/m^2: irradiance `S cos` on a surface, the direction the -Z axis. Of
 //!   angular diameter `angle > 0`, radiance `S / (pi sin^2(angle / 2))` over the cone
 //!   (Cycles' `SunLight`), which leaves `E = S cos` while the cone is above the horizon; its
-//!   visibility is the share of 16 fixed rays over the cone that escape.
+//!   visibility is the share of fixed rays over the cone that escape (as many as a round
+//!   light's).
 //! - Area, power `P` W over area `A` (one-sided, emitting to -Z): exitance `P / A`, so
 //!   `E = (P / A) F(x -> light)` with the exact unoccluded point-to-polygon form factor
 //!   ([`crate::kernel::point::point_to_polygon`]; a disk or an ellipse as a 32-gon) times the
