@@ -227,6 +227,15 @@ impl Flat {
         settings: &GrSettings,
         light: Option<&GrLight>,
     ) -> Result<*mut GrSession, (GrStatus, String)> {
+        self.build_with(settings, light.map(|l| l as *const GrLight))
+    }
+
+    /// [`Flat::build`] with the light as a pointer (a caller's struct of another layout).
+    fn build_with(
+        &self,
+        settings: &GrSettings,
+        light: Option<*const GrLight>,
+    ) -> Result<*mut GrSession, (GrStatus, String)> {
         let fail = |st| Err((st, last_error()));
         let mut b = null_mut();
         assert_eq!(unsafe { gr_scene_builder_new(&mut b) }, GrStatus::Ok);
@@ -1128,6 +1137,16 @@ fn an_older_hosts_smaller_light_reads_with_the_new_fields_defaults() {
     // Two old lights, 224 bytes apart: read at the caller's stride, Soft Falloff on (the default).
     let from_old = solve(olds.as_ptr().cast(), 2).unwrap();
     assert_eq!(from_old, solve(new.as_ptr(), 2).unwrap());
+    // The builder reads an old light as the session does.
+    let built = |g: *const GrLight| {
+        let s = flat.build_with(&settings, Some(g)).unwrap();
+        assert_eq!(unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) }, GrStatus::Ok);
+        let v: Vec<f32> = (0..flat.vertex_counts.len() as u32).flat_map(|o| corner_radiosity(s, o)).collect();
+        unsafe { gr_session_free(s) };
+        v
+    };
+    assert_eq!(built((&olds[0] as *const GrLightV1).cast()), built(&new[0]));
+    assert_eq!(built(&new[0]), solve(new.as_ptr(), 1).unwrap());
     let mut spheres = new;
     spheres.iter_mut().for_each(|g| g.soft_falloff = 0);
     assert_ne!(from_old, solve(spheres.as_ptr(), 2).unwrap(), "a sphere is not the disk");
