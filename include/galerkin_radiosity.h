@@ -303,6 +303,11 @@ typedef struct GrLight {
    * Area light size along local X and Y (m).
    */
   double area_size[2];
+  /**
+   * Point and spot of radius > 0: 1 (the default, Blender's Soft Falloff) a disk facing the
+   * receiver, 0 a sphere. Appended: a caller whose `struct_size` ends before it gets 1.
+   */
+  uint32_t soft_falloff;
 } GrLight;
 
 /**
@@ -393,7 +398,8 @@ GrStatus gr_scene_builder_add_mesh(struct GrSceneBuilder *b,
  * session's `gr_session_set_lights` replaces the list later.
  *
  * # Safety
- * `b` is NULL or a live builder; `light` is NULL or points to a readable `GrLight`.
+ * `b` is NULL or a live builder; `light` is NULL or points to a readable `GrLight` (its
+ * `struct_size` bytes: an older header's smaller struct is read with defaults beyond it).
  */
 GrStatus gr_scene_builder_add_light(struct GrSceneBuilder *b, const struct GrLight *light);
 
@@ -443,12 +449,14 @@ GrStatus gr_light_default(struct GrLight *out);
 
 /**
  * Replaces the session's lights with `count` lights from the next solved frame on (`count` 0
- * removes them). Each is checked (`struct_size`, kind, shape, finite non-negative power and
- * colour, spot size in (0, pi], blend in [0,1], area size > 0); on error nothing changes.
+ * removes them). The array's stride is the first light's `struct_size` (a host built against
+ * an older header passes an array of its smaller structs), which every light must carry. Each
+ * is checked (`struct_size`, kind, shape, `soft_falloff` 0 or 1, finite non-negative power
+ * and colour, spot size in (0, pi], blend in [0,1], area size > 0); on error nothing changes.
  *
  * # Safety
  * `s` is NULL or a live session; `lights` is NULL (with `count` 0) or points to `count`
- * readable `GrLight`s.
+ * readable `GrLight`s of the caller's layout (`struct_size` bytes each).
  */
 GrStatus gr_session_set_lights(struct GrSession *s, const struct GrLight *lights, size_t count);
 

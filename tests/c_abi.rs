@@ -227,6 +227,15 @@ impl Flat {
         settings: &GrSettings,
         light: Option<&GrLight>,
     ) -> Result<*mut GrSession, (GrStatus, String)> {
+        self.build_with(settings, light.map(|l| l as *const GrLight))
+    }
+
+    /// [`Flat::build`] with the light as a pointer (a caller's struct of another layout).
+    fn build_with(
+        &self,
+        settings: &GrSettings,
+        light: Option<*const GrLight>,
+    ) -> Result<*mut GrSession, (GrStatus, String)> {
         let fail = |st| Err((st, last_error()));
         let mut b = null_mut();
         assert_eq!(unsafe { gr_scene_builder_new(&mut b) }, GrStatus::Ok);
@@ -1061,4 +1070,100 @@ fn face_emission_scales_an_emitter_and_bad_lengths_are_refused() {
     assert_eq!(unsafe { gr_session_set_object_face_emission(s, 1, null(), 0) }, GrStatus::Ok);
     assert_eq!(solved(), plain);
     unsafe { gr_session_free(s) };
+}
+
+/// `GrLight` before `soft_falloff` was appended (224 bytes), as a host built against that header
+/// lays it out.
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct GrLightV1 {
+    struct_size: u32,
+    kind: u32,
+    shape: u32,
+    matrix: [f64; 16],
+    color: [f64; 3],
+    power: f64,
+    radius: f64,
+    spot_size: f64,
+    spot_blend: f64,
+    angle: f64,
+    area_size: [f64; 2],
+}
+
+#[test]
+fn an_older_hosts_smaller_light_reads_with_the_new_fields_defaults() {
+    assert_eq!(size_of::<GrLightV1>(), 224);
+    assert_eq!(std::mem::offset_of!(GrLight, soft_falloff), 224);
+    let mut light = unsafe { std::mem::zeroed::<GrLight>() };
+    assert_eq!(unsafe { gr_light_default(&mut light) }, GrStatus::Ok);
+    assert_eq!((light.struct_size as usize, light.soft_falloff), (size_of::<GrLight>(), 1));
+    light.matrix =
+        glam::DMat4::from_translation(glam::DVec3::new(0.3, 0.35, 0.25)).transpose().to_cols_array();
+    light.power = 20.0;
+    light.radius = 0.1;
+    let mut second = light;
+    second.kind = GrLightKind::GrLightSpot as u32;
+    second.matrix[3] = -0.2;
+    let old = |g: &GrLight| GrLightV1 {
+        struct_size: 224,
+        kind: g.kind,
+        shape: g.shape,
+        matrix: g.matrix,
+        color: g.color,
+        power: g.power,
+        radius: g.radius,
+        spot_size: g.spot_size,
+        spot_blend: g.spot_blend,
+        angle: g.angle,
+        area_size: g.area_size,
+    };
+    let flat = Flat::from_scene(&scenes::cornell_box(2, Settings::default()));
+    let settings = defaults();
+    // The corners of every object with `count` lights at `lights` set on a fresh session.
+    let solve = |lights: *const GrLight, count: usize| -> Result<Vec<f32>, String> {
+        let s = flat.new_session(&settings).unwrap();
+        let st = unsafe { gr_session_set_lights(s, lights, count) };
+        if st != GrStatus::Ok {
+            unsafe { gr_session_free(s) };
+            return Err(last_error());
+        }
+        assert_eq!(unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) }, GrStatus::Ok);
+        let v = (0..flat.vertex_counts.len() as u32).flat_map(|o| corner_radiosity(s, o)).collect();
+        unsafe { gr_session_free(s) };
+        Ok(v)
+    };
+    let new = [light, second];
+    let olds = [old(&light), old(&second)];
+    // Two old lights, 224 bytes apart: read at the caller's stride, Soft Falloff on (the default).
+    let from_old = solve(olds.as_ptr().cast(), 2).unwrap();
+    assert_eq!(from_old, solve(new.as_ptr(), 2).unwrap());
+    // The builder reads an old light as the session does.
+    let built = |g: *const GrLight| {
+        let s = flat.build_with(&settings, Some(g)).unwrap();
+        assert_eq!(unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) }, GrStatus::Ok);
+        let v: Vec<f32> = (0..flat.vertex_counts.len() as u32).flat_map(|o| corner_radiosity(s, o)).collect();
+        unsafe { gr_session_free(s) };
+        v
+    };
+    assert_eq!(built((&olds[0] as *const GrLightV1).cast()), built(&new[0]));
+    assert_eq!(built(&new[0]), solve(new.as_ptr(), 1).unwrap());
+    let mut spheres = new;
+    spheres.iter_mut().for_each(|g| g.soft_falloff = 0);
+    assert_ne!(from_old, solve(spheres.as_ptr(), 2).unwrap(), "a sphere is not the disk");
+    // Refused: a size between the layouts' or beyond, a bad flag, sizes that disagree.
+    for (size, says) in [(220, "below the 224 bytes"), (240, "but this library's struct has 232 bytes")] {
+        let mut bad = new;
+        bad[0].struct_size = size;
+        bad[1].struct_size = size;
+        let m = solve(bad.as_ptr(), 2).unwrap_err();
+        assert!(m.contains(says), "{m}");
+    }
+    let mut bad = new;
+    bad[1].soft_falloff = 2;
+    let m = solve(bad.as_ptr(), 2).unwrap_err();
+    assert!(m.contains("lights[1].soft_falloff 2 is not 0 or 1"), "{m}");
+    let mut mixed = new;
+    mixed[1].struct_size = 224;
+    let m = solve(mixed.as_ptr(), 2).unwrap_err();
+    assert!(m.contains("lights[1].struct_size is 224 but lights[0]'s is 232"), "{m}");
 }

@@ -229,11 +229,11 @@ fn lights_round_trip_through_the_scene_file() {
     let mut area = Light::new("Area", LightKind::Area, DMat4::IDENTITY, 12.0);
     area.shape = AreaShape::Ellipse;
     area.size = [0.5, 2.0];
-    let sc = scene(
-        vec![floor()],
-        vec![spot, area, Light::new("Sun", LightKind::Sun, DMat4::IDENTITY, 2.0)],
-        (1, 3),
-    );
+    let mut point = round_point(DVec3::new(0.0, 1.0, 2.0), 30.0, 0.25, false);
+    point.name = "Bulb".into();
+    let mut sun = Light::new("Sun", LightKind::Sun, DMat4::IDENTITY, 2.0);
+    sun.angle = 0.2;
+    let sc = scene(vec![floor()], vec![spot, area, sun, point], (1, 3));
     let back = parse_scene(&scene_to_json(&sc)).unwrap();
     assert_eq!(back.lights, sc.lights);
     // position + direction: local -Z along the direction.
@@ -242,6 +242,12 @@ fn lights_round_trip_through_the_scene_file() {
     let l = &parse_scene(text).unwrap().lights[0];
     assert_eq!(l.base.matrix.w_axis.truncate(), DVec3::new(1.0, 2.0, 3.0));
     assert!((galerkin_radiosity::lights::direction(&l.base.matrix) + DVec3::Z).length() < 1e-12);
+    assert!(l.soft_falloff, "Blender's default");
+    let sphere =
+        parse_scene(&text.replace(r#""power":10"#, r#""power":10,"radius":0.5,"soft_falloff":false"#))
+            .unwrap();
+    assert!(!sphere.lights[0].soft_falloff);
+    assert_eq!(sphere.lights[0].radius, 0.5);
 }
 
 #[test]
@@ -606,4 +612,298 @@ fn a_two_sided_emitter_lights_from_its_back() {
     );
     assert!(worst < 0.03 * peak, "{worst} vs {peak}");
     assert!((mean(&up) - mean(&down)).abs() < 5e-3 * mean(&down));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Soft shadows: Point and Spot of radius > 0 (a disk facing the receiver with Soft Falloff, a
+// sphere without), Sun of angle > 0 (a cone)
+
+/// A Point light of `power` W and radius `r` at `p`, Soft Falloff `soft`.
+fn round_point(p: DVec3, power: f64, r: f64, soft: bool) -> Light {
+    let mut light = Light::new("Round", LightKind::Point, DMat4::from_translation(p), power);
+    light.radius = r;
+    light.soft_falloff = soft;
+    light
+}
+
+/// The unoccluded irradiance at `x` (unit normal `n`, facing +Z here) of a Lambertian disk of
+/// radiance `radiance` about `centre` of radius `rho` facing `x`, by a fine polar rule over
+/// the disk (the reference for a disk or sphere across the receiver's horizon).
+fn disk_irradiance(x: DVec3, n: DVec3, centre: DVec3, rho: f64, radiance: f64) -> f64 {
+    let a = (centre - x).normalize();
+    let (b1, b2) = a.any_orthonormal_pair();
+    let (nr, nt) = (400, 800);
+    let mut sum = 0.0;
+    for i in 0..nr {
+        let s = rho * (i as f64 + 0.5) / nr as f64;
+        for j in 0..nt {
+            let th = 2.0 * PI * (j as f64 + 0.5) / nt as f64;
+            let y = centre + (b1 * th.cos() + b2 * th.sin()) * s;
+            let d = y - x;
+            let t2 = d.length_squared();
+            let w = n.dot(d).max(0.0) * a.dot(d) / (t2 * t2);
+            sum += w * s * (rho / nr as f64) * (2.0 * PI / nt as f64);
+        }
+    }
+    radiance * sum
+}
+
+#[test]
+fn a_soft_falloff_point_light_is_a_disk_facing_the_receiver() {
+    // Radius 0.5 at 2 m: P cos / (4 pi (d^2 + r^2)), 1 - 4 / 4.25 = 5.9% below the point
+    // light straight under it (Cycles' disk of radiance P / (4 pi^2 r^2)).
+    let (p, r, power) = (DVec3::new(0.3, -0.2, 2.0), 0.5, 100.0);
+    let mut s =
+        Session::new(scene(vec![floor()], vec![round_point(p, power, r, true)], (1, 1)), Method::Full)
+            .unwrap();
+    let got = corners(&mut s, 1.0, 0);
+    let e = |x: DVec3| {
+        let d = p - x;
+        RHO * power / (4.0 * PI) * (d.z / d.length()) / (d.length_squared() + r * r)
+    };
+    let w = worst(&got, e);
+    eprintln!("soft-falloff point: worst corner {w:.2e} of the peak");
+    assert!(w < 5e-3, "{w}");
+    let under = got.iter().find(|(x, _)| (x.x - 0.5).abs() < 1e-9 && x.y.abs() < 1e-9).unwrap();
+    let point = RHO * power / (4.0 * PI) * p.z / (p - under.0).length().powi(3);
+    let ratio = under.1[0] as f64 / point;
+    eprintln!("soft-falloff point: {ratio:.4} of the point light 0.2 m off its foot");
+    assert!(ratio < 0.95 && ratio > 0.93, "{ratio}");
+}
+
+#[test]
+fn a_sphere_light_lights_as_its_point_does_while_seen_whole() {
+    // Soft Falloff off: a sphere of radiance P / (4 pi^2 r^2) subtends sin^2(alpha) = r^2 / d^2,
+    // so E = pi L sin^2(alpha) cos = P cos / (4 pi d^2), the point light's.
+    let (p, r, power) = (DVec3::new(0.3, -0.2, 1.5), 0.5, 100.0);
+    let mut s =
+        Session::new(scene(vec![floor()], vec![round_point(p, power, r, false)], (1, 1)), Method::Full)
+            .unwrap();
+    let got = corners(&mut s, 1.0, 0);
+    let e = |x: DVec3| RHO * power / (4.0 * PI) * p.z / (p - x).length().powi(3);
+    let w = worst(&got, e);
+    eprintln!("sphere light: worst corner {w:.2e} of the peak");
+    assert!(w < 5e-3, "{w}");
+}
+
+#[test]
+fn round_lights_across_the_horizon_match_the_disk_integral() {
+    // Low lights whose disk (or sphere's tangent circle) the floor's far corners see cut by
+    // their horizon: the clipped 32-gon's form factor against a fine integral over the disk.
+    let (r, power) = (0.4, 100.0);
+    let p = DVec3::new(0.0, 0.0, 0.3);
+    for soft in [true, false] {
+        let mut s =
+            Session::new(scene(vec![floor()], vec![round_point(p, power, r, soft)], (1, 1)), Method::Full)
+                .unwrap();
+        let got = corners(&mut s, 1.0, 0);
+        let radiance = power / (4.0 * PI * PI * r * r);
+        let want = |x: DVec3| {
+            let d2 = (x - p).length_squared();
+            if !soft && d2 <= r * r {
+                return RHO * PI * radiance;
+            }
+            let (c, rho) =
+                if soft { (p, r) } else { (p + (x - p) * (r * r / d2), r * (1.0 - r * r / d2).sqrt()) };
+            RHO * disk_irradiance(x, DVec3::Z, c, rho, radiance)
+        };
+        // The corners whose horizon cuts the disk.
+        let cut: Vec<_> = got
+            .iter()
+            .filter(|(x, _)| {
+                let d = p - *x;
+                let dist2 = if soft { d.length_squared() } else { d.length_squared() - r * r };
+                let rho2 = if soft { r * r } else { r * r * dist2 / d.length_squared() };
+                dist2 > 0.0 && (d.z * d.z / d.length_squared()) < rho2 / (dist2 + rho2)
+            })
+            .copied()
+            .collect();
+        assert!(cut.len() > 10, "{}", cut.len());
+        let w = worst(&got, want);
+        let wc = worst(&cut, want);
+        eprintln!(
+            "low {} light: worst corner {w:.2e}, across the horizon {wc:.2e} of the peak ({} corners)",
+            if soft { "disk" } else { "sphere" },
+            cut.len()
+        );
+        assert!(w < 5e-3 && wc < 5e-3, "{w} {wc}");
+    }
+}
+
+/// A 1.5 m square blocker at height 1 facing up covering `x < edge` (its other sides far out).
+fn half_blocker(edge: f64) -> Object {
+    panel("Blocker", DVec3::new(edge - 0.75, 0.0, 1.0), 0.75 * DVec3::X, 1.5 * DVec3::Y, DVec3::Z, 2, 0)
+}
+
+#[test]
+fn a_blocker_edge_across_a_round_light_leaves_half_its_light() {
+    // A light 2 m over the floor's centre, a blocker's edge 1 m up right under it: the centre
+    // of the floor sees half the disk (or the sphere's tangent circle), the rays' points being
+    // symmetric about the disk's centre.
+    let p = DVec3::new(0.0, 0.0, 2.0);
+    for soft in [true, false] {
+        let light = round_point(p, 100.0, 0.5, soft);
+        let open = |objects| {
+            let mut s = Session::new(scene(objects, vec![light.clone()], (1, 1)), Method::Full).unwrap();
+            corners(&mut s, 1.0, 0).into_iter().find(|(x, _)| x.length() < 1e-9).unwrap().1[0] as f64
+        };
+        let (lit, half) = (open(vec![floor()]), open(vec![floor(), half_blocker(0.0)]));
+        eprintln!(
+            "{}: half-blocked centre {:.4} of the unblocked",
+            if soft { "disk" } else { "sphere" },
+            half / lit
+        );
+        assert!((half / lit - 0.5).abs() < 0.02, "{half} vs {lit}");
+    }
+}
+
+#[test]
+fn a_vanishing_radius_converges_to_the_point_light() {
+    let p = DVec3::new(0.3, -0.2, 1.5);
+    let values = |light: Light| {
+        let mut s = Session::new(scene(vec![floor()], vec![light], (1, 1)), Method::Full).unwrap();
+        corners(&mut s, 1.0, 0)
+    };
+    let point = values(round_point(p, 100.0, 0.0, true));
+    for soft in [true, false] {
+        let mut last = f64::INFINITY;
+        for r in [0.3, 0.1, 0.01, 1e-3] {
+            let got = values(round_point(p, 100.0, r, soft));
+            let w =
+                worst(&got, |x| point.iter().find(|(y, _)| (*y - x).length() < 1e-12).unwrap().1[0] as f64);
+            eprintln!(
+                "{} radius {r}: worst corner {w:.2e} of the point's peak",
+                if soft { "disk" } else { "sphere" }
+            );
+            assert!(w <= last * 1.01 + 1e-6, "radius {r}: {w} after {last}");
+            last = w;
+        }
+        assert!(last < 1e-5, "{last}");
+    }
+}
+
+#[test]
+fn a_spot_with_a_radius_keeps_its_cone() {
+    // Inside the cone (well inside its blend) a spot of radius r lights as its disk; outside
+    // it, nothing; at the cone's edge the rays' points fade by their own directions.
+    let p = DVec3::new(0.0, 0.0, 1.0);
+    let mut spot = Light::new("Spot", LightKind::Spot, at(p, -DVec3::Z), 100.0);
+    spot.base.spot_size = 90f64.to_radians();
+    spot.base.spot_blend = 0.2;
+    spot.radius = 0.2;
+    let mut s = Session::new(scene(vec![floor()], vec![spot], (1, 1)), Method::Full).unwrap();
+    let got = corners(&mut s, 1.0, 0);
+    let disk = |x: DVec3| {
+        let d = p - x;
+        RHO * 100.0 / (4.0 * PI) * (d.z / d.length()) / (d.length_squared() + 0.04)
+    };
+    let inner: Vec<_> = got.iter().filter(|(x, _)| x.truncate().length() <= 0.5).copied().collect();
+    let w = worst(&inner, disk);
+    assert!(w < 5e-3, "{w}");
+    assert!(got.iter().filter(|(x, _)| x.truncate().length() >= 1.6).all(|(_, b)| b[0] < 1e-4));
+    let edge: Vec<_> = got
+        .iter()
+        .filter(|(x, _)| (0.9..1.1).contains(&x.truncate().length()))
+        .map(|(x, b)| b[0] as f64 / disk(*x))
+        .collect();
+    eprintln!("spot edge: {edge:?} of the disk");
+    assert!(edge.iter().all(|&f| f > 0.0 && f < 1.0));
+}
+
+#[test]
+fn a_sun_of_an_angle_lights_an_open_floor_by_its_cosine_exactly() {
+    let d = DVec3::new(1.0, 0.5, -2.0).normalize();
+    let mut light = Light::new("Sun", LightKind::Sun, at(DVec3::new(9.0, 9.0, 9.0), d), 3.0);
+    light.angle = 10f64.to_radians();
+    let mut s = Session::new(scene(vec![floor()], vec![light], (1, 1)), Method::Full).unwrap();
+    let got = corners(&mut s, 1.0, 0);
+    let w = worst(&got, |_| RHO * 3.0 * -d.z);
+    assert!(w < 1e-6, "{w}");
+}
+
+#[test]
+fn a_sun_of_an_angle_casts_a_smooth_penumbra() {
+    // A 20 degree sun straight overhead, a blocker's edge 1 m up over x = 0: the penumbra is
+    // 2 tan(10 deg) = 0.35 m wide, half the light under the edge, rising monotonically across.
+    let strip = subdivided_quad(
+        "Strip",
+        [
+            DVec3::new(-0.5, -0.5, 0.0),
+            DVec3::new(0.5, -0.5, 0.0),
+            DVec3::new(0.5, 0.5, 0.0),
+            DVec3::new(-0.5, 0.5, 0.0),
+        ],
+        40,
+        0,
+    );
+    let mut sun = Light::new("Sun", LightKind::Sun, at(DVec3::ZERO, -DVec3::Z), 2.0);
+    sun.angle = 20f64.to_radians();
+    let mut s = Session::new(scene(vec![strip, half_blocker(0.0)], vec![sun], (1, 1)), Method::Full).unwrap();
+    let mut line: Vec<(f64, f64)> = corners(&mut s, 1.0, 0)
+        .into_iter()
+        .filter(|(x, _)| x.y.abs() < 1e-9)
+        .map(|(x, b)| (x.x, b[0] as f64 / (RHO * 2.0)))
+        .collect();
+    line.sort_by(|a, b| a.0.total_cmp(&b.0));
+    line.dedup_by(|a, b| (a.0 - b.0).abs() < 1e-9);
+    eprintln!("sun penumbra: {line:?}");
+    let mid = line.iter().find(|(x, _)| x.abs() < 1e-9).unwrap().1;
+    assert!((mid - 0.5).abs() < 0.02, "{mid}");
+    assert!(line.windows(2).all(|w| w[1].1 >= w[0].1 - 1e-6), "not monotonic");
+    let half_width = 10f64.to_radians().tan();
+    for &(x, v) in &line {
+        if x < -half_width - 0.03 {
+            assert!(v < 1e-4, "{x}: {v}");
+        } else if x > half_width + 0.03 {
+            assert!((v - 1.0).abs() < 1e-4, "{x}: {v}");
+        }
+    }
+    let inside = line.iter().filter(|(_, v)| *v > 0.05 && *v < 0.95).count();
+    let steepest = line.windows(2).map(|w| w[1].1 - w[0].1).fold(0.0, f64::max);
+    eprintln!("sun penumbra: {inside} corners inside, steepest step {steepest:.3}");
+    assert!(inside >= 8, "{inside}");
+    assert!(steepest < 0.2, "{steepest}");
+}
+
+/// A radius and Soft Falloff changed from frame to frame through `Session::set_lights` (as the
+/// add-on and the C ABI set them), and a sun's angle: incremental frames against full solves.
+#[test]
+fn changing_radius_and_angle_incremental_frames_equal_full_solves() {
+    let blocker = panel("Blocker", DVec3::new(0.2, 0.1, 0.6), 0.3 * DVec3::X, 0.3 * DVec3::Y, DVec3::Z, 2, 0);
+    let sc = scene(vec![floor(), blocker], Vec::new(), (1, 4));
+    let lights = |f: usize| {
+        let mut point = round_point(DVec3::new(-0.3, 0.0, 1.6), 120.0, [0.0, 0.2, 0.5, 0.5][f - 1], f != 4);
+        point.base.color = [1.0, 0.8, 0.6];
+        let mut sun = Light::new("Sun", LightKind::Sun, at(DVec3::ZERO, DVec3::new(0.4, 0.1, -1.0)), 1.5);
+        sun.angle = [0.0f64, 5.0, 15.0, 30.0][f - 1].to_radians();
+        vec![point, sun]
+    };
+    let bake = |method| {
+        let mut s = Session::new(sc.clone(), method).unwrap();
+        (1..=4)
+            .map(|f| {
+                s.set_lights(lights(f)).unwrap();
+                s.solve_frame(f as f64, &no_progress).unwrap();
+                s.face_results().unwrap().into_iter().flat_map(|o| o.corner_radiosity).collect::<Vec<_>>()
+            })
+            .collect::<Vec<_>>()
+    };
+    let (full, inc) = (bake(Method::Full), bake(Method::Incremental));
+    for (f, (a, b)) in inc.iter().zip(&full).enumerate() {
+        let peak = b.iter().flatten().fold(0.0f32, |m, x| m.max(*x));
+        let w = a
+            .iter()
+            .zip(b)
+            .flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).abs()))
+            .fold(0.0f32, f32::max);
+        eprintln!("frame {}: worst {:.2e} of the peak", f + 1, w / peak);
+        assert!(w <= 1e-3 * peak, "frame {}: {w} vs {peak}", f + 1);
+    }
+    for f in 1..4 {
+        assert!(
+            full[f - 1].iter().zip(&full[f]).any(|(x, y)| (x[0] - y[0]).abs() > 0.02 * x[0].max(y[0])),
+            "frame {} did not change the picture",
+            f + 1
+        );
+    }
 }

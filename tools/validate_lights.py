@@ -1,15 +1,18 @@
 """Validation of Blender Light objects and the World against Cycles (issue 22): a small room lit
-only by one Point, Spot, Sun or Area light, or by the World (``world``: a uniform colour;
+only by one Point, Spot, Sun or Area light, one of their soft variants (``point_soft``: radius
+0.5 with Soft Falloff, Blender's default, a disk facing the receiver; ``point_sphere``: the same
+without Soft Falloff, a sphere; ``spot_soft``: radius 0.25, Soft Falloff; ``sun_soft``: angle
+10 degrees), or by the World (``world``: a uniform colour;
 ``sky``: an equirectangular image, bright and warm towards +X, dim and blue towards -X, so a
 mirrored or rotated mapping lights the wrong walls), baked by the add-on (default settings) and
 by Cycles (DIFFUSE: direct + indirect + colour), relative RMSE per object.
 
     .venv/bin/python -m tools.validate_lights [--samples 2048] [--subdiv 6]
-        [--lights point spot sun area world sky]
+        [--lights point spot sun area world sky point_soft point_sphere spot_soft sun_soft]
 
 The room: floor, walls (red left, green right) and a white block, Lambertian Diffuse BSDFs; the
-ceiling is left off for the sun and the World (they shine in through the open top). Point and Spot radius 0
-and Sun angle 0 (our soft shadows are not modelled yet), the World black. Ground truth as in
+ceiling is left off for the sun and the World (they shine in through the open top). Point and
+Spot radius 0 and Sun angle 0 but in the soft variants, the World black. Ground truth as in
 tools/validate_cycles.py: 64 bounces, no clamping, no denoising, no adaptive sampling. Cycles'
 own noise is estimated from a second bake at a quarter of the samples.
 """
@@ -31,7 +34,7 @@ def parse(argv):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--samples", type=int, default=2048, help="Cycles samples of the reference")
     p.add_argument("--subdiv", type=int, default=6, help="walls split n x n")
-    p.add_argument("--lights", nargs="+", default=["point", "spot", "sun", "area", "world", "sky"])
+    p.add_argument("--lights", nargs="+", default=["point", "spot", "sun", "area", "world", "sky", *SOFT])
     p.add_argument("--out", default=str(REPO / "out" / "validation"))
     return p.parse_args(argv)
 
@@ -94,7 +97,25 @@ def room(bpy, n, ceiling):
     return objs + [block]
 
 
+#: The soft variants: the light they vary and what they set on it.
+SOFT = {
+    "point_soft": ("point", dict(shadow_soft_size=0.5, use_soft_falloff=True), (-0.3, 0.2, 1.4)),
+    "point_sphere": ("point", dict(shadow_soft_size=0.5, use_soft_falloff=False), (-0.3, 0.2, 1.4)),
+    "spot_soft": ("spot", dict(shadow_soft_size=0.25, use_soft_falloff=True), (0.0, -0.5, 1.7)),
+    "sun_soft": ("sun", dict(angle=math.radians(10)), None),
+}
+
+
 def add_light(bpy, kind):
+    """The room's light ``kind``: point, spot, sun, area or a soft variant (``SOFT``)."""
+    if kind in SOFT:
+        base, values, loc = SOFT[kind]
+        ob = add_light(bpy, base)
+        for k, v in values.items():
+            setattr(ob.data, k, v)
+        if loc is not None:
+            ob.location = loc
+        return ob
     sc = bpy.context.scene
     if kind == "point":
         data = bpy.data.lights.new("Lamp", "POINT")
@@ -120,7 +141,7 @@ def add_light(bpy, kind):
     return ob
 
 
-OPEN_TOP = ("sun", "world", "sky")
+OPEN_TOP = ("sun", "sun_soft", "world", "sky")
 
 
 def sky_image(bpy, width=64, height=32):

@@ -5,9 +5,9 @@ the view layer, renderable (not ``hide_render``) and not excluded in its Radiosi
 settings, sorted by name so the library order is stable. Other kinds of object are reported.
 
 Light objects (Point, Spot, Sun, Area) of the same selection are sources: their evaluated state
-(``matrix_world``, colour, power or strength, radius, spot size and blend, angle, area shape and
-size) is sampled per frame and handed to the session with ``set_lights``; the scene's World and
-the objects' Two-Sided Emitter settings likewise (``world.py``).
+(``matrix_world``, colour, power or strength, radius and Soft Falloff, spot size and blend, angle,
+area shape and size) is sampled per frame and handed to the session with ``set_lights``; the
+scene's World and the objects' Two-Sided Emitter settings likewise (``world.py``).
 
 Geometry is the evaluated mesh (modifiers, shape keys, drivers applied) via
 ``evaluated_get(depsgraph).to_mesh()``, in object space; the placement is the evaluated
@@ -128,6 +128,7 @@ def light_state(obj, depsgraph) -> dict:
            "color": tuple(float(c) for c in d.color), "power": float(d.energy)}
     if d.type in ("POINT", "SPOT"):
         out["radius"] = float(d.shadow_soft_size)
+        out["soft_falloff"] = bool(getattr(d, "use_soft_falloff", True))
     if d.type == "SPOT":
         out["spot_size"], out["spot_blend"] = float(d.spot_size), float(d.spot_blend)
     if d.type == "SUN":
@@ -144,7 +145,8 @@ def lights_key(lights: list[dict]) -> str:
         return ""
     parts = [np.asarray(light["matrix"], np.float64).reshape(-1) for light in lights]
     parts += [np.asarray([v for k, v in sorted(light.items()) if isinstance(v, float)]) for light in lights]
-    names = "|".join(f"{light['type']}:{light.get('shape', '')}" for light in lights)
+    names = "|".join(f"{light['type']}:{light.get('shape', '')}:{light.get('soft_falloff', '')}"
+                     for light in lights)
     return digest(np.frombuffer(names.encode(), np.uint8), *parts, decimals=6)
 
 

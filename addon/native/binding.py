@@ -105,6 +105,7 @@ class _Light(Structure):
         ("spot_blend", c_double),
         ("angle", c_double),
         ("area_size", c_double * 2),
+        ("soft_falloff", c_uint32),
     ]
 
 
@@ -499,8 +500,10 @@ class Session:
     def set_lights(self, lights) -> None:
         """Replaces the lights from the next frame on. ``lights``: dicts with ``type`` (POINT, SPOT,
         SUN, AREA), ``matrix`` (4x4 row-major world-from-light), and optionally ``color`` (RGB),
-        ``power`` (W; sun: strength W/m^2), ``radius``, ``spot_size``, ``spot_blend`` (radians,
-        [0,1]), ``angle``, ``shape`` (SQUARE, RECTANGLE, DISK, ELLIPSE), ``size`` ((x, y) m)."""
+        ``power`` (W; sun: strength W/m^2), ``radius``, ``soft_falloff`` (point and spot of radius
+        > 0: a disk facing the receiver, the default, or False a sphere), ``spot_size``,
+        ``spot_blend`` (radians, [0,1]), ``angle``, ``shape`` (SQUARE, RECTANGLE, DISK, ELLIPSE),
+        ``size`` ((x, y) m)."""
         arr = (_Light * max(len(lights), 1))()
         for i, d in enumerate(lights):
             g = arr[i]
@@ -520,6 +523,8 @@ class Session:
             for key in ("power", "radius", "spot_size", "spot_blend", "angle"):
                 if key in d:
                     setattr(g, key, float(d[key]))
+            if "soft_falloff" in d:
+                g.soft_falloff = 1 if d["soft_falloff"] else 0
             if "size" in d:
                 g.area_size[:] = [float(x) for x in _floats(d["size"], (2,), f"lights[{i}].size")]
         self._call("gr_session_set_lights", arr, len(lights))

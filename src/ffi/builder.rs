@@ -9,7 +9,7 @@
 use std::ptr::null;
 
 use super::error::{Failure, GrStatus};
-use super::lights::{GrLight, light_of};
+use super::lights::{GrLight, read_light};
 use super::panic::{boundary, boundary_value};
 use super::session::{GrSession, array, matrix_from_row_major, rgb};
 use super::settings::{GrSettings, read_settings};
@@ -263,7 +263,8 @@ unsafe fn read_mesh(mesh: *const GrMesh, index: usize) -> Result<Object, Failure
 /// session's `gr_session_set_lights` replaces the list later.
 ///
 /// # Safety
-/// `b` is NULL or a live builder; `light` is NULL or points to a readable `GrLight`.
+/// `b` is NULL or a live builder; `light` is NULL or points to a readable `GrLight` (its
+/// `struct_size` bytes: an older header's smaller struct is read with defaults beyond it).
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn gr_scene_builder_add_light(
     b: *mut GrSceneBuilder,
@@ -274,9 +275,8 @@ pub unsafe extern "C" fn gr_scene_builder_add_light(
         if light.is_null() {
             return Err(Failure::null("light"));
         }
-        // SAFETY: non-null and readable per the contract.
-        let g = unsafe { light.read_unaligned() };
-        let light = light_of(b.lights.len(), &g)?;
+        // SAFETY: non-null and readable (its `struct_size` bytes) per the contract.
+        let light = unsafe { read_light(b.lights.len(), light) }?;
         b.lights.push(light);
         Ok(())
     })

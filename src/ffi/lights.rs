@@ -57,7 +57,13 @@ pub struct GrLight {
     pub angle: f64,
     /// Area light size along local X and Y (m).
     pub area_size: [f64; 2],
+    /// Point and spot of radius > 0: 1 (the default, Blender's Soft Falloff) a disk facing the
+    /// receiver, 0 a sphere. Appended: a caller whose `struct_size` ends before it gets 1.
+    pub soft_falloff: u32,
 }
+
+/// The size of `GrLight` before `soft_falloff` was appended: the smallest `struct_size` taken.
+const GR_LIGHT_V1_SIZE: usize = std::mem::offset_of!(GrLight, soft_falloff);
 
 /// Writes Blender's defaults for a point light of 1000 W at the origin to `out`.
 ///
@@ -82,6 +88,7 @@ pub unsafe extern "C" fn gr_light_default(out: *mut GrLight) -> GrStatus {
             spot_blend: d.base.spot_blend,
             angle: d.angle,
             area_size: d.size,
+            soft_falloff: d.soft_falloff as u32,
         };
         // SAFETY: non-null per the check, writable per the contract.
         unsafe { out.write_unaligned(light) };
@@ -89,14 +96,38 @@ pub unsafe extern "C" fn gr_light_default(out: *mut GrLight) -> GrStatus {
     })
 }
 
-pub(super) fn light_of(i: usize, g: &GrLight) -> Result<Light, Failure> {
-    if g.struct_size as usize != size_of::<GrLight>() {
-        return Err(Failure::invalid(format!(
-            "lights[{i}].struct_size is {}, this library's GrLight has {} bytes (fill it with gr_light_default)",
-            g.struct_size,
-            size_of::<GrLight>()
-        )));
-    }
+/// The caller's light `i` at `given`, read as far as its `struct_size` says (from
+/// [`GR_LIGHT_V1_SIZE`], the layout before `soft_falloff`, to `sizeof(GrLight)`), the fields
+/// beyond it at their defaults; checked as [`light_of`] does.
+///
+/// # Safety
+/// `given` is non-NULL and points to a readable `u32` `struct_size` followed by the rest of
+/// that many readable bytes.
+pub(super) unsafe fn read_light(i: usize, given: *const GrLight) -> Result<Light, Failure> {
+    // SAFETY: the first field is there in every version, readable per the contract.
+    let size = unsafe { given.cast::<u32>().read_unaligned() };
+    super::sized::check(
+        &format!("lights[{i}]"),
+        size,
+        GR_LIGHT_V1_SIZE,
+        size_of::<GrLight>(),
+        "gr_light_default",
+    )?;
+    let mut light = std::mem::MaybeUninit::<GrLight>::uninit();
+    // SAFETY: `gr_light_default` initialises every field of the (non-null, writable) struct;
+    // then the caller's `size` bytes, readable per the contract and at most the struct's,
+    // overwrite the leading fields whole, the layouts agreeing on those (fields are only
+    // appended, and `size` ends at a field's end or at the struct's).
+    let g = unsafe {
+        gr_light_default(light.as_mut_ptr());
+        std::ptr::copy_nonoverlapping(given.cast::<u8>(), light.as_mut_ptr().cast::<u8>(), size as usize);
+        light.assume_init()
+    };
+    light_of(i, &g)
+}
+
+/// A whole `GrLight` as a light (its `struct_size` already taken by [`read_light`]).
+fn light_of(i: usize, g: &GrLight) -> Result<Light, Failure> {
     let kind = match g.kind {
         0 => LightKind::Point,
         1 => LightKind::Spot,
@@ -117,6 +148,11 @@ pub(super) fn light_of(i: usize, g: &GrLight) -> Result<Light, Failure> {
     light.base.spot_size = g.spot_size;
     light.base.spot_blend = g.spot_blend;
     light.radius = g.radius;
+    light.soft_falloff = match g.soft_falloff {
+        0 => false,
+        1 => true,
+        k => return Err(Failure::invalid(format!("lights[{i}].soft_falloff {k} is not 0 or 1"))),
+    };
     light.angle = g.angle;
     light.shape = shape;
     light.size = g.area_size;
@@ -124,12 +160,14 @@ pub(super) fn light_of(i: usize, g: &GrLight) -> Result<Light, Failure> {
 }
 
 /// Replaces the session's lights with `count` lights from the next solved frame on (`count` 0
-/// removes them). Each is checked (`struct_size`, kind, shape, finite non-negative power and
-/// colour, spot size in (0, pi], blend in [0,1], area size > 0); on error nothing changes.
+/// removes them). The array's stride is the first light's `struct_size` (a host built against
+/// an older header passes an array of its smaller structs), which every light must carry. Each
+/// is checked (`struct_size`, kind, shape, `soft_falloff` 0 or 1, finite non-negative power
+/// and colour, spot size in (0, pi], blend in [0,1], area size > 0); on error nothing changes.
 ///
 /// # Safety
 /// `s` is NULL or a live session; `lights` is NULL (with `count` 0) or points to `count`
-/// readable `GrLight`s.
+/// readable `GrLight`s of the caller's layout (`struct_size` bytes each).
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn gr_session_set_lights(
     s: *mut GrSession,
@@ -138,11 +176,50 @@ pub unsafe extern "C" fn gr_session_set_lights(
 ) -> GrStatus {
     boundary("gr_session_set_lights", || {
         let s = unsafe { session(s) }?;
-        let given = unsafe { array(lights, count, "lights") }?;
-        let lights = given.iter().enumerate().map(|(i, g)| light_of(i, g)).collect::<Result<Vec<_>, _>>()?;
+        let lights = unsafe { read_lights(lights, count) }?;
         s.write()?.session.set_lights(lights)?;
         Ok(())
     })
+}
+
+/// `count` lights at `p`, each `struct_size` (the first's) bytes long.
+///
+/// # Safety
+/// As `gr_session_set_lights`'s `lights`.
+unsafe fn read_lights(p: *const GrLight, count: usize) -> Result<Vec<Light>, Failure> {
+    if count == 0 {
+        return Ok(Vec::new());
+    }
+    if p.is_null() {
+        return Err(Failure::null("lights"));
+    }
+    // SAFETY: non-null, and the first light's first field is readable per the contract.
+    let stride = unsafe { p.cast::<u32>().read_unaligned() } as usize;
+    super::sized::check(
+        "lights[0]",
+        stride as u32,
+        GR_LIGHT_V1_SIZE,
+        size_of::<GrLight>(),
+        "gr_light_default",
+    )?;
+    if count.checked_mul(stride).is_none_or(|bytes| bytes > isize::MAX as usize) {
+        return Err(Failure::invalid(format!("lights: {count} elements is more than any buffer can hold")));
+    }
+    (0..count)
+        .map(|i| {
+            // SAFETY: light `i` starts `i * stride` bytes in, inside the caller's array.
+            let at = unsafe { p.cast::<u8>().add(i * stride) }.cast::<GrLight>();
+            // SAFETY: as above; its first field is readable.
+            let size = unsafe { at.cast::<u32>().read_unaligned() } as usize;
+            if size != stride {
+                return Err(Failure::invalid(format!(
+                    "lights[{i}].struct_size is {size} but lights[0]'s is {stride}: an array's lights share one layout"
+                )));
+            }
+            // SAFETY: `stride` readable bytes at `at`.
+            unsafe { read_light(i, at) }
+        })
+        .collect()
 }
 
 /// Replaces the session's World from the next solved frame on: radiance `strength x color`

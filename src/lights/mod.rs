@@ -10,12 +10,28 @@
 //!
 //! Conventions (Blender 4.x/5.x, Cycles; checked against Cycles bakes in
 //! `tools/validate_lights.py`): a light looks down its local -Z axis; colour multiplies power.
-//! - Point, power `P` W: radiant intensity `P / (4 pi)` W/sr, so `E = P cos / (4 pi d^2)`.
-//! - Spot: the point's intensity inside the cone of full angle `spot_size`, faded by
-//!   `smoothstep((cos a - cos(size/2)) / ((1 - cos(size/2)) blend))` with `a` the angle off
-//!   the axis (Cycles' `spot_attenuation`).
-//! - Sun, strength `S` W/m^2: irradiance `S cos` on a surface, the direction the -Z axis (its
-//!   `angle` is taken as 0: parallel rays).
+//! - Point, power `P` W, radius 0: radiant intensity `P / (4 pi)` W/sr, so
+//!   `E = P cos / (4 pi d^2)`. Of radius `r > 0`, radiance `P / (4 pi^2 r^2)` (Cycles'
+//!   `PointLight`: `eval_fac = 1 / (pi 4 pi r^2)`) over one of two shapes, by Blender's Soft
+//!   Falloff (`use_soft_falloff`, on by default; Cycles' `is_sphere` is its negation):
+//!   - Soft Falloff on: a disk of radius `r` about the centre facing the receiver, so
+//!     `E = P cos / (4 pi (d^2 + r^2))` seen whole above the horizon;
+//!   - Soft Falloff off: a sphere of radius `r`, `E = P cos / (4 pi d^2)` seen whole (its
+//!     irradiance is that of its tangent circle, a disk of radius `r sqrt(d^2 - r^2) / d`
+//!     about `c + (x - c) r^2 / d^2`); a receiver inside it gets `P / (4 pi r^2)`.
+//!
+//!   Shadows and the horizon are [`direct`]'s: the disk's exact form factor times the share
+//!   of fixed shadow rays to it that arrive (64 at a corner at Medium quality, 16 at each
+//!   projection point).
+//! - Spot: the point's (or disk's, sphere's) radiance inside the cone of full angle
+//!   `spot_size`, faded by `smoothstep((cos a - cos(size/2)) / ((1 - cos(size/2)) blend))` with
+//!   `a` the angle off the axis of the direction from the light's point to the receiver
+//!   (Cycles' `spot_attenuation`, per shadow ray for a radius).
+//! - Sun, strength `S` W/m^2: irradiance `S cos` on a surface, the direction the -Z axis. Of
+//!   angular diameter `angle > 0`, radiance `S / (pi sin^2(angle / 2))` over the cone
+//!   (Cycles' `SunLight`), which leaves `E = S cos` while the cone is above the horizon; its
+//!   visibility is the share of fixed rays over the cone that escape (as many as a round
+//!   light's).
 //! - Area, power `P` W over area `A` (one-sided, emitting to -Z): exitance `P / A`, so
 //!   `E = (P / A) F(x -> light)` with the exact unoccluded point-to-polygon form factor
 //!   ([`crate::kernel::point::point_to_polygon`]; a disk or an ellipse as a 32-gon) times the
@@ -131,9 +147,12 @@ pub struct Light {
     pub kind: LightKind,
     /// The state at frames without keys (and the values keys leave out).
     pub base: LightState,
-    /// Point and Spot radius, metres (soft shadows are not modelled yet: the light is its centre).
+    /// Point and Spot radius, metres (0: a point).
     pub radius: f64,
-    /// Sun angular diameter, radians (taken as 0: parallel rays).
+    /// Point and Spot of radius > 0: Blender's Soft Falloff (`use_soft_falloff`, default on), a
+    /// disk facing the receiver; off, a sphere (module docs).
+    pub soft_falloff: bool,
+    /// Sun angular diameter, radians (0: parallel rays).
     pub angle: f64,
     pub shape: AreaShape,
     /// Area size along local X and Y, metres (`size[1]` used by Rectangle and Ellipse).
@@ -156,6 +175,7 @@ impl Light {
                 spot_blend: 0.15,
             },
             radius: 0.0,
+            soft_falloff: true,
             angle: 0.0,
             shape: AreaShape::Square,
             size: [1.0, 1.0],

@@ -78,6 +78,9 @@ struct LightFile {
     strength: Option<f64>,
     color: Option<[f64; 3]>,
     radius: Option<f64>,
+    /// Point and spot of radius > 0: a disk facing the receiver (true, Blender's default) or a
+    /// sphere (false).
+    soft_falloff: Option<bool>,
     spot_size: Option<f64>,
     spot_blend: Option<f64>,
     angle: Option<f64>,
@@ -151,6 +154,7 @@ fn parse_light(l: usize, f: LightFile) -> Result<Light> {
     light.base.spot_size = f.spot_size.unwrap_or(light.base.spot_size);
     light.base.spot_blend = f.spot_blend.unwrap_or(light.base.spot_blend);
     light.radius = f.radius.unwrap_or(light.radius);
+    light.soft_falloff = f.soft_falloff.unwrap_or(light.soft_falloff);
     light.angle = f.angle.unwrap_or(light.angle);
     if let Some(shape) = f.shape {
         light.shape = AreaShape::parse(&shape).ok_or_else(|| {
@@ -501,7 +505,7 @@ pub fn scene_to_json(scene: &Scene) -> String {
             let b = &l.base;
             let mut light = json!({
                 "name": l.name, "type": l.kind.name(), "matrix": row_major(&b.matrix), "color": b.color,
-                "radius": l.radius, "spot_size": b.spot_size, "spot_blend": b.spot_blend, "angle": l.angle,
+                "radius": l.radius, "soft_falloff": l.soft_falloff, "spot_size": b.spot_size, "spot_blend": b.spot_blend, "angle": l.angle,
                 "shape": l.shape.name(), "size": l.size, "animation": animation,
             });
             light[if l.kind == LightKind::Sun { "strength" } else { "power" }] = json!(b.power);
