@@ -15,8 +15,10 @@
 //! On a linear map with full depth this is GMRES on `(I - M) x = s` (Walker & Ni, theorem 2.2),
 //! so it converges at least as fast as the plain sweeps and usually much faster. The norm `W`
 //! weights each leaf by its area, the norm in which the solve's stopping test measures change.
-//! The least-squares problem, `depth x depth`, goes through its normal equations; the oldest step
-//! is dropped whenever they are too ill-conditioned to solve (Walker & Ni's condition control).
+//! The least-squares problem, `depth x depth`, goes through its normal equations, whose products
+//! are kept from step to step (a step adds one column's, in the same pass that forms it); the
+//! oldest step is dropped whenever they are too ill-conditioned to solve (Walker & Ni's
+//! condition control).
 
 use std::collections::VecDeque;
 
@@ -38,14 +40,22 @@ pub struct Anderson {
     steps: VecDeque<Pair>,
     /// Reserved columns not in use.
     pool: Vec<Pair>,
+    /// The weighted products of the steps' residual differences with each other, in `steps`'
+    /// order: kept from step to step, so a step computes only its new column's.
+    gram: VecDeque<Vec<f64>>,
 }
 
+/// The deepest mixer [`Anderson::new`] makes.
+pub const MAX_DEPTH: usize = 16;
+
 impl Anderson {
-    /// A mixer over vectors of `weights.len() x stride` entries keeping `depth` steps (0: it
+    /// A mixer over vectors of `weights.len() x stride` entries keeping `depth` steps (at most
+    /// [`MAX_DEPTH`]; 0: it
     /// leaves every image as it is);
     /// [`crate::Error::OutOfMemory`] when its `2 depth + 2` vectors cannot be had (a caller
     /// then sweeps without it).
     pub fn new(depth: usize, weights: Vec<f64>, stride: usize) -> Result<Self> {
+        let depth = depth.min(MAX_DEPTH);
         let n = weights.len() * stride;
         let what = "the hierarchical solve's acceleration";
         // Reserved now, so that a large scene learns before its first sweep whether it fits.
@@ -53,13 +63,7 @@ impl Anderson {
         for _ in 0..=depth {
             pool.push((budget::try_filled(n, 0.0, what)?, budget::try_filled(n, 0.0, what)?));
         }
-        Ok(Self { depth, weights, stride, last: None, steps: VecDeque::new(), pool })
-    }
-
-    /// Forgets the steps: the next [`Anderson::mix`] leaves its image as it is.
-    pub fn restart(&mut self) {
-        self.pool.extend(self.steps.drain(..));
-        self.pool.extend(self.last.take());
+        Ok(Self { depth, weights, stride, last: None, steps: VecDeque::new(), pool, gram: VecDeque::new() })
     }
 
     /// Takes the step `x -> g` (`g = g(x)`) and overwrites `g` with the next iterate.
@@ -80,20 +84,48 @@ impl Anderson {
             return;
         };
         // The new difference column, in the oldest step's storage once `depth` are kept.
-        let (mut df, mut dg) = if self.steps.len() == self.depth {
-            self.steps.pop_front().expect("depth > 0 steps")
-        } else {
-            self.pool.pop().expect("the pool holds depth + 1 pairs")
-        };
-        for i in 0..g.len() {
-            let f = g[i] - x[i];
-            df[i] = f - f_last[i];
-            dg[i] = g[i] - g_last[i];
-            f_last[i] = f;
-            g_last[i] = g[i];
+        if self.steps.len() == self.depth {
+            self.drop_oldest();
         }
+        let (mut df, mut dg) = self.pool.pop().expect("the pool holds depth + 1 pairs");
+        // One pass: the new columns, the new residual, and the products the least-squares
+        // problem needs of them (the older columns' products with each other are kept).
+        let m = self.steps.len();
+        let mut row = vec![0.0; m + 1];
+        let mut rhs = vec![0.0; m + 1];
+        let n = self.stride;
+        for (c, &w) in self.weights.iter().enumerate() {
+            let span = c * n..(c + 1) * n;
+            let (mut own, mut own_rhs) = (0.0, 0.0);
+            let mut with = [0.0; MAX_DEPTH];
+            let mut with_rhs = [0.0; MAX_DEPTH];
+            for i in span.clone() {
+                let f = g[i] - x[i];
+                let d = f - f_last[i];
+                df[i] = d;
+                dg[i] = g[i] - g_last[i];
+                f_last[i] = f;
+                g_last[i] = g[i];
+                own += d * d;
+                own_rhs += d * f;
+                for (j, (old, _)) in self.steps.iter().enumerate() {
+                    with[j] += d * old[i];
+                    with_rhs[j] += old[i] * f;
+                }
+            }
+            for j in 0..m {
+                row[j] += w * with[j];
+                rhs[j] += w * with_rhs[j];
+            }
+            row[m] += w * own;
+            rhs[m] += w * own_rhs;
+        }
+        for (j, r) in self.gram.iter_mut().enumerate() {
+            r.push(row[j]);
+        }
+        self.gram.push_back(row);
         self.steps.push_back((df, dg));
-        let gamma = self.least_squares(&f_last);
+        let gamma = self.least_squares(rhs);
         for ((_, dg), c) in self.steps.iter().zip(gamma) {
             for (gi, &d) in g.iter_mut().zip(dg) {
                 *gi -= c * d;
@@ -102,37 +134,30 @@ impl Anderson {
         self.last = Some((f_last, g_last));
     }
 
-    /// `gamma` over the kept steps, after dropping the oldest until the problem is
-    /// well-conditioned.
-    fn least_squares(&mut self, f: &[f64]) -> Vec<f64> {
-        loop {
-            let m = self.steps.len();
-            let mut a = vec![0.0; m * m];
-            let mut rhs = vec![0.0; m];
-            for i in 0..m {
-                let di = &self.steps[i].0;
-                rhs[i] = self.dot(di, f);
-                for j in 0..=i {
-                    let v = self.dot(di, &self.steps[j].0);
-                    a[i * m + j] = v;
-                    a[j * m + i] = v;
-                }
-            }
-            if let Some(gamma) = cholesky_solve(&mut a, &mut rhs, m) {
-                return gamma;
-            }
-            // Nearly dependent steps: drop the oldest and try again (none left: a plain sweep).
-            let oldest = self.steps.pop_front().expect("a failed solve has steps");
-            self.pool.push(oldest);
+    /// Forgets the oldest step and its products.
+    fn drop_oldest(&mut self) {
+        let oldest = self.steps.pop_front().expect("a step to drop");
+        self.pool.push(oldest);
+        self.gram.pop_front();
+        for r in self.gram.iter_mut() {
+            r.remove(0);
         }
     }
 
-    fn dot(&self, a: &[f64], b: &[f64]) -> f64 {
-        a.chunks_exact(self.stride)
-            .zip(b.chunks_exact(self.stride))
-            .zip(&self.weights)
-            .map(|((a, b), w)| w * a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>())
-            .sum()
+    /// `gamma` over the kept steps (`rhs`: each step's product with the newest residual), after
+    /// dropping the oldest until the problem is well-conditioned.
+    fn least_squares(&mut self, mut rhs: Vec<f64>) -> Vec<f64> {
+        loop {
+            let m = self.steps.len();
+            let mut a: Vec<f64> = self.gram.iter().flatten().copied().collect();
+            let mut b = rhs.clone();
+            if let Some(gamma) = cholesky_solve(&mut a, &mut b, m) {
+                return gamma;
+            }
+            // Nearly dependent steps: drop the oldest and try again (none left: a plain sweep).
+            self.drop_oldest();
+            rhs.remove(0);
+        }
     }
 }
 
