@@ -170,8 +170,8 @@ fn obj_under_a_light(path: &str) -> Scene {
         scenes::subdivided_quad("Light", light, 1, 1),
     ];
     Scene::new(
-        // The corner gather off, as session 15's 1,013 s were measured: on the full monastery it
-        // alone ran for more than 28 minutes on 2 cores (session 21, stopped).
+        // The corner gather off, as the recorded full-monastery runs (docs/benchmarks.md) have it:
+        // on, the gather alone ran for more than 28 minutes on 2 cores before it was stopped.
         Settings { basis_order: 1, corner_gather: false, ..Default::default() },
         (0, 0),
         materials,

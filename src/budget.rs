@@ -143,7 +143,7 @@ const HIERARCHY_LINK_GROWTH: f64 = 0.76;
 /// on the 91-face Cornell box at order 2, about 250k for 15.9M on the monastery), each its
 /// record, moments, the solve's three coefficient vectors and its mixer's columns. Elements and results as
 /// [`estimate`]; no corner gather (the hierarchy's corners come from its leaves). Against the
-/// measured peaks: the full monastery at order 1, 6.4 GiB (session 21; about 12 GB estimated); the decimated
+/// measured peaks: the full monastery at order 1, 6.4 GiB (about 12 GB estimated); the decimated
 /// one at order 2, 56 MB (0.3 GB estimated).
 pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
     let s = &scene.settings;
