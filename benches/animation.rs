@@ -133,14 +133,7 @@ fn mixing_table(settings: &Settings, quick: bool) {
     use galerkin_radiosity::hierarchy::update::update_frame;
     use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
     let frames = if quick { 3 } else { 8 };
-    let cases: Vec<(&str, Scene)> = vec![
-        ("Fig. 5a room", scenes::seed_room(if quick { 2.0 } else { 3.0 }, frames, settings.clone())),
-        ("Fig. 5b billiard", scenes::billiard(if quick { 1.5 } else { 2.5 }, frames, settings.clone())),
-        (
-            "Cornell box, moving light",
-            scenes::cornell_box_moving_light(if quick { 6 } else { 14 }, frames, settings.clone()),
-        ),
-    ];
+    let cases = bench_scenes(settings, quick, frames);
     println!(
         "\nThe hierarchical solve's sweeps plain (Jacobi with push-pull) and mixed (Anderson, depth {}): the same \
          scenes over {frames} frames, the first fresh, the others updated; solve seconds and sweeps per frame \
@@ -198,22 +191,24 @@ fn mixing_table(settings: &Settings, quick: bool) {
     }
 }
 
-/// The flat methods side by side: docs/benchmarks.md's "animation" block.
-fn flat_table(settings: &Settings, quick: bool) {
-    let frames = if quick { 4 } else { 48 };
-    let cases: Vec<(&str, Scene, &str)> = vec![
-        ("Fig. 5a room", scenes::seed_room(if quick { 2.0 } else { 3.0 }, frames, settings.clone()), "65%"),
-        (
-            "Fig. 5b billiard",
-            scenes::billiard(if quick { 1.5 } else { 2.5 }, frames, settings.clone()),
-            "61%",
-        ),
+/// The three scenes every table of this bench runs, over `frames` frames: the seed's room and
+/// billiard (its Fig. 5) and the Cornell box with a moving light, smaller with `quick`.
+fn bench_scenes(settings: &Settings, quick: bool, frames: i64) -> Vec<(&'static str, Scene)> {
+    vec![
+        ("Fig. 5a room", scenes::seed_room(if quick { 2.0 } else { 3.0 }, frames, settings.clone())),
+        ("Fig. 5b billiard", scenes::billiard(if quick { 1.5 } else { 2.5 }, frames, settings.clone())),
         (
             "Cornell box, moving light",
             scenes::cornell_box_moving_light(if quick { 6 } else { 14 }, frames, settings.clone()),
-            "",
         ),
-    ];
+    ]
+}
+
+/// The flat methods side by side: docs/benchmarks.md's "animation" block.
+fn flat_table(settings: &Settings, quick: bool) {
+    let frames = if quick { 4 } else { 48 };
+    // The seed's savings for its two scenes (its Fig. 5), beside ours.
+    let papers = ["65%", "61%", ""];
     // The caption, then the table: docs/benchmarks.md's "animation" block (scripts/regenerate_docs.py).
     println!(
         "The seed's scenes and the moving-light box: {frames} frames, order 2, visibility on, corner gather \
@@ -224,7 +219,7 @@ fn flat_table(settings: &Settings, quick: bool) {
         "| scene | patches | first frame s | series s/frame | exact s/frame | full s/frame | saving vs full | x full | x exact | links/frame by series / recomputed | paper's saving |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
-    for (name, scene, paper) in cases {
+    for ((name, scene), paper) in bench_scenes(settings, quick, frames).into_iter().zip(papers) {
         let inc = run(&scene, Method::Incremental);
         let exact = run(&scene, Method::Exact);
         let full = run(&scene, Method::Full);
@@ -247,14 +242,7 @@ fn flat_table(settings: &Settings, quick: bool) {
 /// The hierarchy's frames: docs/benchmarks.md's "animation-hierarchy" block.
 fn hierarchy_table(settings: &Settings, quick: bool) {
     let hframes = if quick { 4 } else { 16 };
-    let hcases: Vec<(&str, Scene)> = vec![
-        ("Fig. 5a room", scenes::seed_room(if quick { 2.0 } else { 3.0 }, hframes, settings.clone())),
-        ("Fig. 5b billiard", scenes::billiard(if quick { 1.5 } else { 2.5 }, hframes, settings.clone())),
-        (
-            "Cornell box, moving light",
-            scenes::cornell_box_moving_light(if quick { 6 } else { 14 }, hframes, settings.clone()),
-        ),
-    ];
+    let hcases = bench_scenes(settings, quick, hframes);
     println!(
         "\nThe hierarchy (issue 21): the same scenes over {hframes} frames, order 2, corner gather off, each frame \
          updated from the one before, then solved from scratch, means over frames 2..{hframes}; rms is the worst \

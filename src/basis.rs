@@ -7,6 +7,10 @@
 /// Highest polynomial degree per axis that the library supports.
 pub const MAX_ORDER: usize = 3;
 
+/// The most functions a basis has, `(MAX_ORDER+1)^2`: the size of a stack buffer for one
+/// element's coefficients.
+pub const MAX_LEN: usize = (MAX_ORDER + 1) * (MAX_ORDER + 1);
+
 /// A basis of polynomial degree `order` per axis: `(order+1)^2` functions.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Basis {

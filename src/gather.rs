@@ -1208,7 +1208,7 @@ impl Gather<'_> {
         moments: &mut [f32],
         feet: &mut Vec<Foot>,
     ) -> usize {
-        const MAX_NB: usize = (crate::basis::MAX_ORDER + 1) * (crate::basis::MAX_ORDER + 1);
+        use crate::basis::MAX_LEN as MAX_NB;
         let mut m = [0.0; MAX_NB];
         let m = &mut m[..moments.len()];
         let mut weight = 0.0;

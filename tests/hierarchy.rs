@@ -46,15 +46,7 @@ fn on_the_faces_alone_the_hierarchy_is_the_flat_system() {
     let mut flat = System::build(&scene, 0.0, &no_progress).unwrap();
     flat.solve(1e-6, &|| false).unwrap();
     assert_eq!(h.stats.links, flat.stats.pairs, "the same pairs");
-    let (a, b) = (h.face_results(&scene, 0.0), flat.face_results(&scene, 0.0));
-    let peak = b.iter().flat_map(|o| &o.face_radiosity).map(|v| v[0]).fold(0.0f32, f32::max);
-    for (x, y) in a.iter().zip(&b) {
-        for (f, (u, v)) in x.face_radiosity.iter().zip(&y.face_radiosity).enumerate() {
-            for c in 0..3 {
-                assert!((u[c] - v[c]).abs() < 1e-4 * peak, "{} face {f}: {} vs flat {}", x.name, u[c], v[c]);
-            }
-        }
-    }
+    assert_faces_agree(&h.face_results(&scene, 0.0), &flat.face_results(&scene, 0.0), "flat");
 }
 
 /// The Anderson-mixed sweeps (issue 21) reach the plain Jacobi sweeps' solution on the same
@@ -75,15 +67,7 @@ fn mixed_sweeps_reach_the_plain_sweeps_solution_in_fewer_sweeps() {
         a.stats.sweeps,
         b.stats.sweeps
     );
-    let (x, y) = (a.face_results(&scene, 0.0), b.face_results(&scene, 0.0));
-    let peak = y.iter().flat_map(|o| &o.face_radiosity).map(|v| v[0]).fold(0.0f32, f32::max);
-    for (u, v) in x.iter().zip(&y) {
-        for (f, (p, q)) in u.face_radiosity.iter().zip(&v.face_radiosity).enumerate() {
-            for c in 0..3 {
-                assert!((p[c] - q[c]).abs() < 1e-4 * peak, "{} face {f}: {} vs plain {}", u.name, p[c], q[c]);
-            }
-        }
-    }
+    assert_faces_agree(&a.face_results(&scene, 0.0), &b.face_results(&scene, 0.0), "plain");
 }
 
 /// Refining below faces and clustering above them moves the Cornell box's walls towards the
@@ -243,4 +227,26 @@ fn the_link_phase_reports_progress_and_cancels_between_chunks() {
     let r = solve_frame(&scene, 0.0, &hs, &cancel);
     assert!(matches!(r, Err(galerkin_radiosity::Error::Cancelled)), "{:?}", r.err());
     assert!(!*swept.lock().unwrap(), "the solve began before the cancel was heard");
+}
+
+/// Every face's radiosity (RGB) of `got` within 1e-4 of the peak of `want` (`what` names `want`).
+fn assert_faces_agree(
+    got: &[galerkin_radiosity::scene::json::ObjectResult],
+    want: &[galerkin_radiosity::scene::json::ObjectResult],
+    what: &str,
+) {
+    let peak = want.iter().flat_map(|o| &o.face_radiosity).map(|v| v[0]).fold(0.0f32, f32::max);
+    for (x, y) in got.iter().zip(want) {
+        for (f, (u, v)) in x.face_radiosity.iter().zip(&y.face_radiosity).enumerate() {
+            for c in 0..3 {
+                assert!(
+                    (u[c] - v[c]).abs() < 1e-4 * peak,
+                    "{} face {f}: {} vs {what} {}",
+                    x.name,
+                    u[c],
+                    v[c]
+                );
+            }
+        }
+    }
 }

@@ -50,10 +50,8 @@ pub const MAX_DEPTH: usize = 16;
 
 impl Anderson {
     /// A mixer over vectors of `weights.len() x stride` entries keeping `depth` steps (at most
-    /// [`MAX_DEPTH`]; 0: it
-    /// leaves every image as it is);
-    /// [`crate::Error::OutOfMemory`] when its `2 depth + 2` vectors cannot be had (a caller
-    /// then sweeps without it).
+    /// [`MAX_DEPTH`]; 0: it leaves every image as it is); [`crate::Error::OutOfMemory`] when its
+    /// `2 depth + 2` vectors cannot be had (a caller then sweeps without it).
     pub fn new(depth: usize, weights: Vec<f64>, stride: usize) -> Result<Self> {
         let depth = depth.min(MAX_DEPTH);
         let n = weights.len() * stride;
@@ -95,11 +93,10 @@ impl Anderson {
         let mut rhs = vec![0.0; m + 1];
         let n = self.stride;
         for (c, &w) in self.weights.iter().enumerate() {
-            let span = c * n..(c + 1) * n;
             let (mut own, mut own_rhs) = (0.0, 0.0);
             let mut with = [0.0; MAX_DEPTH];
             let mut with_rhs = [0.0; MAX_DEPTH];
-            for i in span.clone() {
+            for i in c * n..(c + 1) * n {
                 let f = g[i] - x[i];
                 let d = f - f_last[i];
                 df[i] = d;

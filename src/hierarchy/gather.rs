@@ -38,6 +38,7 @@ use rayon::prelude::*;
 use super::coupling::{CLUSTER_RAYS, SplitMix, sample_point};
 use super::solve::{Incoming, State};
 use super::tree::{Kind, NodeId, Surface, Tree};
+use crate::basis::MAX_LEN as MAX_NB;
 use crate::error::Result;
 use crate::gather::{CornerValues, FACING, FOOT_BALL, NEAR_FACING, Stop, corner_points, shading_point};
 use crate::geometry::{Patch, Rect};
@@ -68,8 +69,6 @@ const FAR_POINTS: usize = 2;
 
 /// Deepest split of a source rectangle; there its form factor is taken analytically.
 const MAX_DEPTH: u32 = 12;
-
-const MAX_NB: usize = (crate::basis::MAX_ORDER + 1) * (crate::basis::MAX_ORDER + 1);
 
 /// What the gather of one hierarchical frame reads.
 pub struct Inputs<'a> {

@@ -14,7 +14,7 @@ use rayon::prelude::*;
 use super::anderson::Anderson;
 use super::coupling::{Coupling, Link};
 use super::lobes::{self, Lobes};
-use super::tree::{Kind, NodeId, Surface, Tree};
+use super::tree::{Kind, NodeId, Tree};
 use super::two_scale::TwoScale;
 use crate::budget;
 use crate::error::{Error, Result};
@@ -263,63 +263,73 @@ impl State {
     /// faces moved, so that the next sweep shoots from their new normals and areas. A later
     /// frame's solve starts here, from the last frame's solution.
     pub fn refresh(&mut self, tree: &Tree) {
-        let mut scratch = vec![[0.0; 3]; self.nb];
-        self.pull(tree, tree.root, &mut scratch);
+        self.pull(tree, tree.root);
     }
 
-    /// Sets every node above the leaves from its children: a surface's polynomial as its
-    /// quadrants' projection and its mean from theirs, a cluster's mean and intensity lobes as
-    /// its children's sum (the pull half of [`State::push_pull`], without its pushes).
-    fn pull(&mut self, tree: &Tree, id: NodeId, scratch: &mut [[f64; 3]]) {
+    /// Sets every node above the leaves from its children (the pull half of
+    /// [`State::push_pull`], without its pushes).
+    fn pull(&mut self, tree: &Tree, id: NodeId) {
+        let children: &[NodeId] = match &tree.nodes[id as usize].kind {
+            Kind::Cluster { children } => children,
+            Kind::Surface(s) => s.children.as_ref().map_or(&[], |c| c),
+        };
+        for &c in children {
+            self.pull(tree, c);
+        }
+        self.pull_node(tree, id);
+    }
+
+    /// Sets node `id` from its children, which are set: a surface's polynomial as its
+    /// quadrants' projection and its mean from theirs (a leaf's from its own polynomial), a
+    /// face's intensity lobe from its mean, a cluster's mean and lobes as its children's sum.
+    fn pull_node(&mut self, tree: &Tree, id: NodeId) {
         let nb = self.nb;
         let i = id as usize;
         let node = &tree.nodes[i];
+        let children: &[NodeId] = match &node.kind {
+            Kind::Cluster { children } => children,
+            Kind::Surface(s) => s.children.as_ref().map_or(&[], |c| c),
+        };
         let mut power = [0.0; 3];
+        for &c in children {
+            let a = tree.nodes[c as usize].area;
+            for ch in 0..3 {
+                power[ch] += self.mean[c as usize][ch] * a;
+            }
+        }
+        let from_children = power.map(|p| if node.area > 0.0 { p / node.area } else { 0.0 });
         match &node.kind {
             Kind::Cluster { children } => {
                 let mut out = lobes::ZERO;
                 for &c in children {
-                    self.pull(tree, c, scratch);
                     lobes::add(&mut out, &self.lobes[c as usize]);
-                    let a = tree.nodes[c as usize].area;
-                    for ch in 0..3 {
-                        power[ch] += self.mean[c as usize][ch] * a;
-                    }
                 }
                 self.lobes[i] = out;
+                self.mean[i] = from_children;
             }
             Kind::Surface(s) => {
-                match s.children {
-                    None => {
-                        self.mean[i] = self.mean_of(s, i);
-                        power = self.mean[i].map(|m| m * node.area);
-                    }
+                // The mean from the leaves (area-weighted), which a pulled polynomial keeps only
+                // where the area element is polynomial of the basis order.
+                self.mean[i] = match s.children {
+                    None => self.mean_of(s, i),
                     Some(children) => {
-                        for &c in &children {
-                            self.pull(tree, c, scratch);
-                            let a = tree.nodes[c as usize].area;
-                            for ch in 0..3 {
-                                power[ch] += self.mean[c as usize][ch] * a;
-                            }
-                        }
                         let part = |q: usize| {
                             let c = children[q] as usize;
                             &self.b[c * nb..(c + 1) * nb]
                         };
-                        self.two_scale.pull([part(0), part(1), part(2), part(3)], scratch);
-                        self.b[i * nb..(i + 1) * nb].copy_from_slice(scratch);
+                        let mut pulled = [[0.0; 3]; crate::basis::MAX_LEN];
+                        self.two_scale.pull([part(0), part(1), part(2), part(3)], &mut pulled[..nb]);
+                        self.b[i * nb..(i + 1) * nb].copy_from_slice(&pulled[..nb]);
+                        from_children
                     }
-                }
+                };
                 if s.depth == 0 {
-                    let mean = power.map(|p| if node.area > 0.0 { p / node.area } else { 0.0 });
                     let mut l = lobes::ZERO;
-                    lobes::add_lobe(&mut l, s.normal, mean.map(|m| m * node.area / std::f64::consts::PI));
+                    let f = node.area / std::f64::consts::PI;
+                    lobes::add_lobe(&mut l, s.normal, self.mean[i].map(|m| m * f));
                     self.lobes[i] = l;
                 }
             }
-        }
-        if !matches!(node.kind, Kind::Surface(Surface { children: None, .. })) {
-            self.mean[i] = power.map(|p| if node.area > 0.0 { p / node.area } else { 0.0 });
         }
     }
 
@@ -497,18 +507,9 @@ impl State {
                         flat[0][c] += own[c];
                     }
                 }
-                let mut out = lobes::ZERO;
-                let mut power = [0.0; 3];
                 for &c in children {
                     self.visit(tree, c, &l, &flat, gathered, change);
-                    lobes::add(&mut out, &self.lobes[c as usize]);
-                    let a = tree.nodes[c as usize].area;
-                    for ch in 0..3 {
-                        power[ch] += self.mean[c as usize][ch] * a;
-                    }
                 }
-                self.lobes[i] = out;
-                self.mean[i] = power.map(|p| if node.area > 0.0 { p / node.area } else { 0.0 });
             }
             Kind::Surface(s) => {
                 let mut h: Vec<[f64; 3]> = pushed.to_vec();
@@ -539,41 +540,16 @@ impl State {
                             node.area * (0..3).map(|c| (after[c] - before[c]).abs()).fold(0.0, f64::max);
                     }
                     Some(children) => {
-                        let mut parts: [Vec<[f64; 3]>; 4] = Default::default();
                         for (q, &c) in children.iter().enumerate() {
                             let mut hq = vec![[0.0; 3]; nb];
                             self.two_scale.push_add(q, &h, &mut hq);
                             self.visit(tree, c, &lobes::ZERO, &hq, gathered, change);
-                            parts[q] = self.b[c as usize * nb..(c as usize + 1) * nb].to_vec();
                         }
-                        let mut pulled = vec![[0.0; 3]; nb];
-                        self.two_scale.pull([&parts[0], &parts[1], &parts[2], &parts[3]], &mut pulled);
-                        self.b[i * nb..(i + 1) * nb].copy_from_slice(&pulled);
                     }
-                }
-                // The mean from the leaves (area-weighted), which a pulled polynomial keeps only
-                // where the area element is polynomial of the basis order.
-                self.mean[i] = match s.children {
-                    None => self.mean_of(s, i),
-                    Some(children) => {
-                        let mut p = [0.0; 3];
-                        for &c in &children {
-                            let a = tree.nodes[c as usize].area;
-                            for ch in 0..3 {
-                                p[ch] += self.mean[c as usize][ch] * a;
-                            }
-                        }
-                        p.map(|x| if node.area > 0.0 { x / node.area } else { 0.0 })
-                    }
-                };
-                if s.depth == 0 {
-                    let mut l = lobes::ZERO;
-                    let f = node.area / std::f64::consts::PI;
-                    lobes::add_lobe(&mut l, s.normal, self.mean[i].map(|m| m * f));
-                    self.lobes[i] = l;
                 }
             }
         }
+        self.pull_node(tree, id);
     }
 
     fn mean_of(&self, s: &super::tree::Surface, i: usize) -> [f64; 3] {

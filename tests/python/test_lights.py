@@ -296,6 +296,19 @@ def test_the_live_preview_follows_lights_and_the_world(blender):
         sc.radiosity.live_preview = False
 
 
+def _bake_frame_one_with_cycles(bpy, objs):
+    """Frame 1 of the scene baked by Cycles (DIFFUSE, 128 samples) into ``Cycles`` and, with a
+    second seed for its own noise, ``Cycles2``, then by the add-on (FULL) into ``Rad_0001``."""
+    from tools import bakes
+
+    sc = bpy.context.scene
+    sc.frame_start = sc.frame_end = 1
+    sc.frame_set(1)
+    bakes.cycles_bake(bpy, objs, 128, attr="Cycles", seed=1)
+    bakes.cycles_bake(bpy, objs, 128, attr="Cycles2", seed=2)
+    bakes.ours_bake(bpy, (1, 1), 2, method="FULL")
+
+
 def test_a_room_lit_by_the_world_agrees_with_cycles(blender):
     """The validation room with its top open (tools/validate_lights.py), lit only by the sky
     image (bright and warm towards +X, brighter towards the zenith), baked by the add-on and by
@@ -311,12 +324,7 @@ def test_a_room_lit_by_the_world_agrees_with_cycles(blender):
     # their light (the floor's RMSE 20% from those corners alone).
     objs = room(bpy, 6, ceiling=False)
     set_world(bpy, "sky")
-    sc = bpy.context.scene
-    sc.frame_start = sc.frame_end = 1
-    sc.frame_set(1)
-    bakes.cycles_bake(bpy, objs, 128, attr="Cycles", seed=1)
-    bakes.cycles_bake(bpy, objs, 128, attr="Cycles2", seed=2)
-    bakes.ours_bake(bpy, (1, 1), 2, method="FULL")
+    _bake_frame_one_with_cycles(bpy, objs)
     for ob in objs:
         ref, other = corner_values(ob, "Cycles"), corner_values(ob, "Cycles2")
         ours = corner_values(ob, "Rad_0001")
@@ -344,12 +352,7 @@ def test_a_soft_point_light_agrees_with_cycles(blender):
     objs = room(bpy, 6, ceiling=True)
     lamp = add_light(bpy, "point_soft")
     assert lamp.data.use_soft_falloff and lamp.data.shadow_soft_size == 0.5
-    sc = bpy.context.scene
-    sc.frame_start = sc.frame_end = 1
-    sc.frame_set(1)
-    bakes.cycles_bake(bpy, objs, 128, attr="Cycles", seed=1)
-    bakes.cycles_bake(bpy, objs, 128, attr="Cycles2", seed=2)
-    bakes.ours_bake(bpy, (1, 1), 2, method="FULL")
+    _bake_frame_one_with_cycles(bpy, objs)
     disk = {ob.name: corner_values(ob, "Rad_0001") for ob in objs}
     bpy.ops.radiosity.clear()
     lamp.data.use_soft_falloff = False
