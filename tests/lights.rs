@@ -114,7 +114,7 @@ fn a_square_area_light_over_a_point_gives_the_rectangle_form_factor() {
     // four corner rectangles of 0.5 x 0.5 at distance 1 (Howell C-11) make the form factor.
     let mut light = Light::new("Area", LightKind::Area, at(DVec3::new(0.0, 0.0, 1.0), -DVec3::Z), 10.0);
     light.shape = AreaShape::Square;
-    light.size = [1.0, 1.0];
+    light.base.size = [1.0, 1.0];
     let mut s = Session::new(scene(vec![floor()], vec![light], (1, 1)), Method::Full).unwrap();
     let got = corners(&mut s, 1.0, 0);
     let (x, y) = (0.5f64, 0.5f64);
@@ -150,27 +150,19 @@ fn animated_lights_incremental_frames_equal_full_solves() {
     let mut point =
         Light::new("Point", LightKind::Point, DMat4::from_translation(DVec3::new(-0.5, 0.0, 1.5)), 80.0);
     point.animation = vec![
-        LightKey { frame: 1.0, matrix: None, color: None, power: None, spot_size: None, spot_blend: None },
+        LightKey { frame: 1.0, ..LightKey::default() },
         LightKey {
             frame: 4.0,
             matrix: Some(DMat4::from_translation(DVec3::new(0.6, 0.2, 1.2))),
             color: Some([1.0, 0.6, 0.3]),
             power: Some(150.0),
-            spot_size: None,
-            spot_blend: None,
+            ..LightKey::default()
         },
     ];
     let mut sun = Light::new("Sun", LightKind::Sun, at(DVec3::ZERO, DVec3::new(0.3, 0.0, -1.0)), 1.0);
     sun.animation = vec![
-        LightKey { frame: 1.0, matrix: None, color: None, power: None, spot_size: None, spot_blend: None },
-        LightKey {
-            frame: 4.0,
-            matrix: None,
-            color: Some([0.2, 0.4, 1.0]),
-            power: None,
-            spot_size: None,
-            spot_blend: None,
-        },
+        LightKey { frame: 1.0, ..LightKey::default() },
+        LightKey { frame: 4.0, matrix: None, color: Some([0.2, 0.4, 1.0]), ..LightKey::default() },
     ];
     let block = galerkin_radiosity::scenes::merge(
         "Block",
@@ -209,21 +201,19 @@ fn lights_round_trip_through_the_scene_file() {
     let mut spot =
         Light::new("Spot", LightKind::Spot, at(DVec3::new(1.0, 2.0, 3.0), DVec3::new(0.0, 1.0, -1.0)), 40.0);
     spot.base.color = [1.0, 0.5, 0.25];
-    spot.animation = vec![LightKey {
-        frame: 3.0,
-        matrix: None,
-        color: None,
-        power: Some(5.0),
-        spot_size: Some(0.5),
-        spot_blend: None,
-    }];
+    spot.animation = vec![
+        LightKey { frame: 3.0, power: Some(5.0), spot_size: Some(0.5), ..LightKey::default() },
+        LightKey { frame: 5.0, radius: Some(0.3), soft_falloff: Some(false), ..LightKey::default() },
+    ];
     let mut area = Light::new("Area", LightKind::Area, DMat4::IDENTITY, 12.0);
     area.shape = AreaShape::Ellipse;
-    area.size = [0.5, 2.0];
+    area.base.size = [0.5, 2.0];
+    area.animation = vec![LightKey { frame: 2.0, size: Some([0.25, 1.5]), ..LightKey::default() }];
     let mut point = round_point(DVec3::new(0.0, 1.0, 2.0), 30.0, 0.25, false);
     point.name = "Bulb".into();
     let mut sun = Light::new("Sun", LightKind::Sun, DMat4::IDENTITY, 2.0);
-    sun.angle = 0.2;
+    sun.base.angle = 0.2;
+    sun.animation = vec![LightKey { frame: 2.0, angle: Some(0.05), ..LightKey::default() }];
     let sc = scene(vec![floor()], vec![spot, area, sun, point], (1, 3));
     let back = parse_scene(&scene_to_json(&sc)).unwrap();
     assert_eq!(back.lights, sc.lights);
@@ -233,12 +223,12 @@ fn lights_round_trip_through_the_scene_file() {
     let l = &parse_scene(text).unwrap().lights[0];
     assert_eq!(l.base.matrix.w_axis.truncate(), DVec3::new(1.0, 2.0, 3.0));
     assert!((galerkin_radiosity::lights::direction(&l.base.matrix) + DVec3::Z).length() < 1e-12);
-    assert!(l.soft_falloff, "Blender's default");
+    assert!(l.base.soft_falloff, "Blender's default");
     let sphere =
         parse_scene(&text.replace(r#""power":10"#, r#""power":10,"radius":0.5,"soft_falloff":false"#))
             .unwrap();
-    assert!(!sphere.lights[0].soft_falloff);
-    assert_eq!(sphere.lights[0].radius, 0.5);
+    assert!(!sphere.lights[0].base.soft_falloff);
+    assert_eq!(sphere.lights[0].base.radius, 0.5);
 }
 
 #[test]
@@ -326,7 +316,7 @@ fn an_area_light_lights_like_the_emissive_quad_it_stands_for() {
     // Unrotated, a light looks down -Z with its size along X and Y.
     let mut light = Light::new("Area", LightKind::Area, DMat4::from_translation(centre), 20.0);
     light.shape = AreaShape::Rectangle;
-    light.size = [0.6, 0.4];
+    light.base.size = [0.6, 0.4];
     let lit = scene(receivers.clone(), vec![light], (1, 1));
     let mut materials = materials();
     materials[1].emission = [20.0 / (0.6 * 0.4); 3];
@@ -612,8 +602,8 @@ fn a_two_sided_emitter_lights_from_its_back() {
 /// A Point light of `power` W and radius `r` at `p`, Soft Falloff `soft`.
 fn round_point(p: DVec3, power: f64, r: f64, soft: bool) -> Light {
     let mut light = Light::new("Round", LightKind::Point, DMat4::from_translation(p), power);
-    light.radius = r;
-    light.soft_falloff = soft;
+    light.base.radius = r;
+    light.base.soft_falloff = soft;
     light
 }
 
@@ -781,7 +771,7 @@ fn a_spot_with_a_radius_keeps_its_cone() {
     let mut spot = Light::new("Spot", LightKind::Spot, at(p, -DVec3::Z), 100.0);
     spot.base.spot_size = 90f64.to_radians();
     spot.base.spot_blend = 0.2;
-    spot.radius = 0.2;
+    spot.base.radius = 0.2;
     let mut s = Session::new(scene(vec![floor()], vec![spot], (1, 1)), Method::Full).unwrap();
     let got = corners(&mut s, 1.0, 0);
     let disk = |x: DVec3| {
@@ -805,7 +795,7 @@ fn a_spot_with_a_radius_keeps_its_cone() {
 fn a_sun_of_an_angle_lights_an_open_floor_by_its_cosine_exactly() {
     let d = DVec3::new(1.0, 0.5, -2.0).normalize();
     let mut light = Light::new("Sun", LightKind::Sun, at(DVec3::new(9.0, 9.0, 9.0), d), 3.0);
-    light.angle = 10f64.to_radians();
+    light.base.angle = 10f64.to_radians();
     let mut s = Session::new(scene(vec![floor()], vec![light], (1, 1)), Method::Full).unwrap();
     let got = corners(&mut s, 1.0, 0);
     let w = worst(&got, |_| RHO * 3.0 * -d.z);
@@ -828,7 +818,7 @@ fn a_sun_of_an_angle_casts_a_smooth_penumbra() {
         0,
     );
     let mut sun = Light::new("Sun", LightKind::Sun, at(DVec3::ZERO, -DVec3::Z), 2.0);
-    sun.angle = 20f64.to_radians();
+    sun.base.angle = 20f64.to_radians();
     let mut s = Session::new(scene(vec![strip, half_blocker(0.0)], vec![sun], (1, 1)), Method::Full).unwrap();
     let mut line: Vec<(f64, f64)> = corners(&mut s, 1.0, 0)
         .into_iter()
@@ -856,30 +846,47 @@ fn a_sun_of_an_angle_casts_a_smooth_penumbra() {
     assert!(steepest < 0.2, "{steepest}");
 }
 
-/// A radius and Soft Falloff changed from frame to frame through `Session::set_lights` (as the
-/// add-on and the C ABI set them), and a sun's angle: incremental frames against full solves.
+/// A radius and Soft Falloff changed from frame to frame, a sun's angle and an area light's
+/// size: set per frame through `Session::set_lights` (as the add-on and the C ABI set them),
+/// incremental frames against full solves; and the same changes keyed in the scene's own
+/// animation (as a scene file holds them) give the same frames.
 #[test]
-fn changing_radius_and_angle_incremental_frames_equal_full_solves() {
+fn changing_radius_angle_and_size_incremental_frames_equal_full_solves() {
     let blocker = panel("Blocker", DVec3::new(0.2, 0.1, 0.6), 0.3 * DVec3::X, 0.3 * DVec3::Y, DVec3::Z, 2, 0);
-    let sc = scene(vec![floor(), blocker], Vec::new(), (1, 4));
-    let lights = |f: usize| {
-        let mut point = round_point(DVec3::new(-0.3, 0.0, 1.6), 120.0, [0.0, 0.2, 0.5, 0.5][f - 1], f != 4);
+    let radius = [0.0, 0.2, 0.5, 0.5];
+    let angle = [0.0f64, 5.0, 15.0, 30.0].map(f64::to_radians);
+    let size = [[0.4, 0.4], [0.4, 0.8], [1.0, 0.8], [0.2, 0.2]];
+    let point_at = |f: usize| {
+        let mut point = round_point(DVec3::new(-0.3, 0.0, 1.6), 120.0, radius[f - 1], f != 4);
         point.base.color = [1.0, 0.8, 0.6];
-        let mut sun = Light::new("Sun", LightKind::Sun, at(DVec3::ZERO, DVec3::new(0.4, 0.1, -1.0)), 1.5);
-        sun.angle = [0.0f64, 5.0, 15.0, 30.0][f - 1].to_radians();
-        vec![point, sun]
+        point
     };
-    let bake = |method| {
+    let sun_at = |f: usize| {
+        let mut sun = Light::new("Sun", LightKind::Sun, at(DVec3::ZERO, DVec3::new(0.4, 0.1, -1.0)), 1.5);
+        sun.base.angle = angle[f - 1];
+        sun
+    };
+    let area_at = |f: usize| {
+        let mut area = Light::new("Area", LightKind::Area, at(DVec3::new(0.8, -0.5, 1.2), -DVec3::Z), 60.0);
+        area.shape = AreaShape::Rectangle;
+        area.base.size = size[f - 1];
+        area
+    };
+    let lights = |f: usize| vec![point_at(f), sun_at(f), area_at(f)];
+    let bake = |sc: &Scene, method, set: bool| {
         let mut s = Session::new(sc.clone(), method).unwrap();
         (1..=4)
             .map(|f| {
-                s.set_lights(lights(f)).unwrap();
+                if set {
+                    s.set_lights(lights(f)).unwrap();
+                }
                 s.solve_frame(f as f64, &no_progress).unwrap();
                 s.face_results().unwrap().into_iter().flat_map(|o| o.corner_radiosity).collect::<Vec<_>>()
             })
             .collect::<Vec<_>>()
     };
-    let (full, inc) = (bake(Method::Full), bake(Method::Incremental));
+    let sc = scene(vec![floor(), blocker.clone()], Vec::new(), (1, 4));
+    let (full, inc) = (bake(&sc, Method::Full, true), bake(&sc, Method::Incremental, true));
     assert_frames_agree(&inc, &full);
     for f in 1..4 {
         assert!(
@@ -888,6 +895,35 @@ fn changing_radius_and_angle_incremental_frames_equal_full_solves() {
             f + 1
         );
     }
+    // Keyed: every value of frame f in a key at f.
+    let keyed = |light: Light, key: &dyn Fn(usize, &Light) -> LightKey| {
+        let mut l = light;
+        l.animation = (1..=4).map(|f| key(f, &l)).collect();
+        l
+    };
+    let point = keyed(point_at(1), &|f, _| LightKey {
+        frame: f as f64,
+        radius: Some(radius[f - 1]),
+        soft_falloff: Some(f != 4),
+        ..LightKey::default()
+    });
+    // Soft Falloff holds the earlier key's value between keys; the radius is linear.
+    let between = point.state_at(3.5);
+    assert!(between.soft_falloff && (between.radius - 0.5).abs() < 1e-15);
+    assert!((point.state_at(1.5).radius - 0.1).abs() < 1e-15);
+    let sun = keyed(sun_at(1), &|f, _| LightKey {
+        frame: f as f64,
+        angle: Some(angle[f - 1]),
+        ..LightKey::default()
+    });
+    let area = keyed(area_at(1), &|f, _| LightKey {
+        frame: f as f64,
+        size: Some(size[f - 1]),
+        ..LightKey::default()
+    });
+    let sc = scene(vec![floor(), blocker], vec![point, sun, area], (1, 4));
+    let sc = parse_scene(&scene_to_json(&sc)).unwrap(); // through the scene file
+    assert_frames_agree(&bake(&sc, Method::Incremental, false), &full);
 }
 
 /// Each frame's corners (RGB) of `inc` within 1e-3 of that frame's peak of `full`, frames from 1.

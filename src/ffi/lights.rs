@@ -83,12 +83,12 @@ pub unsafe extern "C" fn gr_light_default(out: *mut GrLight) -> GrStatus {
             matrix: DMat4::IDENTITY.to_cols_array(),
             color: d.base.color,
             power: d.base.power,
-            radius: d.radius,
+            radius: d.base.radius,
             spot_size: d.base.spot_size,
             spot_blend: d.base.spot_blend,
-            angle: d.angle,
-            area_size: d.size,
-            soft_falloff: d.soft_falloff as u32,
+            angle: d.base.angle,
+            area_size: d.base.size,
+            soft_falloff: d.base.soft_falloff as u32,
         };
         // SAFETY: non-null per the check, writable per the contract.
         unsafe { out.write_unaligned(light) };
@@ -147,15 +147,15 @@ fn light_of(i: usize, g: &GrLight) -> Result<Light, Failure> {
     light.base.color = g.color;
     light.base.spot_size = g.spot_size;
     light.base.spot_blend = g.spot_blend;
-    light.radius = g.radius;
-    light.soft_falloff = match g.soft_falloff {
+    light.base.radius = g.radius;
+    light.base.soft_falloff = match g.soft_falloff {
         0 => false,
         1 => true,
         k => return Err(Failure::invalid(format!("lights[{i}].soft_falloff {k} is not 0 or 1"))),
     };
-    light.angle = g.angle;
+    light.base.angle = g.angle;
     light.shape = shape;
-    light.size = g.area_size;
+    light.base.size = g.area_size;
     Ok(light)
 }
 

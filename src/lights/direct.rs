@@ -89,8 +89,8 @@ impl Placed {
             LightKind::Sun => colour(1.0),
             LightKind::Area => {
                 let (a, b) = match light.shape {
-                    AreaShape::Square | AreaShape::Disk => (light.size[0], light.size[0]),
-                    AreaShape::Rectangle | AreaShape::Ellipse => (light.size[0], light.size[1]),
+                    AreaShape::Square | AreaShape::Disk => (s.size[0], s.size[0]),
+                    AreaShape::Rectangle | AreaShape::Ellipse => (s.size[0], s.size[1]),
                 };
                 let round = matches!(light.shape, AreaShape::Disk | AreaShape::Ellipse);
                 // Local outline wound clockwise about +Z, so that its front is -Z.
@@ -117,16 +117,16 @@ impl Placed {
                         }
                     }
                 }
-                colour(1.0 / light.area())
+                colour(1.0 / light.area(s))
             }
         };
         let smooth = (1.0 - cos_half) * s.spot_blend;
         let extent = match light.kind {
-            LightKind::Point | LightKind::Spot => light.radius,
-            LightKind::Sun => 0.5 * light.angle,
+            LightKind::Point | LightKind::Spot => s.radius,
+            LightKind::Sun => 0.5 * s.angle,
             LightKind::Area => 0.0,
         };
-        let sphere = !light.soft_falloff;
+        let sphere = !s.soft_falloff;
         Placed { kind: light.kind, position, axis, scale, cos_half, smooth, extent, sphere, polygon, samples }
     }
 }

@@ -127,10 +127,21 @@ pub struct LightState {
     pub spot_size: f64,
     /// Spot blend in [0,1].
     pub spot_blend: f64,
+    /// Point and Spot radius, metres (0: a point).
+    pub radius: f64,
+    /// Point and Spot of radius > 0: Blender's Soft Falloff (`use_soft_falloff`, default on), a
+    /// disk facing the receiver; off, a sphere (module docs).
+    pub soft_falloff: bool,
+    /// Sun angular diameter, radians (0: parallel rays).
+    pub angle: f64,
+    /// Area size along local X and Y, metres (`size[1]` used by Rectangle and Ellipse).
+    pub size: [f64; 2],
 }
 
-/// Keyed values of a light at `frame`: fields left `None` keep the light's own.
-#[derive(Clone, Debug, PartialEq)]
+/// Keyed values of a light at `frame`: fields left `None` keep the light's own. Numbers are
+/// linear between keys; `soft_falloff`, a switch, holds the earlier key's value up to the next
+/// key, as Blender's constant interpolation of a boolean does.
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct LightKey {
     pub frame: f64,
     pub matrix: Option<DMat4>,
@@ -138,6 +149,10 @@ pub struct LightKey {
     pub power: Option<f64>,
     pub spot_size: Option<f64>,
     pub spot_blend: Option<f64>,
+    pub radius: Option<f64>,
+    pub soft_falloff: Option<bool>,
+    pub angle: Option<f64>,
+    pub size: Option<[f64; 2]>,
 }
 
 /// A Blender Light object.
@@ -147,16 +162,7 @@ pub struct Light {
     pub kind: LightKind,
     /// The state at frames without keys (and the values keys leave out).
     pub base: LightState,
-    /// Point and Spot radius, metres (0: a point).
-    pub radius: f64,
-    /// Point and Spot of radius > 0: Blender's Soft Falloff (`use_soft_falloff`, default on), a
-    /// disk facing the receiver; off, a sphere (module docs).
-    pub soft_falloff: bool,
-    /// Sun angular diameter, radians (0: parallel rays).
-    pub angle: f64,
     pub shape: AreaShape,
-    /// Area size along local X and Y, metres (`size[1]` used by Rectangle and Ellipse).
-    pub size: [f64; 2],
     /// Keys sorted by frame: linear between keys, held outside them.
     pub animation: Vec<LightKey>,
 }
@@ -173,12 +179,12 @@ impl Light {
                 power,
                 spot_size: 45f64.to_radians(),
                 spot_blend: 0.15,
+                radius: 0.0,
+                soft_falloff: true,
+                angle: 0.0,
+                size: [1.0, 1.0],
             },
-            radius: 0.0,
-            soft_falloff: true,
-            angle: 0.0,
             shape: AreaShape::Square,
-            size: [1.0, 1.0],
             animation: Vec::new(),
         }
     }
@@ -194,6 +200,10 @@ impl Light {
             power: k.power.unwrap_or(self.base.power),
             spot_size: k.spot_size.unwrap_or(self.base.spot_size),
             spot_blend: k.spot_blend.unwrap_or(self.base.spot_blend),
+            radius: k.radius.unwrap_or(self.base.radius),
+            soft_falloff: k.soft_falloff.unwrap_or(self.base.soft_falloff),
+            angle: k.angle.unwrap_or(self.base.angle),
+            size: k.size.unwrap_or(self.base.size),
         };
         let (a, b) = (at(&self.animation[lo]), at(&self.animation[hi]));
         if w == 0.0 {
@@ -206,12 +216,16 @@ impl Light {
             power: mix(a.power, b.power),
             spot_size: mix(a.spot_size, b.spot_size),
             spot_blend: mix(a.spot_blend, b.spot_blend),
+            radius: mix(a.radius, b.radius),
+            soft_falloff: a.soft_falloff,
+            angle: mix(a.angle, b.angle),
+            size: std::array::from_fn(|c| mix(a.size[c], b.size[c])),
         }
     }
 
-    /// The light's area (Area lights), m^2.
-    pub fn area(&self) -> f64 {
-        let [a, b] = self.size;
+    /// The light's area (Area lights) in state `s`, m^2.
+    pub fn area(&self, s: &LightState) -> f64 {
+        let [a, b] = s.size;
         match self.shape {
             AreaShape::Square => a * a,
             AreaShape::Rectangle => a * b,
@@ -221,7 +235,7 @@ impl Light {
     }
 }
 
-fn check_state(place: &str, s: &LightState) -> Result<()> {
+fn check_state(place: &str, kind: LightKind, s: &LightState) -> Result<()> {
     if !s.matrix.is_finite() {
         return Err(invalid_scene!("{place}: matrix is not finite"));
     }
@@ -237,6 +251,15 @@ fn check_state(place: &str, s: &LightState) -> Result<()> {
     if !(0.0..=1.0).contains(&s.spot_blend) {
         return Err(invalid_scene!("{place}: spot_blend {} is outside [0,1]", s.spot_blend));
     }
+    if !(s.radius.is_finite() && s.radius >= 0.0) {
+        return Err(invalid_scene!("{place}: radius {} must be finite and >= 0", s.radius));
+    }
+    if !(s.angle.is_finite() && s.angle >= 0.0) {
+        return Err(invalid_scene!("{place}: angle {} must be finite and >= 0", s.angle));
+    }
+    if kind == LightKind::Area && s.size.iter().any(|x| !(x.is_finite() && *x > 0.0)) {
+        return Err(invalid_scene!("{place}: size {:?} must be finite and > 0", s.size));
+    }
     Ok(())
 }
 
@@ -244,21 +267,12 @@ fn check_state(place: &str, s: &LightState) -> Result<()> {
 pub fn validate(lights: &[Light]) -> Result<()> {
     for (l, light) in lights.iter().enumerate() {
         let place = format!("light {l} \"{}\"", light.name);
-        check_state(&place, &light.base)?;
+        check_state(&place, light.kind, &light.base)?;
         for k in &light.animation {
             if !k.frame.is_finite() {
                 return Err(invalid_scene!("{place}: animation key frame {} is not finite", k.frame));
             }
-            check_state(&format!("{place} key at frame {}", k.frame), &light.state_at(k.frame))?;
-        }
-        if !(light.radius.is_finite() && light.radius >= 0.0) {
-            return Err(invalid_scene!("{place}: radius {} must be finite and >= 0", light.radius));
-        }
-        if !(light.angle.is_finite() && light.angle >= 0.0) {
-            return Err(invalid_scene!("{place}: angle {} must be finite and >= 0", light.angle));
-        }
-        if light.kind == LightKind::Area && light.size.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
-            return Err(invalid_scene!("{place}: size {:?} must be finite and > 0", light.size));
+            check_state(&format!("{place} key at frame {}", k.frame), light.kind, &light.state_at(k.frame))?;
         }
     }
     Ok(())

@@ -102,6 +102,10 @@ struct LightKeyFile {
     color: Option<[f64; 3]>,
     spot_size: Option<f64>,
     spot_blend: Option<f64>,
+    radius: Option<f64>,
+    soft_falloff: Option<bool>,
+    angle: Option<f64>,
+    size: Option<[f64; 2]>,
 }
 
 /// A light's world-from-light matrix from the file's `matrix`, or `position` and `direction`
@@ -153,15 +157,15 @@ fn parse_light(l: usize, f: LightFile) -> Result<Light> {
     }
     light.base.spot_size = f.spot_size.unwrap_or(light.base.spot_size);
     light.base.spot_blend = f.spot_blend.unwrap_or(light.base.spot_blend);
-    light.radius = f.radius.unwrap_or(light.radius);
-    light.soft_falloff = f.soft_falloff.unwrap_or(light.soft_falloff);
-    light.angle = f.angle.unwrap_or(light.angle);
+    light.base.radius = f.radius.unwrap_or(light.base.radius);
+    light.base.soft_falloff = f.soft_falloff.unwrap_or(light.base.soft_falloff);
+    light.base.angle = f.angle.unwrap_or(light.base.angle);
     if let Some(shape) = f.shape {
         light.shape = AreaShape::parse(&shape).ok_or_else(|| {
             invalid_scene!("{place}: shape \"{shape}\" is not square, rectangle, disk or ellipse")
         })?;
     }
-    light.size = f.size.unwrap_or(light.size);
+    light.base.size = f.size.unwrap_or(light.base.size);
     for (k, key) in f.animation.into_iter().enumerate() {
         let kp = format!("{place} animation key {k}");
         light.animation.push(LightKey {
@@ -171,6 +175,10 @@ fn parse_light(l: usize, f: LightFile) -> Result<Light> {
             power: key.power.or(key.strength),
             spot_size: key.spot_size,
             spot_blend: key.spot_blend,
+            radius: key.radius,
+            soft_falloff: key.soft_falloff,
+            angle: key.angle,
+            size: key.size,
         });
     }
     Ok(light)
@@ -490,14 +498,24 @@ pub fn scene_to_json(scene: &Scene) -> String {
                     if let Some(c) = k.color {
                         key["color"] = json!(c);
                     }
-                    if let Some(p) = k.power {
-                        key["power"] = json!(p);
+                    // Only the fields the key sets: a field left out keeps the light's own.
+                    let numbers = [
+                        ("power", k.power),
+                        ("spot_size", k.spot_size),
+                        ("spot_blend", k.spot_blend),
+                        ("radius", k.radius),
+                        ("angle", k.angle),
+                    ];
+                    for (field, v) in numbers {
+                        if let Some(v) = v {
+                            key[field] = json!(v);
+                        }
                     }
-                    if let Some(v) = k.spot_size {
-                        key["spot_size"] = json!(v);
+                    if let Some(v) = k.soft_falloff {
+                        key["soft_falloff"] = json!(v);
                     }
-                    if let Some(v) = k.spot_blend {
-                        key["spot_blend"] = json!(v);
+                    if let Some(v) = k.size {
+                        key["size"] = json!(v);
                     }
                     key
                 })
@@ -505,8 +523,8 @@ pub fn scene_to_json(scene: &Scene) -> String {
             let b = &l.base;
             let mut light = json!({
                 "name": l.name, "type": l.kind.name(), "matrix": row_major(&b.matrix), "color": b.color,
-                "radius": l.radius, "soft_falloff": l.soft_falloff, "spot_size": b.spot_size, "spot_blend": b.spot_blend, "angle": l.angle,
-                "shape": l.shape.name(), "size": l.size, "animation": animation,
+                "radius": b.radius, "soft_falloff": b.soft_falloff, "spot_size": b.spot_size, "spot_blend": b.spot_blend, "angle": b.angle,
+                "shape": l.shape.name(), "size": b.size, "animation": animation,
             });
             light[if l.kind == LightKind::Sun { "strength" } else { "power" }] = json!(b.power);
             light
