@@ -216,7 +216,8 @@ def _main(args, bpy, pkg):
             lines = progress.Lines(0, args.progress_interval)  # the frame count comes with the first job
             bake.listeners.append(lines.listen)
             try:
-                code = _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt, lines)
+                with lines.heartbeat():  # a line every interval even while the library is silent
+                    code = _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt, lines)
             finally:
                 bake.listeners.remove(lines.listen)
                 interrupt.uninstall()

@@ -75,7 +75,8 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
         lines.expect(job)
         bake.listeners.append(lines.listen)
         try:
-            job.run()
+            with lines.heartbeat():  # a line every second even while the library is silent
+                job.run()
         except bake.BakeError as e:
             for line in job.warnings:
                 self.report({"WARNING"}, line)

@@ -9,15 +9,16 @@ The shares are learned as the library's are: a finished frame's stages, timed, a
 the next frame of its kind (its first stage), so a frame whose gather is 90% of it (the
 monastery's) is not reported half done when its gather starts.
 
-``Lines`` turns the events of a bake into the lines the headless script prints: one at most every
-``interval`` seconds inside a frame, one per finished frame, each with the time spent and left,
-and a closing summary.
+``Lines`` turns the events of a bake into the lines the headless script prints: one every
+``interval`` seconds inside a frame (repeated by a heartbeat thread while the library is
+silent), one per finished frame, each with the time spent and left, and a closing summary.
 Both are called from the library's worker threads (one call at a time, but not the main thread):
 a lock guards the state, and nothing here touches bpy.
 """
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import threading
 import time
@@ -54,6 +55,7 @@ class Meter:
         self.done = 0
         self.start = self.frame_start = now
         self.fraction = 0.0
+        self.stage_fraction = 0.0   # the largest fraction the running stage reported since it started
         self.finished = 0.0   # the finished frames' total time
         self.stage_times: dict[str, float] = {}   # this frame's stages, in the order they ran
         self.running: tuple[str, float] | None = None
@@ -61,6 +63,7 @@ class Meter:
 
     def report(self, fraction: float, stage: str, now: float) -> Reading:
         self._time_stage(stage, now)
+        self.stage_fraction = max(self.stage_fraction, min(max(fraction, 0.0), 1.0))
         start, span = self._share(stage)
         f = min(max(start + span * min(max(fraction, 0.0), 1.0), 0.0), 1.0)
         self.fraction = max(self.fraction, f)
@@ -89,6 +92,7 @@ class Meter:
             name, since = self.running
             self.stage_times[name] = self.stage_times.get(name, 0.0) + max(now - since, 0.0)
         self.running = None if stage is None else (stage, now)
+        self.stage_fraction = 0.0
         if stage is not None:
             self.stage_times.setdefault(stage, 0.0)
 
@@ -96,9 +100,25 @@ class Meter:
         kind = next(iter(self.stage_times), stage)
         return self.learned.get(kind, {}).get(stage) or share(stage)
 
+    def _frame_left(self, now: float, in_frame: float) -> float | None:
+        """Seconds left of the frame: the running stage's rest at its own rate plus the stages
+        after it at the frame's rate (``src/progress.rs``, ``Meter::frame_left``: the stage's
+        rate holds where the shares are guesses); the frame's rate alone for a stage under 5%."""
+        if self.fraction <= 0:
+            return None
+        by_frame = in_frame * (1.0 - self.fraction) / self.fraction
+        if self.running is None:
+            return by_frame
+        stage, since = self.running
+        g, t = self.stage_fraction, max(now - since, 0.0)
+        if g < 0.05 or t <= 0:
+            return by_frame
+        start, span = self._share(stage)
+        return t * (1.0 - g) / g + max(1.0 - start - span, 0.0) * in_frame / self.fraction
+
     def reading(self, now: float) -> Reading:
         in_frame = max(now - self.frame_start, 0.0)
-        frame_left = in_frame * (1.0 - self.fraction) / self.fraction if self.fraction > 0 else None
+        frame_left = self._frame_left(now, in_frame)
         if self.done:
             per_frame = self.finished / self.done
         else:
@@ -144,8 +164,12 @@ class Lines:
 
     Inside a frame, a line at most every ``interval`` seconds (the library calls back every few
     milliseconds); after each frame, ``Radiosity: frame F done (i/n) in T s; bake P%, S spent,
-    about L left``; ``summary()`` gives the closing line. A bake in several jobs (the headless
-    checkpoints) announces each with ``expect``, which keeps ``i/n`` counting across them.
+    about L left``; ``summary()`` gives the closing line. The library may be silent for longer
+    than ``interval`` (one slow link or corner on a 125k-face scene): inside ``heartbeat()``, a
+    thread repeats the frame's line (its time spent and left moving on) when none came for
+    ``interval``, so a terminal never waits more than about ``interval`` for a line. A bake in
+    several jobs (the headless checkpoints) announces each with ``expect``, which keeps ``i/n``
+    counting across them.
     """
 
     def __init__(self, frames: int, interval: float = 1.0, out=None, clock=time.perf_counter):
@@ -160,6 +184,7 @@ class Lines:
         self.beyond = 0
         self.kept = None   # frames the first job kept from an earlier bake
         self._job_seen = True
+        self.running = None   # (frame, stage) of the frame in progress, for the heartbeat
 
     def expect(self, job, beyond: int = 0) -> None:
         """The events to come are ``job``'s, and ``beyond`` frames follow it in later jobs. The
@@ -172,6 +197,7 @@ class Lines:
         """The expected job returned (its counts count even when it solved nothing)."""
         with self.lock:
             self._see_job()
+            self.running = None
 
     def _see_job(self) -> None:
         if not self._job_seen:
@@ -187,15 +213,13 @@ class Lines:
             m = self.meter
             self._see_job()
             if event.get("kind") == "progress":
-                r = m.report(float(event["fraction"]), str(event["stage"]), now)
+                m.report(float(event["fraction"]), str(event["stage"]), now)
+                self.running = (event["frame"], str(event["stage"]))
                 if now - self.last_line >= self.interval:
-                    self.last_line = now
-                    self._print(f"Radiosity: frame {event['frame']} ({m.done + 1}/{m.frames}): "
-                                f"{event['stage']}, frame {100 * r.frame_fraction:.0f}%, "
-                                f"{human(r.frame_left)} left; bake {100 * r.bake_fraction:.0f}%, "
-                                f"{human(r.elapsed)} spent, about {human(r.bake_left)} left")
+                    self._frame_line(now)
             elif event.get("kind") == "frame":
                 m.frame_done(now)
+                self.running = None
                 self.frame_seconds.append(float(event["seconds"]))
                 r = m.reading(now)
                 self.last_line = now
@@ -203,6 +227,43 @@ class Lines:
                             f"{event['seconds']:.2f} s; bake {100 * r.bake_fraction:.0f}%, "
                             f"{human(r.elapsed)} spent, about {human(r.bake_left)} left")
         return None
+
+    def tick(self) -> None:
+        """The heartbeat: the running frame's line again if none was printed for ``interval``."""
+        with self.lock:
+            now = self.clock()
+            if self.running is not None and now - self.last_line >= max(self.interval, 0.1):
+                self._frame_line(now)
+
+    @contextlib.contextmanager
+    def heartbeat(self, period: float | None = None):
+        """Calls ``tick`` from a daemon thread every ``period`` seconds (a tenth of ``interval``
+        by default, at least 0.1 s) while the block runs."""
+        stop = threading.Event()
+        period = max(self.interval / 10 if period is None else period, 0.1)
+
+        def beat():
+            while not stop.wait(period):
+                self.tick()
+
+        thread = threading.Thread(target=beat, name="radiosity-progress", daemon=True)
+        thread.start()
+        try:
+            yield self
+        finally:
+            stop.set()
+            thread.join()
+
+    def _frame_line(self, now: float) -> None:
+        """The line of the frame in progress (the lock held)."""
+        m = self.meter
+        frame, stage = self.running
+        r = m.reading(now)
+        self.last_line = now
+        self._print(f"Radiosity: frame {frame} ({m.done + 1}/{m.frames}): "
+                    f"{stage}, frame {100 * r.frame_fraction:.0f}%, "
+                    f"{human(r.frame_left)} left; bake {100 * r.bake_fraction:.0f}%, "
+                    f"{human(r.elapsed)} spent, about {human(r.bake_left)} left")
 
     def summary(self) -> str:
         with self.lock:

@@ -9,9 +9,10 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
-use std::time::Instant;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
-use galerkin_radiosity::progress::{self, Meter};
+use galerkin_radiosity::progress::Lines;
 use galerkin_radiosity::scene::json::{FrameResult, ResultFile, read_scene, scene_to_json};
 use galerkin_radiosity::scene::{MAX_THREADS, Settings, check_animation, check_frames};
 use galerkin_radiosity::scenes;
@@ -196,49 +197,59 @@ fn bake_into(
     let start = Instant::now();
     let mut frames_out = Vec::new();
     let total = (last - first + 1) as usize;
-    // A line a second at most (the session calls back every few ms), monotone, with the time
-    // spent and left (galerkin_radiosity::progress).
-    let meter = Mutex::new((Meter::new(total), Instant::now()));
-    for (k, frame) in (first..=last).enumerate() {
-        let progress = |fraction: f64, stage: &str| {
-            let mut guard = meter.lock().unwrap();
-            let (meter, last_print) = &mut *guard;
-            let now = Instant::now();
-            let r = meter.report(fraction, stage, now);
-            if !quiet && now.duration_since(*last_print).as_secs_f64() >= 1.0 {
-                *last_print = now;
-                let left = |d: Option<std::time::Duration>| d.map_or("?".to_string(), progress::human);
-                eprintln!(
-                    "frame {frame} ({}/{total}): {stage}, frame {:.0}%, {} left; bake {:.0}%, {} spent, {} left",
-                    k + 1,
-                    100.0 * r.frame_fraction,
-                    left(r.frame_left),
-                    100.0 * r.bake_fraction,
-                    progress::human(r.elapsed),
-                    left(r.bake_left),
-                );
-            }
-            true
-        };
-        let stats = session.solve_frame(frame as f64, &progress)?;
-        meter.lock().unwrap().0.frame_done(Instant::now());
+    // A line a second (galerkin_radiosity::progress: monotone, with the time spent and left):
+    // from the session's callbacks, which come every few ms, and from a heartbeat thread that
+    // repeats the line while they are silent (one slow link or corner of a 125k-face scene).
+    let lines = Mutex::new(Lines::new(total, Duration::from_secs(1)));
+    let done = AtomicBool::new(false);
+    std::thread::scope(|scope| -> Result<(), CliError> {
         if !quiet {
-            eprintln!(
-                "frame {frame} ({}/{total}): {:.3} s, {} links ({} by series, {} recomputed), {} shots",
-                k + 1,
-                stats.seconds,
-                stats.pairs,
-                stats.links_series,
-                stats.links_recomputed,
-                stats.shots
-            );
+            scope.spawn(|| {
+                while !done.load(Ordering::Relaxed) {
+                    std::thread::sleep(Duration::from_millis(100));
+                    if let Some(line) = lines.lock().unwrap().line(Instant::now(), None) {
+                        eprintln!("{line}");
+                    }
+                }
+            });
         }
-        frames_out.push(FrameResult {
-            frame,
-            objects: session.face_results()?,
-            stats: serde_json::to_value(&stats).expect("stats serialize"),
-        });
-    }
+        let solved = (|| {
+            for (k, frame) in (first..=last).enumerate() {
+                let progress = |fraction: f64, stage: &str| {
+                    let mut lines = lines.lock().unwrap();
+                    let now = Instant::now();
+                    lines.meter.report(fraction, stage, now);
+                    let running = format!("frame {frame} ({}/{total}): {stage}", k + 1);
+                    if let Some(line) = lines.line(now, Some(running)).filter(|_| !quiet) {
+                        eprintln!("{line}");
+                    }
+                    true
+                };
+                let stats = session.solve_frame(frame as f64, &progress)?;
+                let mut lines = lines.lock().unwrap();
+                lines.frame_done(Instant::now());
+                if !quiet {
+                    eprintln!(
+                        "frame {frame} ({}/{total}): {:.3} s, {} links ({} by series, {} recomputed), {} shots",
+                        k + 1,
+                        stats.seconds,
+                        stats.pairs,
+                        stats.links_series,
+                        stats.links_recomputed,
+                        stats.shots
+                    );
+                }
+                frames_out.push(FrameResult {
+                    frame,
+                    objects: session.face_results()?,
+                    stats: serde_json::to_value(&stats).expect("stats serialize"),
+                });
+            }
+            Ok::<(), CliError>(())
+        })();
+        done.store(true, Ordering::Relaxed);
+        solved
+    })?;
     let result = ResultFile {
         frames: frames_out,
         stats: serde_json::json!({

@@ -111,6 +111,70 @@ def test_lines_inside_a_frame_come_at_most_every_interval():
     assert text[-1] == "Radiosity: frame 1 done (1/2) in 3.50 s; bake 50%, 3.5 s spent, about 3.5 s left"
 
 
+def test_the_time_left_follows_the_running_stage_at_its_own_rate():
+    # As src/progress.rs's test: a gather guessed at 45% of the frame that is all of it.
+    m = Meter(1, now=0.0)
+    m.report(1.0, "kernel", 1.0)
+    m.report(0.0, "corner gather", 2.0)
+    assert m.report(0.25, "corner gather", 12.0).frame_left == pytest.approx(30.0)
+    m = Meter(1, now=0.0)
+    m.report(0.0, "kernel", 0.0)
+    assert m.report(0.5, "kernel", 4.0).frame_left == pytest.approx(4.0 + 0.55 * 4.0 / (0.45 * 0.5))
+    f = 0.55 + 0.45 * 0.01
+    assert m.report(0.01, "corner gather", 5.0).frame_left == pytest.approx(5.0 * (1 - f) / f)
+
+
+def test_the_heartbeat_repeats_the_line_while_the_library_is_silent():
+    out = []
+
+    class Sink:
+        def write(self, text):
+            out.append(text)
+
+        def flush(self):
+            pass
+
+    def lines_printed():
+        return [s for s in "".join(out).splitlines() if s]
+
+    # On a fake clock: one report, then silence (a slow corner); tick() gives a line once the
+    # interval passed since the last, with the time spent moving on, and none between frames.
+    t = [0.0]
+    lines = Lines(2, interval=1.0, out=Sink(), clock=lambda: t[0])
+    lines.listen({"kind": "progress", "frame": 7, "fraction": 0.5, "stage": "corner gather"})
+    for now in (0.5, 0.99):
+        t[0] = now
+        lines.tick()
+    assert lines_printed() == []
+    t[0] = 2.0
+    lines.tick()
+    t[0] = 2.5
+    lines.tick()
+    # At 2 s the gather, the last stage, is half done after 2 s of it: 2 s left, and the next
+    # frame is expected to take 4 s.
+    assert lines_printed() == ["Radiosity: frame 7 (1/2): corner gather, frame 78%, 2.0 s left; "
+                               "bake 39%, 2.0 s spent, about 6.0 s left"]
+    t[0] = 5.0
+    lines.tick()
+    assert "5.0 s spent" in lines_printed()[-1]
+    lines.listen({"kind": "frame", "frame": 7, "seconds": 5.0})
+    n = len(lines_printed())
+    t[0] = 9.0
+    lines.tick()
+    assert len(lines_printed()) == n, "no frame is running: nothing to repeat"
+
+    # The thread, on the real clock: a report, then 1 s of silence at an interval of 0.1 s.
+    out.clear()
+    lines = Lines(1, interval=0.1, out=Sink())
+    with lines.heartbeat():
+        lines.listen({"kind": "progress", "frame": 1, "fraction": 0.2, "stage": "links"})
+        time.sleep(1.0)
+    got = len(lines_printed())
+    assert got >= 3, lines_printed()
+    time.sleep(0.3)
+    assert len(lines_printed()) == got, "the thread stops with the block"
+
+
 # -- the modal operator's ticks, against the real window manager --------------------------------
 
 
