@@ -79,8 +79,9 @@ def table(lines: list[tuple[float, str]], wall: float) -> str:
         rows.append(f"| {t:.1f} s | {m['stage']} | {m['fp']} | {said(fl)} | {end - t:.1f} s | {m['bp']} | "
                     f"{said(bl)} | {wall - t:.1f} s |")
     longest = max(gaps) if gaps else float("nan")
-    return "\n".join(rows) + (f"\n\n{len(stamps)} progress lines in {wall:.1f} s; the longest wait between two "
-                              f"(or before the first): {longest:.2f} s\n")
+    tail = (f"{len(stamps)} progress lines in {wall:.1f} s; the longest wait between two "
+            f"(or before the first): {longest:.2f} s")
+    return "\n".join(rows) + f"\n\n{tail}\n"
 
 
 def main(argv=None) -> int:
