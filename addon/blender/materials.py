@@ -23,6 +23,7 @@ from ..core import materials as core
 from . import textures
 
 NODES_ALWAYS = bpy.app.version >= (5, 0, 0)  # Material.use_nodes is deprecated in 5.0
+LIGHT_GROUP_TAG = "radiosity_light"  # the custom property marking light_nodes' inserted group node
 
 
 def output_node(tree):
@@ -53,7 +54,15 @@ def _surface_node(mat):
     out = output_node(tree)
     if out is None or not out.inputs["Surface"].is_linked:
         return None
-    return through_reroutes(out.inputs["Surface"].links[0].from_socket)
+    node = through_reroutes(out.inputs["Surface"].links[0].from_socket)
+    # Apply to Materials' own group (``light_nodes``, tagged) sits between the artist's shader
+    # and the output until Clear: a re-bake reads the shader it wraps, not the baked light.
+    if node is not None and node.bl_idname == "ShaderNodeGroup" and node.get(LIGHT_GROUP_TAG) == 1:
+        shader = node.inputs.get("Shader")
+        if shader is None or not shader.is_linked:
+            return None
+        node = through_reroutes(shader.links[0].from_socket)
+    return node
 
 
 def _value(node, name, problems, what, textured: bool = False):
