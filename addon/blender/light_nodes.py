@@ -28,10 +28,10 @@ node (and with it the links it added): the node tree is as before ``apply``.
 from __future__ import annotations
 
 from ..core.frames import LIGHT_ATTRIBUTE
-from .materials import output_node, through_reroutes
+from .materials import LIGHT_GROUP_TAG, output_node, through_reroutes
 
 GROUP = "Radiosity Light"
-NODE_TAG = "radiosity_light"
+NODE_TAG = LIGHT_GROUP_TAG   # materials.py reads through the tagged node on a re-bake
 VERSION = 1
 
 # Per readable shader: its (colour, emission colour, emission strength) inputs (None: not there).

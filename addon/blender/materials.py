@@ -7,9 +7,12 @@ chain ``textures`` can sample is read per face by ``textures.polygon_reflectance
 own reflectance stays the default, unused where the faces are read). A readable texture on the
 emission colour makes the material's emission its strength x white, and
 ``textures.polygon_emission`` scales each face by the texture's mean over it (so an animated
-strength keeps applying). Any other linked input falls back to the default grey, a linked
-emission to none, and the spec says why (naming the node). Any other shader, or no material at
-all, gives the default (grey 0.8, no emission).
+strength keeps applying). A linked strength is read where its chain is constant (a Value
+node, Math of constants: ``textures.constant``, at the current frame, so keyframes on them are
+followed) or holds a readable texture (then the material's strength is 1 and the faces carry
+colour x strength, ``textures.polygon_emission``). Any other linked input falls back to the
+default grey, a linked emission to none, and the spec says why (naming the node). Any other
+shader, or no material at all, gives the default (grey 0.8, no emission).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from ..core import materials as core
 from . import textures
 
 NODES_ALWAYS = bpy.app.version >= (5, 0, 0)  # Material.use_nodes is deprecated in 5.0
+LIGHT_GROUP_TAG = "radiosity_light"  # the custom property marking light_nodes' inserted group node
 
 
 def output_node(tree):
@@ -50,7 +54,15 @@ def _surface_node(mat):
     out = output_node(tree)
     if out is None or not out.inputs["Surface"].is_linked:
         return None
-    return through_reroutes(out.inputs["Surface"].links[0].from_socket)
+    node = through_reroutes(out.inputs["Surface"].links[0].from_socket)
+    # Apply to Materials' own group (``light_nodes``, tagged) sits between the artist's shader
+    # and the output until Clear: a re-bake reads the shader it wraps, not the baked light.
+    if node is not None and node.bl_idname == "ShaderNodeGroup" and node.get(LIGHT_GROUP_TAG) == 1:
+        shader = node.inputs.get("Shader")
+        if shader is None or not shader.is_linked:
+            return None
+        node = through_reroutes(shader.links[0].from_socket)
+    return node
 
 
 def _value(node, name, problems, what, textured: bool = False):
@@ -68,6 +80,26 @@ def _value(node, name, problems, what, textured: bool = False):
         problems.append(f"{name} is linked to {bad or fed.bl_label or fed.bl_idname}, not read")
         return None
     return sock.default_value
+
+
+def _strength(node, name, problems, what):
+    """An emission strength: its value where unlinked or linked to a constant chain (a Value
+    node, Math of constants; read at the current frame, so keyframes on them are followed like
+    a keyed input's), None where it holds a texture (read per face) or cannot be read (and why,
+    in `problems`)."""
+    sock = node.inputs.get(name)
+    if sock is None or not sock.is_linked:
+        return _value(node, name, problems, what)
+    bad = textures.is_readable(sock)
+    if bad is None:
+        try:
+            return textures.constant(sock)
+        except textures.Textured:
+            return None
+        except textures.Unreadable as e:
+            bad = str(e)
+    problems.append(f"{name} is linked to {bad}, not read")
+    return None
 
 
 def _shader_input(mat, names: dict):
@@ -92,17 +124,26 @@ def emission_socket(mat):
     return _shader_input(mat, {"ShaderNodeBsdfPrincipled": "Emission Color", "ShaderNodeEmission": "Color"})
 
 
-def _emission(node, color_name, color, strength, multiplier):
+def strength_socket(mat):
+    """The input socket that holds `mat`'s emission strength (Principled Emission Strength, an
+    Emission shader's Strength), or None."""
+    return _shader_input(mat, {"ShaderNodeBsdfPrincipled": "Emission Strength",
+                               "ShaderNodeEmission": "Strength"})
+
+
+def _emission(node, names, color, strength, multiplier):
     """Colour x strength x multiplier as exitance. A readable texture on the colour (`color`
-    None) counts as white: the faces carry its mean (``textures.polygon_emission``). Any other
-    missing value: no emission."""
+    None) counts as white, one on the strength as 1: the faces carry their product's mean
+    (``textures.polygon_emission``). Any other missing value: no emission."""
+    color_sock, strength_sock = (node.inputs.get(n) for n in names)
     if color is None:
-        sock = node.inputs.get(color_name)
-        if sock is None or not sock.is_linked or textures.is_readable(sock) is not None:
+        if color_sock is None or not color_sock.is_linked or textures.is_readable(color_sock) is not None:
             return (0.0, 0.0, 0.0)
         color = (1.0, 1.0, 1.0)
     if strength is None:
-        return (0.0, 0.0, 0.0)
+        if strength_sock is None or not textures.varies(strength_sock):
+            return (0.0, 0.0, 0.0)
+        strength = 1.0
     return core.exitance(color, strength, multiplier)
 
 
@@ -126,8 +167,8 @@ def read_material(mat, multiplier: float = 1.0, owner: str = "") -> core.Materia
         if base is not None:
             rho = core.reflectance(base)
         color = _value(node, "Emission Color", problems, "Principled BSDF", textured=True)
-        strength = _value(node, "Emission Strength", problems, "Principled BSDF")
-        emission = _emission(node, "Emission Color", color, strength, multiplier)
+        strength = _strength(node, "Emission Strength", problems, "Principled BSDF")
+        emission = _emission(node, ("Emission Color", "Emission Strength"), color, strength, multiplier)
     elif kind == "ShaderNodeBsdfDiffuse":
         base = _value(node, "Color", problems, "Diffuse BSDF", textured=True)
         if base is not None:
@@ -135,8 +176,8 @@ def read_material(mat, multiplier: float = 1.0, owner: str = "") -> core.Materia
     elif kind == "ShaderNodeEmission":
         rho = (0.0, 0.0, 0.0)
         color = _value(node, "Color", problems, "Emission", textured=True)
-        strength = _value(node, "Strength", problems, "Emission")
-        emission = _emission(node, "Color", color, strength, multiplier)
+        strength = _strength(node, "Strength", problems, "Emission")
+        emission = _emission(node, ("Color", "Strength"), color, strength, multiplier)
     else:
         problems.append(f"shader {node.bl_label or kind} is not read")
     return core.MaterialSpec(name=name, reflectance=rho, emission=emission,

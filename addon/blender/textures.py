@@ -4,16 +4,20 @@ over the face.
 The library holds one reflectance and one emission per element (a face today), and the solve is
 linear in each, so what a face reflects or emits in total is its area-mean reflectance or
 emission. The emission's mean is a per-face scale of the material's emission (strength x white
-where the Emission Color is textured), so animated strengths keep applying. The means are
-computed here by sampling the material's colour node chain (Base Color, or Emission Color) over
-each face's UV triangles (Blender's ``loop_triangles``), area-weighted:
+where the Emission Color is textured, colour x 1 where the strength is), so animated strengths
+keep applying. The means are computed here by sampling the material's colour node chain (Base
+Color; Emission Color x Emission Strength, multiplied per sample) over each face's UV triangles
+(Blender's ``loop_triangles``), area-weighted:
 
 - Readable chains, evaluated per sample with numpy: an Image Texture (flat projection; Linear,
   Closest or Cubic (read as Linear) interpolation; Repeat, Extend, Clip or Mirror extension; its
   UV map from a UV Map node or the mesh's active render map), an RGB node, a Mix Color node
-  (Mix, Multiply, Add, Subtract, Screen, Darken, Lighten; the legacy MixRGB too), Reroutes, and
-  unlinked inputs. Anything else (a Mapping node, a procedural texture, ...) is reported by node
-  type, and the material keeps its default reflectance (an unreadable emission counts as none).
+  (Mix, Multiply, Add, Subtract, Screen, Darken, Lighten; the legacy MixRGB too), a Value node, a
+  Math node (``MATH``), Reroutes, and unlinked inputs. A colour into a float input is its
+  luminance (``luminance_weights``), a float into a colour grey. ``constant`` evaluates a chain
+  without a texture to one value (a Value-driven strength, read per frame). Anything else (a
+  Mapping node, a procedural texture, ...) is reported by node type, and the material keeps
+  its default reflectance (an unreadable emission counts as none).
 - Colour images are read as Blender does: an 8-bit or float image whose colour space is sRGB is
   decoded with the sRGB transfer function to scene-linear; Non-Color and linear spaces are used as
   stored. The alpha output reads the image's alpha as grey.
@@ -30,12 +34,32 @@ from ..core import materials as core
 
 # Node types read, for the report of what is not.
 READ = {"ShaderNodeTexImage", "ShaderNodeRGB", "ShaderNodeMix", "ShaderNodeMixRGB", "NodeReroute",
-        "ShaderNodeUVMap", "ShaderNodeTexCoord"}
+        "ShaderNodeUVMap", "ShaderNodeTexCoord", "ShaderNodeValue", "ShaderNodeMath"}
 MIN_SUBDIVISION, MAX_SUBDIVISION = 4, 256
+
+
+def luminance_weights() -> np.ndarray:
+    """The weights of Blender's colour-to-float conversion (a colour output linked into a float
+    input): Cycles' film.rgb_to_y (svm convert: dot(rgb, rgb_to_y)), the Y row of the scene-linear
+    to XYZ transform, which mathutils gives. They follow the file's scene-linear space: in bpy
+    4.5 Rec.709's 0.2126741, 0.7151515, 0.0721754; in 5.0 0.2126391, 0.7151691, 0.0721927
+    (tests/python/test_textures.py measures them in a Cycles EMIT bake)."""
+    from mathutils import Color
+
+    return np.array([Color(c).from_scene_linear_to_xyz_d65()[1] for c in np.eye(3)], np.float32)
+
+
+# Math node operations read (Cycles' svm_math semantics: a zero divisor gives 0, a negative base
+# with a fractional exponent gives 0).
+MATH = {"ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "MINIMUM", "MAXIMUM", "ABSOLUTE", "POWER"}
 
 
 class Unreadable(Exception):
     """A node chain the sampler does not evaluate; the message names the node type."""
+
+
+class Textured(Exception):
+    """A chain evaluated as a constant reached a texture coordinate: it varies over a face."""
 
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
@@ -78,6 +102,7 @@ class Sampler:
 
     def __init__(self, mesh):
         self.mesh = mesh
+        self.luminance = luminance_weights()
         self._uv: dict[str, np.ndarray] = {}
         self._images: dict[str, np.ndarray] = {}
 
@@ -136,6 +161,8 @@ class Sampler:
             return np.broadcast_to(rgb, (uv_of.count, 3))
         node, out = fed
         kind = node.bl_idname
+        if kind in ("ShaderNodeValue", "ShaderNodeMath"):
+            return np.repeat(self.scalar(socket, uv_of), 3, axis=1)   # a float into a colour: grey
         if kind == "ShaderNodeRGB":
             return np.broadcast_to(np.asarray(out.default_value[:3], np.float32), (uv_of.count, 3))
         if kind == "ShaderNodeTexImage":
@@ -145,10 +172,49 @@ class Sampler:
         raise Unreadable(_label(node))
 
     def scalar(self, socket, uv_of) -> np.ndarray:
+        """(N, 1) value of a float input socket at the samples (a colour fed in: its luminance)."""
         fed = _link(socket)
         if fed is None:
-            return np.full((uv_of.count, 1), float(socket.default_value), np.float32)
-        return self.socket(socket, uv_of).mean(axis=1, keepdims=True)
+            v = socket.default_value
+            if hasattr(v, "__len__"):   # a colour input read as a float
+                v = np.dot(np.asarray(v[:3], np.float32), self.luminance)
+            return np.full((uv_of.count, 1), float(v), np.float32)
+        node, out = fed
+        if node.bl_idname == "ShaderNodeValue":
+            return np.full((uv_of.count, 1), float(out.default_value), np.float32)
+        if node.bl_idname == "ShaderNodeMath":
+            return self.math(node, uv_of)
+        if out.type in ("VALUE", "INT", "BOOLEAN"):   # a float output (an image's Alpha)
+            return self.socket(socket, uv_of)[:, :1]
+        return (self.socket(socket, uv_of) @ self.luminance)[:, None]
+
+    def math(self, node, uv_of) -> np.ndarray:
+        op = node.operation
+        if op not in MATH:
+            raise Unreadable(f"Math ({op.replace('_', ' ').title()})")
+        a = self.scalar(node.inputs[0], uv_of)
+        b = self.scalar(node.inputs[1], uv_of) if op != "ABSOLUTE" else None
+        with np.errstate(all="ignore"):
+            if op == "ADD":
+                r = a + b
+            elif op == "SUBTRACT":
+                r = a - b
+            elif op == "MULTIPLY":
+                r = a * b
+            elif op == "DIVIDE":
+                r = np.where(b != 0, a / np.where(b != 0, b, 1), 0)
+            elif op == "MULTIPLY_ADD":
+                r = a * b + self.scalar(node.inputs[2], uv_of)
+            elif op == "MINIMUM":
+                r = np.minimum(a, b)
+            elif op == "MAXIMUM":
+                r = np.maximum(a, b)
+            elif op == "ABSOLUTE":
+                r = np.abs(a)
+            else:   # POWER
+                r = np.where((a < 0) & (b != np.floor(b)), 0, np.power(a, b))
+        r = np.asarray(r, np.float32)
+        return np.clip(r, 0.0, 1.0) if node.use_clamp else r
 
     def image(self, node, out, uv_of) -> np.ndarray:
         if node.image is None:
@@ -207,6 +273,21 @@ class Sampler:
         return np.clip(r, 0.0, 1.0) if clamp_out else r
 
 
+class _NoUV:
+    """The UVs of one sample that has none: asking for them means the chain is textured."""
+
+    count = 1
+
+    def __call__(self, name):
+        raise Textured()
+
+
+def constant(socket) -> float:
+    """The value of float input `socket` where its chain holds no texture (Value nodes, Math,
+    RGB, Mix, unlinked inputs). Raises Textured (it varies over a face) or Unreadable."""
+    return float(Sampler(None).scalar(socket, _NoUV())[0, 0])
+
+
 def bilinear(px: np.ndarray, uv: np.ndarray, extension: str, closest: bool) -> np.ndarray:
     """(N, 4) samples of (H, W, 4) pixels at UVs, texel centres at (i + 0.5) / W as Cycles'."""
     h, w = px.shape[:2]
@@ -254,8 +335,8 @@ class _UVs:
         return p.reshape(-1, 2)
 
 
-def _texel_area(sampler: Sampler, socket, tri_loops: np.ndarray) -> np.ndarray:
-    """Per triangle, its area in texels of the largest image feeding `socket` (0: none)."""
+def _texel_area(sampler: Sampler, sockets, tri_loops: np.ndarray) -> np.ndarray:
+    """Per triangle, its area in texels of the largest image feeding `sockets` (0: none)."""
     images = []
 
     def walk(s):
@@ -268,7 +349,8 @@ def _texel_area(sampler: Sampler, socket, tri_loops: np.ndarray) -> np.ndarray:
         for i in node.inputs:
             walk(i)
 
-    walk(socket)
+    for s in sockets:
+        walk(s)
     if not images:
         return np.zeros(len(tri_loops))
     try:
@@ -279,9 +361,30 @@ def _texel_area(sampler: Sampler, socket, tri_loops: np.ndarray) -> np.ndarray:
     return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) * max(images)
 
 
-def socket_means(sampler: Sampler, socket, tri_loops: np.ndarray) -> np.ndarray:
-    """(T, 3) mean colour of `socket` over each loop triangle."""
-    texels = _texel_area(sampler, socket, tri_loops)
+class Chain:
+    """What a material feeds into one quantity: a colour socket, or the product of a colour socket
+    and a float socket (the emission: colour x strength), either one possibly absent (1). The
+    product is taken per sample, so a face's mean is the mean of colour x strength over it."""
+
+    def __init__(self, color=None, strength=None):
+        self.color, self.strength = color, strength
+        self.sockets = [s for s in (color, strength) if s is not None]
+
+    def __call__(self, sampler: Sampler, uvs) -> np.ndarray:
+        out = np.ones((uvs.count, 3), np.float32)
+        for sock, read in ((self.color, sampler.socket), (self.strength, sampler.scalar)):
+            if sock is None:
+                continue
+            try:
+                out = out * read(sock, uvs)
+            except Unreadable as e:
+                raise Unreadable(f"{sock.name} is linked to {e}") from e
+        return out
+
+
+def socket_means(sampler: Sampler, chain: Chain, tri_loops: np.ndarray) -> np.ndarray:
+    """(T, 3) mean of `chain` over each loop triangle."""
+    texels = _texel_area(sampler, chain.sockets, tri_loops)
     m = np.clip(np.ceil(np.sqrt(np.maximum(texels, 0.0))), MIN_SUBDIVISION, MAX_SUBDIVISION).astype(np.int64)
     m = 2 ** np.ceil(np.log2(m)).astype(np.int64)   # few distinct levels, each one vectorized call
     out = np.zeros((len(tri_loops), 3), np.float64)
@@ -293,7 +396,7 @@ def socket_means(sampler: Sampler, socket, tri_loops: np.ndarray) -> np.ndarray:
         for c in range(0, len(sel), step):
             part = sel[c:c + step]
             uvs = _UVs(sampler, tri_loops[part], bary)
-            values = np.asarray(sampler.socket(socket, uvs), np.float64).reshape(len(part), len(bary), 3)
+            values = np.asarray(chain(sampler, uvs), np.float64).reshape(len(part), len(bary), 3)
             out[part] = values.mean(axis=1)
     return out
 
@@ -324,18 +427,17 @@ def _area_means(means: np.ndarray, polys: np.ndarray, w: np.ndarray, out: np.nda
         out[p] = means[polys == p].mean(axis=0)
 
 
-def polygon_socket_means(mesh, slots, polygon_slots, socket_of, untextured, problems: list):
-    """Per polygon of `mesh`, the mean over it of the colour its slot material feeds into the
-    socket ``socket_of(mat)`` where that socket is linked to a chain the sampler reads, else
-    ``untextured(mat, linked)`` (`mat` may be None; `linked`: the socket is linked but could not
-    be read). Returns ((P, 3) float64, whether any polygon was read), or None when no slot
-    material has that socket linked. What cannot be read is appended to `problems`, once per
-    material and reason."""
+def polygon_socket_means(mesh, slots, polygon_slots, chain_of, untextured, problems: list):
+    """Per polygon of `mesh`, the mean over it of what its slot material feeds into the chain
+    ``chain_of(mat)`` (a ``Chain``, or None where nothing varies over a face), else
+    ``untextured(mat, linked)`` (`mat` may be None; `linked`: a chain that could not be read).
+    Returns ((P, 3) float64, whether any polygon was read), or None when no slot material has a
+    chain. What cannot be read is appended to `problems`, once per material and reason."""
     textured = {}
     for k, mat in enumerate(slots or []):
-        sock = socket_of(mat) if mat is not None else None
-        if sock is not None and sock.is_linked:
-            textured[k] = (mat, sock)
+        chain = chain_of(mat) if mat is not None else None
+        if chain is not None:
+            textured[k] = (mat, chain)
     if not textured:
         return None
     n_p = len(mesh.polygons)
@@ -347,14 +449,14 @@ def polygon_socket_means(mesh, slots, polygon_slots, socket_of, untextured, prob
         values[slot == k] = untextured(mat, k in textured)
     sampler = Sampler(mesh)
     any_read = False
-    for k, (mat, sock) in textured.items():
+    for k, (mat, chain) in textured.items():
         tris = np.flatnonzero(slot[tri_poly] == k)
         if len(tris) == 0:
             continue
         try:
-            means = socket_means(sampler, sock, tri_loops[tris])
+            means = socket_means(sampler, chain, tri_loops[tris])
         except Unreadable as e:
-            line = f"{mat.name} ({sock.name} is linked to {e}, not read)"
+            line = f"{mat.name} ({e}, not read)"
             if line not in problems:
                 problems.append(line)
             continue
@@ -374,25 +476,55 @@ def polygon_reflectance(mesh, slots, polygon_slots, problems: list) -> np.ndarra
         # A linked colour that could not be read: the material's own, the default grey.
         return read_material(mat).reflectance if mat is not None else core.DEFAULT_REFLECTANCE
 
-    found = polygon_socket_means(mesh, slots, polygon_slots, reflectance_socket, untextured, problems)
+    def chain_of(mat):
+        sock = reflectance_socket(mat)
+        return Chain(color=sock) if sock is not None and sock.is_linked else None
+
+    found = polygon_socket_means(mesh, slots, polygon_slots, chain_of, untextured, problems)
     if found is None or not found[1]:
         return None
     rho = found[0]
     return np.array([core.reflectance(r) for r in rho], np.float64) if len(rho) else np.zeros((0, 3))
 
 
+def varies(socket) -> bool:
+    """Whether float input `socket` is linked to a readable chain holding a texture (so it is
+    read per face; a constant chain, e.g. a Value node, is read by ``constant``)."""
+    if not socket.is_linked or is_readable(socket) is not None:
+        return False
+    try:
+        constant(socket)
+    except Textured:
+        return True
+    except Unreadable:
+        return False
+    return False
+
+
+def emission_chain(mat) -> Chain | None:
+    """The emission's per-face chain of `mat`: its linked emission colour (read or not: a
+    texture, or one that reports why not) and its strength where that holds a texture; None
+    when neither varies over a face."""
+    from .materials import emission_socket, strength_socket
+
+    color, strength = emission_socket(mat), strength_socket(mat)
+    color = color if color is not None and color.is_linked else None
+    strength = strength if strength is not None and varies(strength) else None
+    return Chain(color, strength) if color is not None or strength is not None else None
+
+
 def polygon_emission(mesh, slots, polygon_slots, problems: list) -> np.ndarray | None:
-    """(P, 3) emission colour scale per polygon of `mesh`: where its slot material's emission
-    colour is textured, the texture's mean over the polygon (the material's emission being its
-    strength x white, ``materials.read_material``); 1 where it is constant (already in the
+    """(P, 3) emission scale per polygon of `mesh`: where its slot material's emission colour or
+    strength is textured, the mean over the polygon of the textured colour x the textured
+    strength (the material's emission holding the rest, ``materials.read_material``: white for a
+    textured colour, 1 for a textured strength); 1 where nothing is textured (already in the
     material's emission); 0 where it is linked but could not be read (a linked emission counts
-    as none, as before). None when no slot material has its emission colour linked."""
-    from .materials import emission_socket
+    as none, as before). None when no slot material has a per-face chain."""
 
     def untextured(_mat, linked):
         return (0.0, 0.0, 0.0) if linked else (1.0, 1.0, 1.0)
 
-    found = polygon_socket_means(mesh, slots, polygon_slots, emission_socket, untextured, problems)
+    found = polygon_socket_means(mesh, slots, polygon_slots, emission_chain, untextured, problems)
     if found is None:
         return None
     scale = np.where(np.isfinite(found[0]), found[0], 0.0)

@@ -240,3 +240,29 @@ def test_the_live_preview_writes_the_irradiance_too(blender):
     shown = scenes.stored_named(floor.data, "Radiosity")
     np.testing.assert_allclose(light * rho, shown, rtol=1e-5, atol=1e-7)
     sc.radiosity.live_preview = False
+
+
+def test_a_rebake_reads_the_materials_through_the_inserted_group(blender):
+    # After Apply to Materials, every material's output is fed by the group until Clear: a
+    # re-bake (here of a moved light, with the option on, then off) must read the shaders the
+    # group wraps, not see an unreadable group (grey, no emission: "no emitters").
+    bpy = blender
+    from addon.blender import bake, light_nodes
+
+    objs = scenes.cornell_box(bpy, n=3, light_frames=(1, 1), box=False)
+    _textured_floor(bpy, objs)
+    assert scenes.bake(bpy, basis_order=1, apply_to_materials=True) == {"FINISHED"}
+    first = {n: _stored(o.data, "Rad_0001") for n, o in objs.items()}
+    objs["Light"].animation_data_clear()
+    objs["Light"].location.x = 0.3
+    for apply in (True, False):
+        bpy.context.scene.radiosity.apply_to_materials = apply
+        job = bake.BakeJob(bpy.context, bake.settings_from_scene(bpy.context.scene))
+        job.run()
+        assert not [w for w in job.warnings if "not fully read" in w], job.warnings
+        moved = {n: _stored(o.data, "Rad_0001") for n, o in objs.items()}
+        np.testing.assert_allclose(moved["Light"], first["Light"], rtol=1e-6)   # its own emission
+        assert abs(moved["Floor"].mean() / first["Floor"].mean() - 1.0) < 0.2   # lit, moved a little
+        assert not np.allclose(moved["Floor"], first["Floor"], rtol=1e-3)
+    for mat in bpy.data.materials:
+        assert mat.get("radiosity_preview") == 1 or light_nodes.inserted(mat) is None, mat.name

@@ -320,3 +320,192 @@ def test_an_animated_strength_keeps_the_emission_texture(blender):
     print(f"floor frame 2 / frame 1: {ratio:.4f}")
     assert abs(ratio - 2.0) < 0.01, ratio
     assert np.allclose(shown[dark], 0.0, atol=1e-4) and np.allclose(shown[~dark], 2 * STRENGTH, rtol=1e-3)
+
+
+# -- a linked Emission Strength (issue 22: "Light the way artists light") --------------------------
+
+
+def _strength_from(bpy, mat, kind, value=STRENGTH):
+    """Links `mat`'s Emission Strength from a Value node of `value` ("value", through a Reroute)
+    or from Math MULTIPLY(Value value / 2, 2) ("math"); returns the Value node."""
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    strength = nodes["Principled BSDF"].inputs["Emission Strength"]
+    strength.default_value = 0.0   # not what is read
+    val = nodes.new("ShaderNodeValue")
+    if kind == "value":
+        val.outputs[0].default_value = value
+        reroute = nodes.new("NodeReroute")
+        links.new(val.outputs[0], reroute.inputs[0])
+        links.new(reroute.outputs[0], strength)
+    else:
+        val.outputs[0].default_value = value / 2
+        mul = nodes.new("ShaderNodeMath")
+        mul.operation = "MULTIPLY"
+        mul.inputs[1].default_value = 2.0
+        links.new(val.outputs[0], mul.inputs[0])
+        links.new(mul.outputs[0], strength)
+    return val
+
+
+def _bake_values(bpy, objs, frames=(1,)):
+    assert bake(bpy, method="FULL") == {"FINISHED"}
+    return {o.name: [stored(o.data, f) for f in frames] for o in objs}
+
+
+def test_a_strength_from_a_value_or_math_node_bakes_as_the_typed_strength(blender):
+    bpy = blender
+    from addon.blender import export
+
+    floor, emitter = _lit_floor(bpy, _emissive(bpy))
+    typed = _bake_values(bpy, (floor, emitter))
+    assert np.allclose(typed["Emitter"][0], STRENGTH, rtol=1e-6)
+    for kind in ("value", "math"):
+        _clear(bpy)
+        floor, emitter = _lit_floor(bpy, _emissive(bpy))
+        _strength_from(bpy, emitter.data.materials[0], kind)
+        exp = export.export(bpy.context.evaluated_depsgraph_get(), [floor, emitter])
+        assert exp.problems_line() is None, exp.problems_line()
+        linked = _bake_values(bpy, (floor, emitter))
+        for name, (values,) in linked.items():
+            np.testing.assert_allclose(values, typed[name][0], rtol=1e-6, atol=1e-7, err_msg=f"{kind} {name}")
+
+
+def test_a_keyed_value_node_strength_follows_its_keys_per_frame(blender):
+    # The Value node keyed STRENGTH at frame 1 and 3 x STRENGTH at frame 3 (Bezier, so frame 2 is
+    # the curve's value there): the emitter shows each frame's strength and the floor scales.
+    bpy = blender
+    floor, emitter = _lit_floor(bpy, _emissive(bpy))
+    val = _strength_from(bpy, emitter.data.materials[0], "value")
+    for frame, value in ((1, STRENGTH), (3, 3 * STRENGTH)):
+        val.outputs[0].default_value = value
+        val.outputs[0].keyframe_insert("default_value", frame=frame)
+    sc = bpy.context.scene
+    sc.frame_start, sc.frame_end = 1, 3
+    keyed = []
+    for f in (1, 2, 3):
+        sc.frame_set(f)
+        keyed.append(val.outputs[0].default_value)
+    assert keyed[0] == STRENGTH and keyed[2] == 3 * STRENGTH and keyed[0] < keyed[1] < keyed[2], keyed
+    got = _bake_values(bpy, (floor, emitter), frames=(1, 2, 3))
+    for f, value in enumerate(keyed):
+        np.testing.assert_allclose(got["Emitter"][f], value, rtol=1e-5, err_msg=f"frame {f + 1}")
+        ratio = got["Floor"][f].mean() / got["Floor"][0].mean()
+        assert abs(ratio - value / STRENGTH) < 1e-4, (f + 1, ratio)
+
+
+def test_a_colour_into_the_strength_is_its_luminance_as_in_cycles(blender):
+    # An RGB node into an Emission shader's Strength: Blender converts the colour to a float with
+    # the scene-linear luma weights. Cycles' EMIT bake of the face (1 sample: emission is exact)
+    # measures them, one primary at a time, against what the add-on reads.
+    bpy = blender
+    from addon.blender import export
+
+    floor, emitter = _lit_floor(bpy, _emissive(bpy))
+    mat = bpy.data.materials.new("Lum")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    nodes = mat.node_tree.nodes
+    nodes.remove(nodes["Principled BSDF"])
+    em, rgb = nodes.new("ShaderNodeEmission"), nodes.new("ShaderNodeRGB")
+    em.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    mat.node_tree.links.new(rgb.outputs[0], em.inputs["Strength"])
+    mat.node_tree.links.new(em.outputs[0], nodes["Material Output"].inputs["Surface"])
+    emitter.data.materials[0] = mat
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.cycles.device, sc.cycles.samples = "CPU", 1
+    me = emitter.data
+    me.color_attributes.active_color = me.color_attributes.new("Emit", "FLOAT_COLOR", "CORNER")
+    bpy.context.view_layer.objects.active = emitter
+    emitter.select_set(True)
+    cycles, ours = [], []
+    for c in range(3):
+        rgb.outputs[0].default_value = tuple(1.0 if k == c else 0.0 for k in range(3)) + (1.0,)
+        bpy.ops.object.bake(type="EMIT", target="VERTEX_COLORS", use_clear=True, margin=0)
+        cycles.append(float(corner_values(emitter, "Emit")[:, 0].mean()))
+        exp = export.export(bpy.context.evaluated_depsgraph_get(), [emitter])
+        assert exp.problems_line() is None, exp.problems_line()
+        ours.append(exp.materials.arrays()[1][0, 0] / np.pi)
+    print(f"luma weights: Cycles {np.round(cycles, 7)}, read {np.round(ours, 7)}")
+    np.testing.assert_allclose(ours, cycles, rtol=1e-5)
+    assert abs(sum(cycles) - 1.0) < 1e-5 and cycles[1] > cycles[0] > cycles[2] > 0
+
+
+def _strength_texture(bpy, mat, img, value=None):
+    """Links `mat`'s Emission Strength from `img`'s colour (Closest), times a Value node of
+    `value` through Math MULTIPLY where given; returns the Image Texture node."""
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation = img, "Closest"
+    out = tex.outputs["Color"]
+    if value is not None:
+        val, mul = nodes.new("ShaderNodeValue"), nodes.new("ShaderNodeMath")
+        val.outputs[0].default_value, mul.operation = value, "MULTIPLY"
+        links.new(out, mul.inputs[0])
+        links.new(val.outputs[0], mul.inputs[1])
+        out = mul.outputs[0]
+    links.new(out, nodes["Principled BSDF"].inputs["Emission Strength"])
+    return tex
+
+
+def test_a_textured_strength_scales_each_face_by_its_luminance_mean(blender):
+    bpy = blender
+    from addon.blender import export
+    from addon.blender.textures import luminance_weights
+
+    img, lin = _checker(bpy)   # red and 0.8 white checks
+    glow = _emissive(bpy)
+    color = (1.0, 0.5, 0.25)
+    glow.node_tree.nodes["Principled BSDF"].inputs["Emission Color"].default_value = (*color, 1.0)
+    _strength_texture(bpy, glow, img)
+    floor, emitter = _lit_floor(bpy, glow, emitter_n=6)   # faces straddling the checks
+    exp = export.export(bpy.context.evaluated_depsgraph_get(), [floor, emitter])
+    assert exp.problems_line() is None, exp.problems_line()
+    # The material's emission is the colour x strength 1; each face carries the image's
+    # luminance mean (grey), the colour staying in the material.
+    np.testing.assert_allclose(exp.materials.arrays()[1].max(axis=0), np.pi * np.array(color), rtol=1e-6)
+    got = exp.objects[1].data.face_emission
+    want = _face_means(emitter, lin) @ luminance_weights()
+    np.testing.assert_allclose(got, np.repeat(want[:, None], 3, axis=1), atol=4e-3)
+    assert got.min() < 0.3 < 0.7 < got.max()
+
+
+def test_a_textured_strength_bakes_as_the_same_texture_on_the_colour(blender):
+    # A black/white checker on the strength (times a Value node of STRENGTH, through Math) is the
+    # same light as the checker on the Emission Color with strength STRENGTH.
+    bpy = blender
+    img, _ = _checker(bpy, colors=BLACK_WHITE)
+    floor, emitter = _lit_floor(bpy, _emissive(bpy, img))
+    on_color = _bake_values(bpy, (floor, emitter))
+    _clear(bpy)
+    glow = _emissive(bpy)
+    _strength_texture(bpy, glow, img, value=STRENGTH)
+    floor, emitter = _lit_floor(bpy, glow)
+    on_strength = _bake_values(bpy, (floor, emitter))
+    for name, (values,) in on_strength.items():
+        np.testing.assert_allclose(values, on_color[name][0], rtol=1e-5, atol=1e-6, err_msg=name)
+    assert on_strength["Emitter"][0].max() > 0.9 * STRENGTH and on_strength["Emitter"][0].min() < 1e-4
+
+
+def test_an_unreadable_strength_is_named_and_emits_nothing(blender):
+    bpy = blender
+    from addon.blender import export
+
+    glow = _emissive(bpy)
+    nodes = glow.node_tree.nodes
+    for make, name in ((lambda: nodes.new("ShaderNodeTexNoise").outputs["Fac"], "Noise Texture"),
+                       (lambda: _sine(nodes), "Math (Sine)")):
+        strength = nodes["Principled BSDF"].inputs["Emission Strength"]
+        glow.node_tree.links.new(make(), strength)
+        floor, emitter = _lit_floor(bpy, glow)
+        exp = export.export(bpy.context.evaluated_depsgraph_get(), [floor, emitter])
+        line = exp.problems_line()
+        assert line is not None and f"Emission Strength is linked to {name}, not read" in line, line
+        assert not exp.materials.arrays()[1].any()
+        _clear(bpy)
+
+
+def _sine(nodes):
+    m = nodes.new("ShaderNodeMath")
+    m.operation = "SINE"
+    return m.outputs[0]
