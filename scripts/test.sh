@@ -97,7 +97,7 @@ if [ "$PYTHON_TESTS" = 1 ]; then
             tests/python/test_headless_and_packaging.py tests/python/test_progress.py \
             tests/python/test_bake.py tests/python/test_cancel_and_errors.py \
             tests/python/test_rebake_and_live.py tests/python/test_export_options.py \
-            tests/python/test_lights.py tests/python/test_clear_leftovers.py \
+            tests/python/test_lights.py tests/python/test_clear_leftovers.py tests/python/test_eevee.py \
             --deselect tests/python/test_lights.py::test_a_room_lit_by_the_world_agrees_with_cycles
     fi
 fi

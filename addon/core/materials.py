@@ -5,11 +5,13 @@
 - Blender's Emission Color x Emission Strength is a radiance L (W/m^2/sr); a Lambertian emitter's
   radiant exitance is E = pi x L, which is what the library takes.
 - The per-object emitter multiplier scales E.
-- A texture on Base Color (or a Diffuse BSDF's Color) is read per face as its mean over the
-  face (``addon/blender/textures.py``) where its node chain is readable.
-- What cannot be read (an unreadable node chain on Base Color, a linked emission, a shader other
-  than Principled BSDF, Diffuse BSDF or Emission, no material) uses ``DEFAULT_REFLECTANCE`` and no
-  emission, and the bake reports it once.
+- A texture on Base Color (or a Diffuse BSDF's Color), on the emission colour or on the
+  emission strength is read per face as its mean over the face (``addon/blender/textures.py``)
+  where its node chain is readable; a strength from a Value node or a Math node of readable
+  values is read at each frame (``addon/blender/materials.py``).
+- What cannot be read (any other node chain on those inputs, a shader other than Principled
+  BSDF, Diffuse BSDF or Emission, no material) uses ``DEFAULT_REFLECTANCE`` and no emission, and
+  the bake reports it once.
 
 Results go back the other way: the attribute holds outgoing radiance B / pi (scene-linear), so
 an emitter shows L and a white wall under it shows rho x E / pi.
