@@ -89,6 +89,9 @@ TABLES: dict[str, Table | None] = {
     # A fresh clone's `.ci/run` (= scripts/test.sh): its stage lines kept in docs/test-stages.log.
     "test-stages": Table(FRESH_RUN, 0, STAGE_TABLE, "about 8-10 min, both cores (a clone built from scratch)",
                          stored=STAGE_TABLE),
+    "time-left": Table(f"{PY} -m tools.time_left", 0,
+                       f"{PY} -m tools.time_left tests/data/real/bunny_scene.json --hierarchy",
+                       "about 2.5 min (one core's worth of the CLI on both)"),
     "tolerance": Table(f"{PY} -m tools.tolerance_sweep", 0,
                        f"{PY} -m tools.tolerance_sweep --frames 4 --subdiv 6", "about 1.5 min"),
     "validation": Table(f"{PY} -m tools.validate_cycles --subdiv 12 --samples 4096 --pictures "

@@ -71,6 +71,33 @@ def stitch(bpy, paths, out, gap=4):
     return Path(out)
 
 
+def grid(bpy, paths, out, columns, gap=4):
+    """Places PNGs of equal size in rows of ``columns`` (left to right, top to bottom; white
+    gaps, a short last row padded white) into one PNG."""
+    tiles = []
+    for p in paths:
+        img = bpy.data.images.load(str(p))
+        w, h = img.size
+        tiles.append(np.array(img.pixels[:], dtype=np.float32).reshape(h, w, 4))
+        bpy.data.images.remove(img)
+    h, w = tiles[0].shape[:2]
+    rows = -(-len(tiles) // columns)
+    sheet = np.ones((rows * h + (rows - 1) * gap, columns * w + (columns - 1) * gap, 4), np.float32)
+    for k, t in enumerate(tiles):
+        r, c = divmod(k, columns)
+        # Blender's pixels run bottom row first: the first row of tiles goes at the top.
+        y = (rows - 1 - r) * (h + gap)
+        sheet[y:y + h, c * (w + gap):c * (w + gap) + w] = t
+    H, W = sheet.shape[:2]
+    img = bpy.data.images.new("grid", W, H, alpha=True)
+    img.pixels.foreach_set(sheet.ravel())
+    img.filepath_raw = str(out)
+    img.file_format = "PNG"
+    img.save()
+    bpy.data.images.remove(img)
+    return Path(out)
+
+
 def side_by_side(bpy, objects, attrs, out, emitters=(), size=256):
     """Renders each attribute and stitches them left to right. Emitter objects keep their own
     material (their light shows in every tile)."""

@@ -57,7 +57,8 @@ def run(scene: Path, extra: list[str]) -> tuple[list[tuple[float, str]], float]:
         return lines, time.perf_counter() - t0
 
 
-def table(lines: list[tuple[float, str]], wall: float) -> str:
+def table(lines: list[tuple[float, str]], wall: float) -> tuple[str, str]:
+    """The markdown table, and a line on the waits between progress lines."""
     frame_end: dict[int, float] = {}   # the bake's frame index -> when its "done" line came
     for t, text in lines:
         if m := DONE.match(text):
@@ -79,9 +80,9 @@ def table(lines: list[tuple[float, str]], wall: float) -> str:
         rows.append(f"| {t:.1f} s | {m['stage']} | {m['fp']} | {said(fl)} | {end - t:.1f} s | {m['bp']} | "
                     f"{said(bl)} | {wall - t:.1f} s |")
     longest = max(gaps) if gaps else float("nan")
-    tail = (f"{len(stamps)} progress lines in {wall:.1f} s; the longest wait between two "
-            f"(or before the first): {longest:.2f} s")
-    return "\n".join(rows) + f"\n\n{tail}\n"
+    waits = f"{len(stamps)} progress lines, the longest wait between two (or before the first) " \
+            f"{longest:.2f} s"
+    return "\n".join(rows), waits
 
 
 def main(argv=None) -> int:
@@ -98,9 +99,10 @@ def main(argv=None) -> int:
     extra += ["--threads", args.threads] if args.threads else []
     lines, wall = run(args.scene, extra)
     name = args.scene.relative_to(ROOT) if args.scene.is_relative_to(ROOT) else args.scene
+    rows, waits = table(lines, wall)
     print(f"The CLI's time left against the time that was left, `{name}`"
-          f"{' --hierarchy' if args.hierarchy else ''}, {wall:.1f} s wall:\n")
-    print(table(lines, wall))
+          f"{' --hierarchy' if args.hierarchy else ''}, {wall:.1f} s wall; {waits}:\n")
+    print(rows)
     return 0
 
 

@@ -9,6 +9,7 @@ by Cycles (DIFFUSE: direct + indirect + colour), relative RMSE per object.
 
     .venv/bin/python -m tools.validate_lights [--samples 2048] [--subdiv 6]
         [--lights point spot sun area world sky point_soft point_sphere spot_soft sun_soft]
+        [--pictures docs/lights_vs_cycles.png]
 
 The room: floor, walls (red left, green right) and a white block, Lambertian Diffuse BSDFs; the
 ceiling is left off for the sun and the World (they shine in through the open top). Point and
@@ -36,6 +37,8 @@ def parse(argv):
     p.add_argument("--subdiv", type=int, default=6, help="walls split n x n")
     p.add_argument("--lights", nargs="+", default=["point", "spot", "sun", "area", "world", "sky", *SOFT])
     p.add_argument("--out", default=str(REPO / "out" / "validation"))
+    p.add_argument("--pictures", metavar="PNG", help="also write a sheet of each light's room, ours left of "
+                   "Cycles, two lights a row in --lights order (docs/lights_vs_cycles.png)")
     return p.parse_args(argv)
 
 
@@ -144,6 +147,28 @@ def add_light(bpy, kind):
 OPEN_TOP = ("sun", "sun_soft", "world", "sky")
 
 
+def add_camera(bpy):
+    """A wide camera against the front wall, looking at the back wall (+Y)."""
+    cam = bpy.data.cameras.new("Camera")
+    cam.lens, cam.sensor_width = 18.0, 36.0
+    ob = bpy.data.objects.new("Camera", cam)
+    ob.location, ob.rotation_euler = (0.0, -0.97, 1.0), (math.pi / 2, 0.0, 0.0)
+    bpy.context.scene.collection.objects.link(ob)
+    bpy.context.scene.camera = ob
+
+
+def picture(bpy, objs, kind, out: Path, size=160):
+    """The room of ``kind``, ours (``Rad_0001``) left of Cycles, as the stored radiance at an
+    exposure that puts Cycles' mean at 0.3 (lights of different power read alike)."""
+    from . import bakes
+    from .pictures import side_by_side
+
+    bpy.context.scene.view_settings.exposure = math.log2(0.3 / max(float(bakes.values(objs, "Cycles").mean()),
+                                                                   1e-9))
+    return side_by_side(bpy, {o.name: o for o in objs}, ["Rad_0001", "Cycles"], out / f"lights_{kind}.png",
+                        size=size)
+
+
 def sky_image(bpy, width=64, height=32):
     """An equirectangular image: columns looking towards +X (u in [0.25, 0.75), Blender's
     mapping) bright and warm, the others dim and blue, all brighter towards the zenith (v = 1,
@@ -184,6 +209,7 @@ def run(args):
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     report = {"samples": args.samples, "subdiv": args.subdiv, "lights": {}}
+    sheets = []
     for kind in args.lights:
         bpy.ops.wm.read_factory_settings(use_empty=True)
         objs = room(bpy, args.subdiv, ceiling=kind not in OPEN_TOP)
@@ -237,7 +263,14 @@ def run(args):
             + f"; Cycles {args.samples} spp {t_ref:.1f} s, ours {t_ours:.2f} s",
             flush=True,
         )
+        if args.pictures:
+            add_camera(bpy)
+            sheets.append(picture(bpy, objs, kind, out))
     (out / "lights.json").write_text(json.dumps(report, indent=2))
+    if args.pictures:
+        from .pictures import grid
+
+        print(f"wrote {grid(bpy, sheets, Path(args.pictures), columns=2, gap=8)}")
     return report
 
 
