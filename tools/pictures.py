@@ -51,24 +51,7 @@ def render_attribute(bpy, objects, attr, path, size=256, skip=()):
 
 def stitch(bpy, paths, out, gap=4):
     """Places PNGs of equal size side by side (white gaps) into one PNG."""
-    tiles = []
-    for p in paths:
-        img = bpy.data.images.load(str(p))
-        w, h = img.size
-        px = np.array(img.pixels[:], dtype=np.float32).reshape(h, w, 4)
-        tiles.append(px)
-        bpy.data.images.remove(img)
-    h = tiles[0].shape[0]
-    sep = np.ones((h, gap, 4), np.float32)
-    row = np.concatenate(sum(([t, sep] for t in tiles), [])[:-1], axis=1)
-    H, W = row.shape[:2]
-    img = bpy.data.images.new("stitched", W, H, alpha=True)
-    img.pixels.foreach_set(row.ravel())
-    img.filepath_raw = str(out)
-    img.file_format = "PNG"
-    img.save()
-    bpy.data.images.remove(img)
-    return Path(out)
+    return grid(bpy, paths, out, columns=len(paths), gap=gap)
 
 
 def grid(bpy, paths, out, columns, gap=4):

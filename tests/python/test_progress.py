@@ -89,24 +89,33 @@ def test_the_next_frame_of_a_kind_is_measured_by_the_last_ones_stages():
     assert m.report(0.0, "corner gather", 42.0).frame_fraction == pytest.approx(0.55)
 
 
+class _Sink:
+    """A terminal for ``Lines``: what was written, as text."""
+
+    def __init__(self):
+        self.parts: list[str] = []
+
+    def write(self, text):
+        self.parts.append(text)
+
+    def flush(self):
+        pass
+
+    def lines(self) -> list[str]:
+        return [s for s in "".join(self.parts).splitlines() if s]
+
+
 def test_lines_inside_a_frame_come_at_most_every_interval():
-    out = []
-
-    class Sink:
-        def write(self, text):
-            out.append(text)
-
-        def flush(self):
-            pass
+    sink = _Sink()
 
     t = [0.0]
-    lines = Lines(2, interval=1.0, out=Sink(), clock=lambda: t[0])
+    lines = Lines(2, interval=1.0, out=sink, clock=lambda: t[0])
     for i in range(31):  # 3 s of reports every 0.1 s: a line at 1, 2 and 3 s
         t[0] = 0.1 * i
         lines.listen({"kind": "progress", "frame": 1, "fraction": i / 30, "stage": "corner gather"})
     t[0] = 3.5
     lines.listen({"kind": "frame", "frame": 1, "seconds": 3.5})
-    text = [s for s in "".join(out).splitlines() if s]
+    text = sink.lines()
     assert len(text) == 4, text
     assert text[-1] == "Radiosity: frame 1 done (1/2) in 3.50 s; bake 50%, 3.5 s spent, about 3.5 s left"
 
@@ -125,22 +134,13 @@ def test_the_time_left_follows_the_running_stage_at_its_own_rate():
 
 
 def test_the_heartbeat_repeats_the_line_while_the_library_is_silent():
-    out = []
-
-    class Sink:
-        def write(self, text):
-            out.append(text)
-
-        def flush(self):
-            pass
-
-    def lines_printed():
-        return [s for s in "".join(out).splitlines() if s]
+    sink = _Sink()
+    lines_printed = sink.lines
 
     # On a fake clock: one report, then silence (a slow corner); tick() gives a line once the
     # interval passed since the last, with the time spent moving on, and none between frames.
     t = [0.0]
-    lines = Lines(2, interval=1.0, out=Sink(), clock=lambda: t[0])
+    lines = Lines(2, interval=1.0, out=sink, clock=lambda: t[0])
     lines.listen({"kind": "progress", "frame": 7, "fraction": 0.5, "stage": "corner gather"})
     for now in (0.5, 0.99):
         t[0] = now
@@ -164,8 +164,8 @@ def test_the_heartbeat_repeats_the_line_while_the_library_is_silent():
     assert len(lines_printed()) == n, "no frame is running: nothing to repeat"
 
     # The thread, on the real clock: a report, then 1 s of silence at an interval of 0.1 s.
-    out.clear()
-    lines = Lines(1, interval=0.1, out=Sink())
+    sink.parts.clear()
+    lines = Lines(1, interval=0.1, out=sink)
     with lines.heartbeat():
         lines.listen({"kind": "progress", "frame": 1, "fraction": 0.2, "stage": "links"})
         time.sleep(1.0)
