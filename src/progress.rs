@@ -86,9 +86,10 @@ impl Meter {
     /// Records `fraction` of `stage` of the current frame at time `now`.
     pub fn report(&mut self, fraction: f64, stage: &str, now: Instant) -> Reading {
         self.time_stage(Some(stage), now);
-        self.stage_fraction = self.stage_fraction.max(fraction.clamp(0.0, 1.0));
+        let fraction = fraction.clamp(0.0, 1.0);
+        self.stage_fraction = self.stage_fraction.max(fraction);
         let (from, span) = self.share(stage);
-        let f = (from + span * fraction.clamp(0.0, 1.0)).clamp(0.0, 1.0);
+        let f = (from + span * fraction).clamp(0.0, 1.0);
         self.fraction = self.fraction.max(f);
         self.reading(now)
     }

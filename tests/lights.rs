@@ -52,6 +52,12 @@ fn corners(session: &mut Session, frame: f64, o: usize) -> Vec<(DVec3, [f32; 3])
     points.into_iter().zip(values).collect()
 }
 
+/// The floor's corners at frame 1 lit by `light` alone (a full solve).
+fn lit_floor(light: Light) -> Vec<(DVec3, [f32; 3])> {
+    let mut s = Session::new(scene(vec![floor()], vec![light], (1, 1)), Method::Full).unwrap();
+    corners(&mut s, 1.0, 0)
+}
+
 /// Worst corner error relative to the peak of `want`.
 fn worst(got: &[(DVec3, [f32; 3])], want: impl Fn(DVec3) -> f64) -> f64 {
     let peak = got.iter().map(|(x, _)| want(*x)).fold(0.0, f64::max);
@@ -68,8 +74,7 @@ fn at(position: DVec3, direction: DVec3) -> DMat4 {
 fn a_point_light_gives_the_inverse_square_cosine_law() {
     let p = DVec3::new(0.3, -0.2, 1.5);
     let light = Light::new("Point", LightKind::Point, DMat4::from_translation(p), 100.0);
-    let mut s = Session::new(scene(vec![floor()], vec![light], (1, 1)), Method::Full).unwrap();
-    let got = corners(&mut s, 1.0, 0);
+    let got = lit_floor(light);
     let e = |x: DVec3| RHO * 100.0 / (4.0 * PI) * p.z / (p - x).length().powi(3);
     let w = worst(&got, e);
     eprintln!("point light: worst corner {w:.2e} of the peak");
@@ -80,8 +85,7 @@ fn a_point_light_gives_the_inverse_square_cosine_law() {
 fn a_sun_lights_a_floor_evenly_by_its_cosine() {
     let d = DVec3::new(1.0, 0.5, -2.0).normalize();
     let light = Light::new("Sun", LightKind::Sun, at(DVec3::new(9.0, 9.0, 9.0), d), 3.0);
-    let mut s = Session::new(scene(vec![floor()], vec![light], (1, 1)), Method::Full).unwrap();
-    let got = corners(&mut s, 1.0, 0);
+    let got = lit_floor(light);
     let w = worst(&got, |_| RHO * 3.0 * -d.z);
     assert!(w < 1e-6, "{w}");
 }
@@ -92,8 +96,7 @@ fn a_spot_lights_its_cone_and_fades_at_its_edge() {
     let mut light = Light::new("Spot", LightKind::Spot, at(p, -DVec3::Z), 100.0);
     light.base.spot_size = 60f64.to_radians();
     light.base.spot_blend = 0.5;
-    let mut s = Session::new(scene(vec![floor()], vec![light], (1, 1)), Method::Full).unwrap();
-    let got = corners(&mut s, 1.0, 0);
+    let got = lit_floor(light);
     let cos_half = 30f64.to_radians().cos();
     let smooth = (1.0 - cos_half) * 0.5;
     let e = |x: DVec3| {
@@ -115,8 +118,7 @@ fn a_square_area_light_over_a_point_gives_the_rectangle_form_factor() {
     let mut light = Light::new("Area", LightKind::Area, at(DVec3::new(0.0, 0.0, 1.0), -DVec3::Z), 10.0);
     light.shape = AreaShape::Square;
     light.base.size = [1.0, 1.0];
-    let mut s = Session::new(scene(vec![floor()], vec![light], (1, 1)), Method::Full).unwrap();
-    let got = corners(&mut s, 1.0, 0);
+    let got = lit_floor(light);
     let (x, y) = (0.5f64, 0.5f64);
     let c11 = (x / (1.0 + x * x).sqrt() * (y / (1.0 + x * x).sqrt()).atan()
         + y / (1.0 + y * y).sqrt() * (x / (1.0 + y * y).sqrt()).atan())
@@ -634,10 +636,7 @@ fn a_soft_falloff_point_light_is_a_disk_facing_the_receiver() {
     // Radius 0.5 at 2 m: P cos / (4 pi (d^2 + r^2)), 1 - 4 / 4.25 = 5.9% below the point
     // light straight under it (Cycles' disk of radiance P / (4 pi^2 r^2)).
     let (p, r, power) = (DVec3::new(0.3, -0.2, 2.0), 0.5, 100.0);
-    let mut s =
-        Session::new(scene(vec![floor()], vec![round_point(p, power, r, true)], (1, 1)), Method::Full)
-            .unwrap();
-    let got = corners(&mut s, 1.0, 0);
+    let got = lit_floor(round_point(p, power, r, true));
     let e = |x: DVec3| {
         let d = p - x;
         RHO * power / (4.0 * PI) * (d.z / d.length()) / (d.length_squared() + r * r)
@@ -657,10 +656,7 @@ fn a_sphere_light_lights_as_its_point_does_while_seen_whole() {
     // Soft Falloff off: a sphere of radiance P / (4 pi^2 r^2) subtends sin^2(alpha) = r^2 / d^2,
     // so E = pi L sin^2(alpha) cos = P cos / (4 pi d^2), the point light's.
     let (p, r, power) = (DVec3::new(0.3, -0.2, 1.5), 0.5, 100.0);
-    let mut s =
-        Session::new(scene(vec![floor()], vec![round_point(p, power, r, false)], (1, 1)), Method::Full)
-            .unwrap();
-    let got = corners(&mut s, 1.0, 0);
+    let got = lit_floor(round_point(p, power, r, false));
     let e = |x: DVec3| RHO * power / (4.0 * PI) * p.z / (p - x).length().powi(3);
     let w = worst(&got, e);
     eprintln!("sphere light: worst corner {w:.2e} of the peak");
@@ -674,10 +670,7 @@ fn round_lights_across_the_horizon_match_the_disk_integral() {
     let (r, power) = (0.4, 100.0);
     let p = DVec3::new(0.0, 0.0, 0.3);
     for soft in [true, false] {
-        let mut s =
-            Session::new(scene(vec![floor()], vec![round_point(p, power, r, soft)], (1, 1)), Method::Full)
-                .unwrap();
-        let got = corners(&mut s, 1.0, 0);
+        let got = lit_floor(round_point(p, power, r, soft));
         let radiance = power / (4.0 * PI * PI * r * r);
         let want = |x: DVec3| {
             let d2 = (x - p).length_squared();
@@ -741,15 +734,11 @@ fn a_blocker_edge_across_a_round_light_leaves_half_its_light() {
 #[test]
 fn a_vanishing_radius_converges_to_the_point_light() {
     let p = DVec3::new(0.3, -0.2, 1.5);
-    let values = |light: Light| {
-        let mut s = Session::new(scene(vec![floor()], vec![light], (1, 1)), Method::Full).unwrap();
-        corners(&mut s, 1.0, 0)
-    };
-    let point = values(round_point(p, 100.0, 0.0, true));
+    let point = lit_floor(round_point(p, 100.0, 0.0, true));
     for soft in [true, false] {
         let mut last = f64::INFINITY;
         for r in [0.3, 0.1, 0.01, 1e-3] {
-            let got = values(round_point(p, 100.0, r, soft));
+            let got = lit_floor(round_point(p, 100.0, r, soft));
             let w =
                 worst(&got, |x| point.iter().find(|(y, _)| (*y - x).length() < 1e-12).unwrap().1[0] as f64);
             eprintln!(
@@ -772,8 +761,7 @@ fn a_spot_with_a_radius_keeps_its_cone() {
     spot.base.spot_size = 90f64.to_radians();
     spot.base.spot_blend = 0.2;
     spot.base.radius = 0.2;
-    let mut s = Session::new(scene(vec![floor()], vec![spot], (1, 1)), Method::Full).unwrap();
-    let got = corners(&mut s, 1.0, 0);
+    let got = lit_floor(spot);
     let disk = |x: DVec3| {
         let d = p - x;
         RHO * 100.0 / (4.0 * PI) * (d.z / d.length()) / (d.length_squared() + 0.04)
@@ -796,8 +784,7 @@ fn a_sun_of_an_angle_lights_an_open_floor_by_its_cosine_exactly() {
     let d = DVec3::new(1.0, 0.5, -2.0).normalize();
     let mut light = Light::new("Sun", LightKind::Sun, at(DVec3::new(9.0, 9.0, 9.0), d), 3.0);
     light.base.angle = 10f64.to_radians();
-    let mut s = Session::new(scene(vec![floor()], vec![light], (1, 1)), Method::Full).unwrap();
-    let got = corners(&mut s, 1.0, 0);
+    let got = lit_floor(light);
     let w = worst(&got, |_| RHO * 3.0 * -d.z);
     assert!(w < 1e-6, "{w}");
 }

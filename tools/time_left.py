@@ -44,6 +44,12 @@ def seconds(text: str) -> float | None:
     raise ValueError(f"not a duration: {text!r}")
 
 
+def said(text: str) -> str:
+    """A line's "N left" as ``12.3 s`` (``?`` while unknown)."""
+    x = seconds(text)
+    return "?" if x is None else f"{x:.1f} s"
+
+
 def run(scene: Path, extra: list[str]) -> tuple[list[tuple[float, str]], float]:
     """The CLI's stderr lines, each with its arrival time from the start, and the wall time."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -67,7 +73,7 @@ def table(lines: list[tuple[float, str]], wall: float) -> tuple[str, str]:
     for t, text in lines:
         if (m := LINE.match(text)) and int(m["i"]) in frame_end:
             readings.append((t, m, frame_end[int(m["i"])]))
-    stamps = [t for t, _ in lines if LINE.match(_) or DONE.match(_)]
+    stamps = [t for t, text in lines if LINE.match(text) or DONE.match(text)]
     gaps = [b - a for a, b in zip([0.0, *stamps], stamps, strict=False)]
     rows = ["| at | stage | frame % | frame left said | was | bake % | bake left said | was |",
             "|---|---|---|---|---|---|---|---|"]
@@ -75,10 +81,9 @@ def table(lines: list[tuple[float, str]], wall: float) -> tuple[str, str]:
         if not readings:
             break
         t, m, end = min(readings, key=lambda r: abs(r[0] - share * wall))
-        fl, bl = seconds(m["fl"]), seconds(m["bl"])
-        said = lambda x: "?" if x is None else f"{x:.1f} s"  # noqa: E731
-        rows.append(f"| {t:.1f} s | {m['stage']} | {m['fp']} | {said(fl)} | {end - t:.1f} s | {m['bp']} | "
-                    f"{said(bl)} | {wall - t:.1f} s |")
+        fl, bl = said(m["fl"]), said(m["bl"])
+        rows.append(f"| {t:.1f} s | {m['stage']} | {m['fp']} | {fl} | {end - t:.1f} s | {m['bp']} | "
+                    f"{bl} | {wall - t:.1f} s |")
     longest = max(gaps) if gaps else float("nan")
     waits = f"{len(stamps)} progress lines, the longest wait between two (or before the first) " \
             f"{longest:.2f} s"

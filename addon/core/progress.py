@@ -63,9 +63,10 @@ class Meter:
 
     def report(self, fraction: float, stage: str, now: float) -> Reading:
         self._time_stage(stage, now)
-        self.stage_fraction = max(self.stage_fraction, min(max(fraction, 0.0), 1.0))
+        fraction = min(max(fraction, 0.0), 1.0)
+        self.stage_fraction = max(self.stage_fraction, fraction)
         start, span = self._share(stage)
-        f = min(max(start + span * min(max(fraction, 0.0), 1.0), 0.0), 1.0)
+        f = min(max(start + span * fraction, 0.0), 1.0)
         self.fraction = max(self.fraction, f)
         return self.reading(now)
 

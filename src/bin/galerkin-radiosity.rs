@@ -226,8 +226,7 @@ fn bake_into(
                     true
                 };
                 let stats = session.solve_frame(frame as f64, &progress)?;
-                let mut lines = lines.lock().unwrap();
-                lines.frame_done(Instant::now());
+                lines.lock().unwrap().frame_done(Instant::now());
                 if !quiet {
                     eprintln!(
                         "frame {frame} ({}/{total}): {:.3} s, {} links ({} by series, {} recomputed), {} shots",
