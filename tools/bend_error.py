@@ -1,6 +1,6 @@
 """Where a flat-shaded Suzanne differs from Cycles, and how much of it is the quads (issue 19).
 
-    .venv/bin/python -m tools.bend_error [--samples 512]
+    .venv/bin/python -m tools.bend_error [--samples 512] [--smooth]
 
 The scene of tests/python/test_smooth_shading.py (Suzanne on a floor under a Point light, flat
 shaded), baked by the add-on and by Cycles' DIFFUSE bake, twice: as modelled (468 quads, median
@@ -14,7 +14,12 @@ triangles read back onto the quads' corners: a quad's corner takes the value of 
 holding it (the first, or the last, in ``loop_triangles`` order) or their mean. Cycles' bake of
 the quads equals its bake of the triangles read with the first triangle to within its noise:
 that is how Cycles writes a quad's corners, and what the library would bake if it split bent
-quads the same way.
+quads the same way. The add-on now does (``addon/core/polygons.py``), so the first table shows
+the split quads' error.
+
+``--smooth`` then bakes the model smooth shaded and prints where its error against Cycles'
+per-vertex mean sits: at vertices whose faces all face the light, all face away, or both (the
+light's terminator crosses the vertex).
 """
 
 from __future__ import annotations
@@ -47,6 +52,7 @@ def rel_rms(a, b) -> float:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--samples", type=int, default=512)
+    p.add_argument("--smooth", action="store_true", help="also break down the smooth-shaded bake's error")
     args = p.parse_args(argv)
     for d in (REPO, REPO / "tests" / "python"):
         sys.path.insert(0, str(d))
@@ -115,7 +121,40 @@ def main(argv=None) -> int:
         c = np.array([tri_cycles[r].mean() for r in read])
         o = np.array([tri_ours[r].mean() for r in read])
         print(f"| {rule} | {100 * rel_rms(c, cycles):.1f}% | {100 * rel_rms(o, cycles):.1f}% |")
+    if args.smooth:
+        model.data = quads
+        scene._shade(model, True)
+        smooth_breakdown(bpy, model, *both())
     return 0
+
+
+def smooth_breakdown(bpy, model, cycles, ours) -> None:
+    """Per vertex, ours against the mean of Cycles' loops, by how the vertex's faces face the lamp."""
+    me = model.data
+    loop_vertex = np.array([lp.vertex_index for lp in me.loops])
+    n = len(me.vertices)
+    count = np.maximum(np.bincount(loop_vertex, minlength=n), 1)
+    ref = np.bincount(loop_vertex, cycles, n) / count
+    got = np.bincount(loop_vertex, ours, n) / count
+    m = np.array(model.matrix_world)
+    lamp = np.array(bpy.data.objects["Lamp"].matrix_world.translation)
+    co = np.array([m[:3, :3] @ np.array(v.co) + m[:3, 3] for v in me.vertices])
+    toward, away = np.zeros(n, bool), np.zeros(n, bool)
+    for poly in me.polygons:
+        normal = m[:3, :3] @ np.array(poly.normal)
+        for v in poly.vertices:
+            (toward if normal @ (lamp - co[v]) >= 0.0 else away)[v] = True
+    err = got - ref
+    total = float((err ** 2).sum())
+    print(f"\nSmooth shaded, {n} vertices, ours against the mean of Cycles' loops per vertex: relative "
+          f"RMSE {100 * np.sqrt((err ** 2).mean()) / ref.mean():.1f}%, by the vertex's faces:\n")
+    print("| the vertex's faces | vertices | share of squared error | relative RMS error | ours / Cycles |")
+    print("|---|---|---|---|---|")
+    for name, sel in (("all face the lamp", toward & ~away), ("some face it, some away", toward & away),
+                      ("all face away", away & ~toward)):
+        print(f"| {name} | {sel.sum()} | {100 * (err[sel] ** 2).sum() / total:.0f}% | "
+              f"{100 * np.sqrt((err[sel] ** 2).mean()) / ref.mean():.1f}% | "
+              f"{got[sel].sum() / ref[sel].sum():.3f} |")
 
 
 if __name__ == "__main__":

@@ -1,12 +1,20 @@
-"""Faces for the library: triangles and convex quads as they are, everything else split into
+"""Faces for the library: triangles and flat convex quads as they are, everything else split into
 triangles, with the map that brings per-corner results back to the mesh's loops.
 
+- A quad that is concave or bent is split into Blender's own two triangles (its
+  ``loop_triangles``: (0,1,2), (0,2,3), or (0,1,3), (1,2,3) when the first pair faces opposite
+  ways). The library models a quad as the bilinear patch X(s,t), which folds over when the quad is
+  concave and is a different surface from the two triangles Blender renders when it is bent (its
+  normal at a corner is the plane of that corner's two edges): Suzanne's flat bake was 18.6% from
+  Cycles as bilinear quads and 4.3% as Blender's triangles (docs/validation-real.md, "Bent
+  quads"). A quad counts as bent when its two triangles' normals differ by more than
+  ``BEND_LIMIT_DEGREES``; flatter quads (a room's walls) keep one element.
 - An n-gon (5+ corners) is ear-clipped in its best-fit plane (Newell normal); a convex n-gon
   gives the same triangles as a fan from its first corner. If ear clipping fails (self-intersecting
   outline) the n-gon falls back to a fan.
-- A concave or folded quad is split along the diagonal through its reflex corner, since the
-  library models a quad as the bilinear patch X(s,t), which folds over when the quad is concave.
-- A loop's value is the mean of the values at the triangle corners that sit on its vertex.
+- A loop of a split polygon takes the value of the first triangle that holds it, as Cycles bakes
+  a colour attribute (the differential test in docs/validation-real.md: 2.4% against 24% for the
+  last triangle and 12% for the mean).
 
 Triangles keep the winding of their source face, so they keep its front side.
 """
@@ -16,6 +24,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+# Beyond this bend between its two triangles a quad is split: the bilinear patch's corner normals
+# then differ from the triangles' by at most this, under 1% of the irradiance at 60 degrees'
+# incidence (tan 60 x 0.25 degrees), and a quad this flat costs one element instead of two.
+BEND_LIMIT_DEGREES = 0.25
 
 
 @dataclass
@@ -27,7 +40,8 @@ class FaceSplit:
     source_face: np.ndarray     # (F',) int64: the polygon each library face comes from
     corner_loop: np.ndarray     # (sum face_sizes,) int64: the mesh loop of each library corner
     n_loops: int
-    split_polygons: int         # polygons that were split (n-gons and concave quads)
+    split_polygons: int         # polygons that were split (n-gons, concave and bent quads)
+    loop_corner: np.ndarray | None = None  # (n_loops,) int64: each loop's first library corner
 
     @property
     def identity(self) -> bool:
@@ -35,17 +49,12 @@ class FaceSplit:
         return self.split_polygons == 0
 
     def to_loops(self, corner_values: np.ndarray) -> np.ndarray:
-        """Per-library-corner values (C', k) to per-loop values (n_loops, k), averaged."""
+        """Per-library-corner values (C', k) to per-loop values (n_loops, k): each loop takes its
+        first library corner's (the first triangle holding it, as Cycles does)."""
         corner_values = np.asarray(corner_values)
         if self.identity:
             return corner_values.astype(np.float32, copy=True)
-        k = corner_values.shape[1]
-        out = np.zeros((self.n_loops, k), np.float64)
-        for c in range(k):
-            out[:, c] = np.bincount(self.corner_loop, weights=corner_values[:, c], minlength=self.n_loops)
-        count = np.bincount(self.corner_loop, minlength=self.n_loops).astype(np.float64)
-        out /= np.maximum(count, 1.0)[:, None]
-        return out.astype(np.float32)
+        return corner_values[self.loop_corner].astype(np.float32)
 
 
 def newell_normal(points: np.ndarray) -> np.ndarray:
@@ -109,6 +118,27 @@ def ear_clip(points: np.ndarray) -> list[tuple[int, int, int]]:
     return tris
 
 
+def blender_quad_normals(q: np.ndarray):
+    """For quads (Q,4,3): the area normals of Blender's two triangles of each and whether Blender
+    flips the split to the (1,3) diagonal (the (0,2) triangles face opposite ways: a quad
+    concave at corner 1 or 3), as ``loop_triangles`` (``mesh_tessellate``) splits a quad."""
+    d1, d2, d3 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0], q[:, 3] - q[:, 0]
+    a, b = np.cross(d1, d2), np.cross(d2, d3)
+    flip = np.einsum("qc,qc->q", a, -b) > 0.0
+    # Flipped: triangles (0,1,3) and (1,2,3).
+    fa = np.cross(d1, d3)
+    fb = np.cross(q[:, 2] - q[:, 1], q[:, 3] - q[:, 1])
+    return np.where(flip[:, None], fa, a), np.where(flip[:, None], fb, b), flip
+
+
+def bend_degrees(na: np.ndarray, nb: np.ndarray) -> np.ndarray:
+    """The angle between normals (Q,3) per row, in degrees (0 where either is zero)."""
+    la, lb = np.linalg.norm(na, axis=1), np.linalg.norm(nb, axis=1)
+    ok = (la > 0.0) & (lb > 0.0)
+    cos = np.einsum("qc,qc->q", na, nb) / np.where(ok, la * lb, 1.0)
+    return np.where(ok, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), 0.0)
+
+
 def split_faces(vertices: np.ndarray, face_sizes: np.ndarray, face_indices: np.ndarray) -> FaceSplit:
     """Split a mesh's polygons (sizes and concatenated vertex indices, in loop order)."""
     vertices = np.asarray(vertices, np.float64)
@@ -121,19 +151,19 @@ def split_faces(vertices: np.ndarray, face_sizes: np.ndarray, face_indices: np.n
     n_loops = int(face_sizes.sum())
     split = np.zeros(len(face_sizes), bool)
     split[face_sizes > 4] = True
-    # Concave quads, tested in bulk: corner turn signs against the Newell normal.
     quads = np.flatnonzero(face_sizes == 4)
-    reflex_of = {}
+    flipped = np.zeros(len(face_sizes), bool)
     if len(quads):
         q = vertices[face_indices[starts[quads][:, None] + np.arange(4)]]  # (Q,4,3)
+        tri_a, tri_b, flip = blender_quad_normals(q)
+        flipped[quads] = flip
+        # Concave: a corner turns against the Newell normal.
         nrm = np.cross(q, np.roll(q, -1, axis=1)).sum(axis=1)
         e_in = q - np.roll(q, 1, axis=1)
         e_out = np.roll(q, -1, axis=1) - q
         turn = np.einsum("qkc,qc->qk", np.cross(e_in, e_out), nrm)
         concave = (turn < 0.0).any(axis=1) & (np.linalg.norm(nrm, axis=1) > 0.0)
-        for qi in np.flatnonzero(concave):
-            reflex_of[int(quads[qi])] = int(np.flatnonzero(turn[qi] < 0.0)[0])
-            split[quads[qi]] = True
+        split[quads] = concave | (bend_degrees(tri_a, tri_b) > BEND_LIMIT_DEGREES)
     if not split.any():
         return FaceSplit(
             face_sizes=face_sizes.astype(np.uint32),
@@ -153,8 +183,7 @@ def split_faces(vertices: np.ndarray, face_sizes: np.ndarray, face_indices: np.n
             out_source.append(f)
             continue
         if n == 4:
-            r = reflex_of[f]
-            tris = [(r, (r + 1) % 4, (r + 2) % 4), (r, (r + 2) % 4, (r + 3) % 4)]
+            tris = [(0, 1, 3), (1, 2, 3)] if flipped[f] else [(0, 1, 2), (0, 2, 3)]
         else:
             tris = ear_clip(vertices[face_indices[loops]])
         for t in tris:
@@ -162,6 +191,7 @@ def split_faces(vertices: np.ndarray, face_sizes: np.ndarray, face_indices: np.n
             out_loops.append(loops[list(t)])
             out_source.append(f)
     corner_loop = np.concatenate(out_loops).astype(np.int64)
+    _, loop_corner = np.unique(corner_loop, return_index=True)
     return FaceSplit(
         face_sizes=np.asarray(out_sizes, np.uint32),
         face_indices=face_indices[corner_loop].astype(np.uint32),
@@ -169,6 +199,7 @@ def split_faces(vertices: np.ndarray, face_sizes: np.ndarray, face_indices: np.n
         corner_loop=corner_loop,
         n_loops=n_loops,
         split_polygons=int(split.sum()),
+        loop_corner=loop_corner,
     )
 
 

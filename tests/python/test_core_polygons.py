@@ -1,4 +1,4 @@
-"""N-gon and concave-quad splitting, and results mapped back to loops (no bpy)."""
+"""N-gon, concave- and bent-quad splitting, and results mapped back to loops (no bpy)."""
 
 import numpy as np
 import pytest
@@ -56,7 +56,7 @@ def test_concave_quad_is_split_on_the_reflex_diagonal():
     assert sum(_area(v[t]) for t in tris) == pytest.approx(_area(v))
 
 
-def test_results_map_back_to_every_loop_as_means():
+def test_results_map_back_to_every_loop():
     v = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0], [0, 1, 0], [3, 0, 0]], float)
     sizes = [6, 3]
     idx = [0, 1, 2, 3, 4, 5, 2, 6, 3]
@@ -68,6 +68,41 @@ def test_results_map_back_to_every_loop_as_means():
     np.testing.assert_allclose(loops[:, 0], v[np.array(idx), 0])
     # The triangle after the n-gon keeps its loops 6..8.
     assert s.corner_loop[-3:].tolist() == [6, 7, 8]
+
+
+def _bent_quad(lift):
+    """A unit square with corner 2 lifted by `lift`: Blender's triangles (0,1,2) and (0,2,3) meet
+    at a bend of sqrt(2) x lift radians (small lifts)."""
+    return np.array([[0, 0, 0], [1, 0, 0], [1, 1, lift], [0, 1, 0]], float)
+
+
+def test_a_bent_quad_becomes_blenders_two_triangles_and_loops_take_the_first():
+    s = polygons.split_faces(_bent_quad(0.2), [4], np.arange(4))
+    assert s.split_polygons == 1
+    assert s.face_indices.reshape(-1, 3).tolist() == [[0, 1, 2], [0, 2, 3]]
+    # Distinct values per library corner: loops 0, 1, 2 come from the first triangle (corners
+    # 0, 1, 2), loop 3 from the second (its corner 2 = library corner 5), as Cycles bakes them.
+    corner = np.arange(6, dtype=np.float32)[:, None] * np.ones(3, np.float32)
+    np.testing.assert_array_equal(s.to_loops(corner)[:, 0], [0, 1, 2, 5])
+
+
+def test_a_quad_flatter_than_the_limit_stays_one_bilinear_face():
+    below = np.radians(0.9 * polygons.BEND_LIMIT_DEGREES) / np.sqrt(2)
+    above = np.radians(1.1 * polygons.BEND_LIMIT_DEGREES) / np.sqrt(2)
+    assert polygons.split_faces(_bent_quad(below), [4], np.arange(4)).identity
+    assert polygons.split_faces(_bent_quad(above), [4], np.arange(4)).split_polygons == 1
+
+
+def test_a_bent_quad_whose_first_split_folds_over_takes_the_other_diagonal():
+    # The arrowhead of the concave test, its reflex corner moved to index 1 and lifted: Blender's
+    # (0,2) triangles would face opposite ways, so it splits on (1,3) into (0,1,3), (1,2,3), both
+    # facing +z like the quad.
+    v = np.array([[2, 1, 0], [0.5, 1, 0.1], [0, 2, 0], [0, 0, 0]], float)
+    s = polygons.split_faces(v, [4], np.arange(4))
+    tris = s.face_indices.reshape(-1, 3)
+    assert tris.tolist() == [[0, 1, 3], [1, 2, 3]]
+    for t in tris:
+        assert polygons.newell_normal(v[t])[2] > 0
 
 
 def test_degenerate_faces_are_found():
