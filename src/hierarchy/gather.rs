@@ -40,7 +40,9 @@ use super::solve::{Incoming, State};
 use super::tree::{Kind, NodeId, Surface, Tree};
 use crate::basis::MAX_LEN as MAX_NB;
 use crate::error::Result;
-use crate::gather::{CornerValues, FACING, FOOT_BALL, NEAR_FACING, Stop, corner_points, shading_point};
+use crate::gather::{
+    BALL_EDGE, CornerValues, FACING, FOOT_BALL, NEAR_FACING, Stop, corner_points, shading_point,
+};
 use crate::geometry::{Patch, Rect};
 use crate::kernel::point::{point_kernel, point_to_polygon};
 use crate::lights::direct::DirectLight;
@@ -408,13 +410,14 @@ impl<'a> Gather<'a> {
         let (centre, radius) = sub.bounding_sphere();
         let distance = rx.x.distance(centre);
         if let Some((r, weight)) = ball {
-            if distance + radius <= r || (depth >= MAX_DEPTH && distance <= r) {
+            let edge = depth >= MAX_DEPTH || radius <= BALL_EDGE * r;
+            if distance + radius <= r || (edge && distance <= r) {
                 let mut m = [0.0; MAX_NB];
                 self.moments(rx, src, rect, depth, &mut m[..out.len()], None);
                 *weight += m[0];
                 return;
             }
-            if distance - radius < r && depth < MAX_DEPTH {
+            if distance - radius < r && !edge {
                 for q in rect.quadrants() {
                     self.moments(rx, src, &q, depth + 1, out, Some((r, &mut *weight)));
                 }
