@@ -412,7 +412,7 @@ class BakeJob:
         h = self.held
         if state.geometry != h.state.geometry:
             # Deformed: rebuild the session on this frame's meshes and solve from scratch.
-            exp = export(dg, [o.obj for o in self.rest.objects], self.rest.light_objects)
+            exp = export(dg, [o.obj for o in self.rest.objects], self.rest.light_objects, rest=self.rest)
             topology = [o.data.topology_key() for o in exp.objects]
             if topology != [o.data.topology_key() for o in self.rest.objects]:
                 raise BakeError(f"the meshes' faces changed at frame {f}; "

@@ -193,12 +193,15 @@ class Export:
                 + ", ".join(f"{name} ({n})" for name, n in bad))
 
 
-def export(depsgraph, objects, light_objects=()) -> Export:
-    """The library scene at the depsgraph's current frame, lit by `light_objects` too."""
+def export(depsgraph, objects, light_objects=(), rest: Export | None = None) -> Export:
+    """The library scene at the depsgraph's current frame, lit by `light_objects` too. `rest`:
+    an earlier export of the same objects (a deformed frame's rebuild), whose library faces the
+    deforming objects keep."""
     table = core_materials.MaterialTable()
     sources = []
     out = []
     table_problems = table.texture_problems
+    kept_splits = {o.obj.name: o.data.split for o in rest.objects} if rest is not None else {}
     for obj in objects:
         ev = obj.evaluated_get(depsgraph)
         mesh = ev.to_mesh()
@@ -222,7 +225,9 @@ def export(depsgraph, objects, light_objects=()) -> Export:
             lib.append(table.add(key, make))
         lib = np.asarray(lib, np.int64)
         poly_lib = lib[np.clip(mats, 0, len(lib) - 1)] if len(mats) else np.zeros(0, np.int64)
-        data = ObjectData.from_mesh(obj.name, co, sizes, loops, poly_lib, np.array(ev.matrix_world))
+        deforms = may_deform(obj)
+        data = ObjectData.from_mesh(obj.name, co, sizes, loops, poly_lib, np.array(ev.matrix_world),
+                                    deforms=deforms, split=kept_splits.get(obj.name) if deforms else None)
         if normals is not None:
             data.set_loop_normals(*normals)
         if textured is not None:
@@ -235,7 +240,7 @@ def export(depsgraph, objects, light_objects=()) -> Export:
             osizes = np.empty(len(sizes), np.int32)
             orig.polygons.foreach_get("loop_total", osizes)
             same = bool((osizes == sizes).all())
-        out.append(ExportedObject(obj, data, slots, smooth, same, may_deform(obj)))
+        out.append(ExportedObject(obj, data, slots, smooth, same, deforms))
     light_objects = list(light_objects)
     return Export(out, table, sources, light_objects, [light_state(o, depsgraph) for o in light_objects],
                   world_state(depsgraph), two_sided(objects))

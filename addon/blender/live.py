@@ -110,7 +110,7 @@ def _update(scene) -> bool:
     smp = sample(dg, rest, sel.objects)
     state = smp.state(rest)
     if state.geometry != h.state.geometry:
-        rest = export(dg, sel.objects, sel.light_objects)
+        rest = export(dg, sel.objects, sel.light_objects, rest=rest)
         h.close()
         h = bake.new_session(bake.settings_from_scene(scene), rest, state, _scene_key(scene, rest))
         bake._held[bake.scene_id(scene)] = h

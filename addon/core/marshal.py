@@ -46,12 +46,17 @@ class ObjectData:
     face_emission: np.ndarray | None = None      # (F', 3) float32 emission scale per library face
 
     @classmethod
-    def from_mesh(cls, name, vertices, polygon_sizes, loop_vertices, polygon_materials, matrix) -> ObjectData:
-        """`polygon_materials` are library material indices per polygon."""
+    def from_mesh(cls, name, vertices, polygon_sizes, loop_vertices, polygon_materials, matrix,
+                  deforms: bool = False, split: FaceSplit | None = None) -> ObjectData:
+        """`polygon_materials` are library material indices per polygon. A deforming mesh has
+        every quad split, so that its library faces stay the same when a quad bends on another
+        frame; `split` (the faces of another frame's export of the same mesh, checked against
+        this one's loops) keeps even the diagonals Blender picks, which follow the shape."""
         vertices = np.asarray(vertices, np.float32).reshape(-1, 3)
         sizes = np.asarray(polygon_sizes, np.int64)
         loops = np.asarray(loop_vertices, np.int64)
-        split = split_faces(vertices, sizes, loops)
+        if split is None or split.n_loops != len(loops) or split.source_face.max(initial=-1) >= len(sizes):
+            split = split_faces(vertices, sizes, loops, every_quad=deforms)
         mats = np.asarray(polygon_materials, np.int64)[split.source_face].astype(np.uint32)
         return cls(
             name=name,

@@ -139,8 +139,10 @@ def bend_degrees(na: np.ndarray, nb: np.ndarray) -> np.ndarray:
     return np.where(ok, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), 0.0)
 
 
-def split_faces(vertices: np.ndarray, face_sizes: np.ndarray, face_indices: np.ndarray) -> FaceSplit:
-    """Split a mesh's polygons (sizes and concatenated vertex indices, in loop order)."""
+def split_faces(vertices: np.ndarray, face_sizes: np.ndarray, face_indices: np.ndarray,
+                every_quad: bool = False) -> FaceSplit:
+    """Split a mesh's polygons (sizes and concatenated vertex indices, in loop order); with
+    `every_quad`, flat quads too (a deforming mesh, whose quads may bend on a later frame)."""
     vertices = np.asarray(vertices, np.float64)
     face_sizes = np.asarray(face_sizes, np.int64)
     face_indices = np.asarray(face_indices, np.int64)
@@ -163,7 +165,7 @@ def split_faces(vertices: np.ndarray, face_sizes: np.ndarray, face_indices: np.n
         e_out = np.roll(q, -1, axis=1) - q
         turn = np.einsum("qkc,qc->qk", np.cross(e_in, e_out), nrm)
         concave = (turn < 0.0).any(axis=1) & (np.linalg.norm(nrm, axis=1) > 0.0)
-        split[quads] = concave | (bend_degrees(tri_a, tri_b) > BEND_LIMIT_DEGREES)
+        split[quads] = every_quad | concave | (bend_degrees(tri_a, tri_b) > BEND_LIMIT_DEGREES)
     if not split.any():
         return FaceSplit(
             face_sizes=face_sizes.astype(np.uint32),

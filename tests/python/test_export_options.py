@@ -108,6 +108,33 @@ def test_deforming_mesh_rebuilds_the_session(blender):
     assert scenes.rad_frames(box.data) == [1, 2]
 
 
+def test_a_flat_mesh_that_bends_on_a_later_frame_keeps_its_faces(blender):
+    """A deforming mesh has every quad split into Blender's triangles from its first export on,
+    with the diagonals kept on rebuilds: a flat grid that a shape key bends on frame 2 (whose
+    bent quads would otherwise be split there, and the faces change) bakes both frames."""
+    bpy = blender
+    from addon.blender import bake
+
+    objs = _static_room(bpy)
+    verts, faces = scenes.grid_quad((-0.4, -0.4, 0.2), (0.8, 0, 0), (0, 0.8, 0), 3)
+    sheet = scenes.mesh_object(bpy, "Sheet", verts, faces, bpy.data.materials["White"])
+    sheet.shape_key_add(name="Basis")
+    bent = sheet.shape_key_add(name="Bent")
+    for k, v in enumerate(bent.data):  # a checkerboard of raised vertices bends every quad
+        v.co.z += 0.1 * ((k % 4 + k // 4) % 2)
+    bent.value = 0.0
+    bent.keyframe_insert("value", frame=1)
+    bent.value = 1.0
+    bent.keyframe_insert("value", frame=2)
+    job = bake.BakeJob(bpy.context, bake.settings_from_scene(bpy.context.scene).replace(basis_order=0))
+    summary = job.run()
+    assert job.rebuilt == 1, summary
+    data = next(o.data for o in job.rest.objects if o.obj.name == "Sheet")
+    assert data.split.face_sizes.tolist() == [3] * (2 * len(faces))
+    assert scenes.rad_frames(sheet.data) == [1, 2]
+    assert scenes.stored(objs["Floor"].data, 2).mean() > 0
+
+
 class _Layout:
     """Records layout.prop calls (panels cannot draw without a window)."""
 
