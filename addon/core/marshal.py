@@ -55,7 +55,7 @@ class ObjectData:
         vertices = np.asarray(vertices, np.float32).reshape(-1, 3)
         sizes = np.asarray(polygon_sizes, np.int64)
         loops = np.asarray(loop_vertices, np.int64)
-        if split is None or split.n_loops != len(loops) or split.source_face.max(initial=-1) >= len(sizes):
+        if split is None or not split.fits(sizes, loops):
             split = split_faces(vertices, sizes, loops, every_quad=deforms)
         mats = np.asarray(polygon_materials, np.int64)[split.source_face].astype(np.uint32)
         return cls(

@@ -8,7 +8,8 @@ triangles, with the map that brings per-corner results back to the mesh's loops.
   normal at a corner is the plane of that corner's two edges): Suzanne's flat bake was 18.6% from
   Cycles as bilinear quads and 4.3% as Blender's triangles (docs/validation-real.md, "Bent
   quads"). A quad counts as bent when its two triangles' normals differ by more than
-  ``BEND_LIMIT_DEGREES``; flatter quads (a room's walls) keep one element.
+  ``BEND_LIMIT_DEGREES``; flatter quads (a room's walls) keep one element. A deforming mesh has
+  every quad split (``every_quad``), so that its faces stay when a quad bends on a later frame.
 - An n-gon (5+ corners) is ear-clipped in its best-fit plane (Newell normal); a convex n-gon
   gives the same triangles as a fan from its first corner. If ear clipping fails (self-intersecting
   outline) the n-gon falls back to a fan.
@@ -47,6 +48,13 @@ class FaceSplit:
     def identity(self) -> bool:
         """True when library faces are the polygons themselves (no polygon was split)."""
         return self.split_polygons == 0
+
+    def fits(self, face_sizes: np.ndarray, face_indices: np.ndarray) -> bool:
+        """True when these faces split a mesh of these polygons (sizes and loop vertex indices):
+        the same loops, each on the same vertex, and every source polygon there."""
+        face_indices = np.asarray(face_indices, np.int64)
+        return (self.n_loops == len(face_indices) and len(face_sizes) > self.source_face.max(initial=-1)
+                and bool((self.face_indices == face_indices[self.corner_loop]).all()))
 
     def to_loops(self, corner_values: np.ndarray) -> np.ndarray:
         """Per-library-corner values (C', k) to per-loop values (n_loops, k): each loop takes its
