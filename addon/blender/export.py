@@ -227,7 +227,7 @@ def export(depsgraph, objects, light_objects=(), rest: Export | None = None) -> 
         poly_lib = lib[np.clip(mats, 0, len(lib) - 1)] if len(mats) else np.zeros(0, np.int64)
         deforms = may_deform(obj)
         data = ObjectData.from_mesh(obj.name, co, sizes, loops, poly_lib, np.array(ev.matrix_world),
-                                    deforms=deforms, split=kept_splits.get(obj.name) if deforms else None)
+                                    split=kept_splits.get(obj.name) if deforms else None)
         if normals is not None:
             data.set_loop_normals(*normals)
         if textured is not None:

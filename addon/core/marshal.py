@@ -47,16 +47,15 @@ class ObjectData:
 
     @classmethod
     def from_mesh(cls, name, vertices, polygon_sizes, loop_vertices, polygon_materials, matrix,
-                  deforms: bool = False, split: FaceSplit | None = None) -> ObjectData:
-        """`polygon_materials` are library material indices per polygon. A deforming mesh has
-        every quad split, so that its library faces stay the same when a quad bends on another
-        frame; `split` (the faces of another frame's export of the same mesh, checked against
-        this one's loops) keeps even the diagonals Blender picks, which follow the shape."""
+                  split: FaceSplit | None = None) -> ObjectData:
+        """`polygon_materials` are library material indices per polygon. `split`: the library
+        faces of another frame's export of the same mesh (a deformed frame's rebuild), kept where
+        they fit its loops, so that a quad bending or unbending does not change the faces."""
         vertices = np.asarray(vertices, np.float32).reshape(-1, 3)
         sizes = np.asarray(polygon_sizes, np.int64)
         loops = np.asarray(loop_vertices, np.int64)
         if split is None or not split.fits(sizes, loops):
-            split = split_faces(vertices, sizes, loops, every_quad=deforms)
+            split = split_faces(vertices, sizes, loops)
         mats = np.asarray(polygon_materials, np.int64)[split.source_face].astype(np.uint32)
         return cls(
             name=name,

@@ -8,8 +8,7 @@ triangles, with the map that brings per-corner results back to the mesh's loops.
   normal at a corner is the plane of that corner's two edges): Suzanne's flat bake was 18.6% from
   Cycles as bilinear quads and 4.3% as Blender's triangles (docs/validation-real.md, "Bent
   quads"). A quad counts as bent when its two triangles' normals differ by more than
-  ``BEND_LIMIT_DEGREES``; flatter quads (a room's walls) keep one element. A deforming mesh has
-  every quad split (``every_quad``), so that its faces stay when a quad bends on a later frame.
+  ``BEND_LIMIT_DEGREES``; flatter quads (a room's walls) keep one element.
 - An n-gon (5+ corners) is ear-clipped in its best-fit plane (Newell normal); a convex n-gon
   gives the same triangles as a fan from its first corner. If ear clipping fails (self-intersecting
   outline) the n-gon falls back to a fan.
@@ -147,10 +146,8 @@ def bend_degrees(na: np.ndarray, nb: np.ndarray) -> np.ndarray:
     return np.where(ok, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), 0.0)
 
 
-def split_faces(vertices: np.ndarray, face_sizes: np.ndarray, face_indices: np.ndarray,
-                every_quad: bool = False) -> FaceSplit:
-    """Split a mesh's polygons (sizes and concatenated vertex indices, in loop order); with
-    `every_quad`, flat quads too (a deforming mesh, whose quads may bend on a later frame)."""
+def split_faces(vertices: np.ndarray, face_sizes: np.ndarray, face_indices: np.ndarray) -> FaceSplit:
+    """Split a mesh's polygons (sizes and concatenated vertex indices, in loop order)."""
     vertices = np.asarray(vertices, np.float64)
     face_sizes = np.asarray(face_sizes, np.int64)
     face_indices = np.asarray(face_indices, np.int64)
@@ -173,7 +170,7 @@ def split_faces(vertices: np.ndarray, face_sizes: np.ndarray, face_indices: np.n
         e_out = np.roll(q, -1, axis=1) - q
         turn = np.einsum("qkc,qc->qk", np.cross(e_in, e_out), nrm)
         concave = (turn < 0.0).any(axis=1) & (np.linalg.norm(nrm, axis=1) > 0.0)
-        split[quads] = every_quad | concave | (bend_degrees(tri_a, tri_b) > BEND_LIMIT_DEGREES)
+        split[quads] = concave | (bend_degrees(tri_a, tri_b) > BEND_LIMIT_DEGREES)
     if not split.any():
         return FaceSplit(
             face_sizes=face_sizes.astype(np.uint32),

@@ -106,12 +106,10 @@ def test_a_bent_quad_whose_first_split_folds_over_takes_the_other_diagonal():
 
 
 def test_a_kept_split_fits_only_the_same_loops_on_the_same_vertices():
-    s = polygons.split_faces(_bent_quad(0.2), [4], np.arange(4), every_quad=True)
+    s = polygons.split_faces(_bent_quad(0.2), [4], np.arange(4))
     assert s.fits([4], [0, 1, 2, 3])
     assert not s.fits([4], [0, 1, 3, 2])  # the same loop count, other vertices
     assert not s.fits([3], [0, 1, 2])
-    # Every quad, even a flat one, when asked (a deforming mesh).
-    assert polygons.split_faces(_bent_quad(0.0), [4], np.arange(4), every_quad=True).split_polygons == 1
 
 
 def test_degenerate_faces_are_found():
