@@ -3,14 +3,15 @@
 //! The scenes of tests/data/real at their own settings (order 2, the flat path the CLI and the
 //! add-on take by default), one frame: the kernel, the solve and the corner gather timed apart,
 //! with the gather's corner points and (point, source) moments. Each case runs in a child
-//! process of this binary, so that its peak RSS is its own.
+//! process of this binary (`common/child.rs`), so that its peak RSS is its own.
 
-use std::process::Command;
 use std::time::Instant;
 
 use galerkin_radiosity::scene::json::read_scene;
 use galerkin_radiosity::system::{System, no_progress};
 
+#[path = "common/child.rs"]
+mod common_child;
 #[path = "common/rss.rs"]
 mod rss;
 use rss::peak_rss_mib;
@@ -55,22 +56,8 @@ fn main() {
         &[("monastery decimated", "monastery_scene.json"), ("bunny scene", "bunny_scene.json")]
     };
     for &(name, file) in real {
-        let out = Command::new(std::env::current_exe().unwrap())
-            .args(["--case", &format!("{dir}/{file}")])
-            .output()
-            .unwrap();
-        if !out.status.success() {
-            eprintln!("{name}: {}", String::from_utf8_lossy(&out.stderr));
-            continue;
-        }
-        let line = String::from_utf8_lossy(&out.stdout);
-        let v: Vec<f64> = line.split_whitespace().map(|x| x.parse().unwrap_or(f64::NAN)).collect();
-        let err = String::from_utf8_lossy(&out.stderr);
-        let peak: f64 = err
-            .lines()
-            .find_map(|l| l.strip_prefix("peak "))
-            .and_then(|x| x.parse().ok())
-            .unwrap_or(f64::NAN);
+        let case = format!("{dir}/{file}");
+        let Some((v, peak)) = common_child::child(&["--case", &case]) else { continue };
         println!(
             "| {name} | {} | {:.2} | {:.2} | {:.2} | {} | {} | {peak:.0} |",
             v[0], v[1], v[2], v[3], v[4], v[5]

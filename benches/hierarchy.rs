@@ -6,7 +6,6 @@
 //! solution of the box with every face subdivided 8 x 8 at order 2 (the reference the issue's
 //! Cycles comparison stands in for here: within 1.6% of a converged Cycles bake).
 
-use std::process::Command;
 use std::time::Instant;
 
 use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
@@ -15,6 +14,8 @@ use galerkin_radiosity::scene::{Material, Object, Scene, Settings};
 use galerkin_radiosity::scenes;
 use galerkin_radiosity::system::{System, no_progress};
 
+#[path = "common/child.rs"]
+mod common_child;
 #[path = "common/rss.rs"]
 mod rss;
 use rss::peak_rss_mib;
@@ -182,17 +183,7 @@ fn obj_under_a_light(path: &str) -> Scene {
 }
 
 fn child(case: &str, arg: &str) -> Option<(Vec<f64>, f64)> {
-    let out = Command::new(std::env::current_exe().unwrap()).args(["--case", case, arg]).output().ok()?;
-    if !out.status.success() {
-        eprintln!("{case} {arg}: {}", String::from_utf8_lossy(&out.stderr));
-        return None;
-    }
-    let line = String::from_utf8_lossy(&out.stdout);
-    let v: Vec<f64> = line.split_whitespace().map(|x| x.parse().unwrap_or(f64::NAN)).collect();
-    let err = String::from_utf8_lossy(&out.stderr);
-    let peak =
-        err.lines().find_map(|l| l.strip_prefix("peak ")).and_then(|x| x.parse().ok()).unwrap_or(f64::NAN);
-    Some((v, peak))
+    common_child::child(&["--case", case, arg])
 }
 
 fn main() {

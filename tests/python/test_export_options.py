@@ -85,22 +85,33 @@ def test_parenting_moves_children_with_the_parent(blender):
     assert f2[x > 0].mean() > f2[x < 0].mean()
 
 
+def _shape_key_on_frame_2(obj, name):
+    """A shape key of `obj` (after a Basis), keyed 0 on frame 1 and 1 on frame 2."""
+    obj.shape_key_add(name="Basis")
+    key = obj.shape_key_add(name=name)
+    for frame, value in ((1, 0.0), (2, 1.0)):
+        key.value = value
+        key.keyframe_insert("value", frame=frame)
+    return key
+
+
+def _bake_order_0(bpy):
+    """The scene baked at order 0 by a BakeJob: (the job, its summary)."""
+    from addon.blender import bake
+
+    job = bake.BakeJob(bpy.context, bake.settings_from_scene(bpy.context.scene).replace(basis_order=0))
+    return job, job.run()
+
+
 def test_deforming_mesh_rebuilds_the_session(blender):
     bpy = blender
-    from addon.blender import bake
 
     objs = _static_room(bpy)
     box = scenes.cube(bpy, "Box", 0.3, (0, 0, 0.3), bpy.data.materials["White"])
-    box.shape_key_add(name="Basis")
-    tall = box.shape_key_add(name="Tall")
+    tall = _shape_key_on_frame_2(box, "Tall")
     for i in (4, 5, 6, 7):  # the top face rises
         tall.data[i].co.z += 0.8
-    tall.value = 0.0
-    tall.keyframe_insert("value", frame=1)
-    tall.value = 1.0
-    tall.keyframe_insert("value", frame=2)
-    job = bake.BakeJob(bpy.context, bake.settings_from_scene(bpy.context.scene).replace(basis_order=0))
-    summary = job.run()
+    job, summary = _bake_order_0(bpy)
     assert job.rebuilt == 1 and "rebuilt the session on 1 deformed frame(s)" in summary
     # The taller box shadows more of the floor.
     floor = objs["Floor"].data
@@ -113,21 +124,14 @@ def test_a_flat_mesh_that_bends_on_a_later_frame_keeps_its_faces(blender):
     shape key bends on frame 2 (whose bent quads a fresh export would split there, changing the
     faces) bakes both frames, its quads one bilinear element each."""
     bpy = blender
-    from addon.blender import bake
 
     objs = _static_room(bpy)
     verts, faces = scenes.grid_quad((-0.4, -0.4, 0.2), (0.8, 0, 0), (0, 0.8, 0), 3)
     sheet = scenes.mesh_object(bpy, "Sheet", verts, faces, bpy.data.materials["White"])
-    sheet.shape_key_add(name="Basis")
-    bent = sheet.shape_key_add(name="Bent")
+    bent = _shape_key_on_frame_2(sheet, "Bent")
     for k, v in enumerate(bent.data):  # a checkerboard of raised vertices bends every quad
         v.co.z += 0.1 * ((k % 4 + k // 4) % 2)
-    bent.value = 0.0
-    bent.keyframe_insert("value", frame=1)
-    bent.value = 1.0
-    bent.keyframe_insert("value", frame=2)
-    job = bake.BakeJob(bpy.context, bake.settings_from_scene(bpy.context.scene).replace(basis_order=0))
-    summary = job.run()
+    job, summary = _bake_order_0(bpy)
     assert job.rebuilt == 1, summary
     data = next(o.data for o in job.rest.objects if o.obj.name == "Sheet")
     assert data.split.face_sizes.tolist() == [4] * len(faces)
