@@ -5,7 +5,7 @@
 
 use glam::DVec3;
 
-use crate::basis::Basis;
+use crate::basis::{Basis, MAX_LEN};
 use crate::geometry::{Patch, Rect};
 use crate::quadrature::GaussLegendre;
 use crate::visibility::cell_of;
@@ -16,9 +16,6 @@ pub(super) const GAUSS_POINTS: usize = 3;
 /// Nodes of the rule.
 pub(super) const N: usize = GAUSS_POINTS * GAUSS_POINTS;
 
-/// The largest basis (order 3: 4 x 4 functions).
-const MAX_BASIS: usize = 16;
-
 #[derive(Clone, Debug)]
 pub(super) struct GaussNodes {
     pub position: [DVec3; N],
@@ -27,7 +24,7 @@ pub(super) struct GaussNodes {
     pub cell: [usize; N],
     /// `w_s w_t |R| A(s,t) Gamma_l(s,t)` per node `k` at `k * nb + l`: the node's weight in the
     /// area measure times each basis function.
-    pub weighted_basis: [f64; N * MAX_BASIS],
+    pub weighted_basis: [f64; N * MAX_LEN],
 }
 
 impl GaussNodes {
@@ -36,12 +33,11 @@ impl GaussNodes {
     pub fn new(patch: &Patch, rect: &Rect, rule: &GaussLegendre, basis: Basis, cells: usize) -> Self {
         debug_assert_eq!(rule.len(), GAUSS_POINTS);
         let nb = basis.len();
-        assert!(nb <= MAX_BASIS, "basis of {nb} functions");
         let mut out = GaussNodes {
             position: [DVec3::ZERO; N],
             normal: [DVec3::ZERO; N],
             cell: [0; N],
-            weighted_basis: [0.0; N * MAX_BASIS],
+            weighted_basis: [0.0; N * MAX_LEN],
         };
         let measure = rect.measure();
         let mut k = 0;

@@ -41,7 +41,7 @@ use super::tree::{Kind, NodeId, Surface, Tree};
 use crate::basis::MAX_LEN as MAX_NB;
 use crate::error::Result;
 use crate::gather::{
-    BALL_EDGE, CornerValues, FACING, FOOT_BALL, NEAR_FACING, Stop, corner_points, shading_point,
+    BALL_EDGE, CornerValues, FACING, FOOT_BALL, NEAR_FACING, Stop, behind_plane, corner_points, shading_point,
 };
 use crate::geometry::{Patch, Rect};
 use crate::kernel::point::{point_kernel, point_to_polygon};
@@ -408,7 +408,7 @@ impl<'a> Gather<'a> {
         let patch = src.patch;
         let sub = patch.sub_patch(rect);
         let (centre, radius) = sub.bounding_sphere();
-        if crate::gather::behind_plane(rx.x, rx.n, &sub, radius) {
+        if behind_plane(rx.x, rx.n, &sub, radius) {
             return;
         }
         let distance = rx.x.distance(centre);
