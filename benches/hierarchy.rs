@@ -97,6 +97,7 @@ fn run_case(case: &str, arg: &str) {
             solve_and_report(&scene);
         }
         "obj" => solve_and_report(&obj_under_a_light(arg)),
+        "separation" => separation(arg.parse().unwrap()),
         c => panic!("unknown case {c}"),
     }
     eprintln!("peak {}", peak_rss_mib());
@@ -110,6 +111,49 @@ fn solve_and_report(scene: &Scene) {
     println!("{} {} {} {} NaN", t.elapsed().as_secs_f64(), s.faces, s.leaves, s.links);
     // Where the time went, for a run by hand (the table reads stdout only).
     eprintln!("link s {:.1}, solve s {:.1}, sweeps {}", s.link_seconds, s.solve_seconds, s.sweeps);
+}
+
+/// How near a cluster may link (`HierarchySettings::cluster_separation = sep`): prints `seconds
+/// links error box_mean box_worst`, with the decimated monastery's link-and-solve time (corner
+/// gather off), its links and its per-face error against the same scene at separation 3 and
+/// accuracy 2e-5, and a closed box's balance (`B = 2` on every face, rho 0.5, E 1): the mean
+/// and the worst face's relative departure.
+fn separation(sep: f64) {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/real/monastery_scene.json");
+    let mut scene = read_scene(std::path::Path::new(path)).unwrap();
+    scene.settings.basis_order = 1;
+    scene.settings.corner_gather = false;
+    let means = |h: &galerkin_radiosity::hierarchy::HierarchicalFrame| -> Vec<f64> {
+        (0..h.hierarchy.tree.faces.len())
+            .map(|f| h.face_mean(f).iter().copied().fold(0.0, f64::max))
+            .collect()
+    };
+    let hs = HierarchySettings { cluster_separation: sep, ..HierarchySettings::of(&scene.settings) };
+    let t = Instant::now();
+    let h = solve_frame(&scene, 0.0, &hs, &no_progress).unwrap();
+    let seconds = t.elapsed().as_secs_f64();
+    eprintln!("peak {}", peak_rss_mib());
+    let fine = HierarchySettings { accuracy: 2e-5, cluster_separation: 3.0, ..hs };
+    let reference = solve_frame(&scene, 0.0, &fine, &no_progress).unwrap();
+    let mut want = means(&reference);
+    for (w, e) in want.iter_mut().zip(&h.hierarchy.tree.faces) {
+        if scene.materials[e.material as usize].emission.iter().any(|&x| x > 0.0) {
+            *w = f64::NAN;
+        }
+    }
+    let error = relative_rms(&means(&h), &want);
+    let boxed = scenes::closed_box(4, 0.5, 1.0, Settings { basis_order: 1, ..Default::default() });
+    let b = solve_frame(
+        &boxed,
+        0.0,
+        &HierarchySettings { cluster_separation: sep, ..Default::default() },
+        &no_progress,
+    )
+    .unwrap();
+    let off: Vec<f64> = means(&b).iter().map(|v| v / 2.0 - 1.0).collect();
+    let mean = off.iter().sum::<f64>() / off.len() as f64;
+    let worst = off.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    println!("{seconds} {} {error} {mean} {worst}", h.stats.links);
 }
 
 /// An OBJ (`v` and `f` lines) on a ground, lit by an emissive square above it: order 1.
@@ -259,5 +303,28 @@ fn main() {
             "| monastery, full ({path}) + ground + light | {} | {:.2} | {} | {} | {peak:.0} |",
             v[1], v[0], v[2], v[3]
         );
+    }
+    println!(
+        "\nHow near a cluster may link (`HierarchySettings::cluster_separation`, radii-sums): the \
+         decimated monastery (tests/data/real, corner gather off), order 1, accuracy {:e}, {} \
+         threads, per-face error against separation 3 at accuracy 2e-5; and a closed box (rho \
+         0.5, E 1, B = 2 everywhere): its mean and worst face's departure from 2:\n",
+        Settings::default().accuracy,
+        rayon::current_num_threads()
+    );
+    println!("| separation | s | links | per-face error | box mean | box worst face | peak RSS MiB |");
+    println!("|---|---|---|---|---|---|---|");
+    let separations: &[&str] = if quick { &["3"] } else { &["3", "2.5", "2", "1.5"] };
+    for sep in separations {
+        if let Some((v, peak)) = child("separation", sep) {
+            println!(
+                "| {sep} | {:.2} | {} | {:.2}% | {:+.2}% | {:.2}% | {peak:.0} |",
+                v[0],
+                v[1],
+                100.0 * v[2],
+                100.0 * v[3],
+                100.0 * v[4]
+            );
+        }
     }
 }

@@ -3,9 +3,9 @@
 //! Between two surfaces (faces or parts of faces) a link holds the Galerkin blocks of eq. (6), as
 //! the flat system's pairs do, computed by the same pair integrator over the two patches with the
 //! visibility masks of their own sample cells. Where a cluster is at one end, the link holds only
-//! the fraction of rays between the two nodes that arrive: the transfer itself follows from the
-//! nodes' current state (a cluster's intensity lobes, a surface's mean radiosity and normal) and
-//! the distance between their centres, [`super::solve`].
+//! a transmittance from rays between the two nodes: the transfer itself follows from the nodes'
+//! current state (a cluster's intensity lobes, a surface's mean radiosity and normal) and the
+//! distance between their centres, [`super::solve`].
 
 use glam::DVec3;
 
@@ -25,7 +25,8 @@ pub(crate) const CLUSTER_RAYS: usize = 8;
 pub enum Coupling {
     /// `G_ab` then `G_ba`, `nb x nb` each, row = the receiver's function (eq. 6).
     Surfaces(Box<[f32]>),
-    /// A cluster at one end at least: the share of rays between the nodes that arrive.
+    /// A cluster at one end at least: the mean over sampled segments between the nodes of
+    /// `V d^2 / r^2` (`transmittance` below), which turns the centres' `1/d^2` into the pair's.
     Clusters { transmittance: f32 },
 }
 
@@ -83,11 +84,12 @@ pub fn compute(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Computed
             surfaces(ctx, (sa.face as usize, &sa.patch), (sb.face as usize, &sb.patch))
         }
         _ => {
-            let (t, facing) = transmittance(ctx, tree, a, b);
+            let rays = transmittance(ctx, tree, a, b);
+            let t = rays.weighted;
             Computed {
                 coupling: (t > 0.0).then_some(Coupling::Clusters { transmittance: t as f32 }),
-                partial: t > 0.0 && t < 1.0,
-                blocked: facing && t == 0.0,
+                partial: rays.arrived > 0 && rays.arrived < rays.facing,
+                blocked: rays.facing > 0 && rays.arrived == 0,
             }
         }
     }
@@ -135,12 +137,14 @@ fn surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize, &Pat
 }
 
 /// The share of up to [`CLUSTER_RAYS`] segments between points of `a` and of `b` that face
-/// each other and arrive unobstructed (1 without visibility, 0 when no sampled pair faces), and
-/// whether some sampled pair faces.
-fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> (f64, bool) {
-    let Some(occ) = ctx.occluders else { return (1.0, true) };
+/// each other and arrive unobstructed, each weighted by `d^2 / r^2` (`d` the centres' distance,
+/// `r` the segment's length): the factor that turns the centres' `1/d^2` into the mean `1/r^2`
+/// over the pair, which nearer clusters need (eq. 1 integrated over both ends). 1 without
+/// visibility far apart, 0 when no sampled pair faces.
+fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Rays {
+    let d2 = tree.node(a).centre.distance_squared(tree.node(b).centre);
     let mut rng = SplitMix(((a as u64) << 32) ^ b as u64 ^ 0x5851_F42D_4C95_7F2D);
-    let (mut facing, mut arrived) = (0, 0);
+    let mut rays = Rays { facing: 0, arrived: 0, weighted: 0.0 };
     for _ in 0..4 * CLUSTER_RAYS {
         let (fx, x, nx) = sample_point(tree, a, &mut rng);
         let (fy, y, ny) = sample_point(tree, b, &mut rng);
@@ -148,13 +152,28 @@ fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> (f64, 
         if nx.dot(d) <= 0.0 || ny.dot(-d) <= 0.0 {
             continue;
         }
-        facing += 1;
-        arrived += occ.segment_visible(x, y, fx, fy) as usize;
-        if facing == CLUSTER_RAYS {
+        rays.facing += 1;
+        if ctx.occluders.is_none_or(|occ| occ.segment_visible(x, y, fx, fy)) {
+            rays.arrived += 1;
+            rays.weighted += d2 / d.length_squared();
+        }
+        if rays.facing == CLUSTER_RAYS {
             break;
         }
     }
-    if facing == 0 { (0.0, false) } else { (arrived as f64 / facing as f64, true) }
+    if rays.facing > 0 {
+        rays.weighted /= rays.facing as f64;
+    }
+    rays
+}
+
+/// What [`transmittance`]'s rays found.
+struct Rays {
+    /// Sampled segments whose ends face each other, and those of them that arrive.
+    facing: usize,
+    arrived: usize,
+    /// The arriving ones' `d^2 / r^2`, summed over `facing`.
+    weighted: f64,
 }
 
 /// A point below node `id` (face, position, normal), area-weighted down the tree.

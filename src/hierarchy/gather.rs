@@ -366,13 +366,15 @@ impl<'a> Gather<'a> {
     }
 
     /// The share of up to [`CLUSTER_RAYS`] segments from the corner to points below `source`
-    /// (area-weighted) that face each other and arrive unobstructed; 1 without visibility, 0
-    /// when no sampled point faces the corner.
+    /// (area-weighted) that face each other and arrive unobstructed, each weighted by `d^2 / r^2`
+    /// (`d` to the cluster's centre, `r` the segment's length) as the links' own transmittance
+    /// is ([`super::coupling`]); 1 far away without visibility, 0 when no sampled point faces
+    /// the corner.
     fn point_transmittance(&self, rx: &Receiver, source: NodeId) -> f64 {
-        let Some(occluders) = self.inputs.occluders else { return 1.0 };
+        let d2 = rx.x.distance_squared(self.inputs.tree.node(source).centre);
         let seed = rx.x.to_array().iter().fold(source as u64, |h, c| h.rotate_left(21) ^ c.to_bits());
         let mut rng = SplitMix(seed ^ 0x2545_F491_4F6C_DD1D);
-        let (mut facing, mut arrived) = (0, 0);
+        let (mut facing, mut arrived) = (0, 0.0);
         for _ in 0..4 * CLUSTER_RAYS {
             let (face, y, ny) = sample_point(self.inputs.tree, source, &mut rng);
             let d = y - rx.x;
@@ -380,12 +382,14 @@ impl<'a> Gather<'a> {
                 continue;
             }
             facing += 1;
-            arrived += occluders.segment_visible(rx.x, y, rx.face, face) as usize;
+            if self.inputs.occluders.is_none_or(|o| o.segment_visible(rx.x, y, rx.face, face)) {
+                arrived += d2 / d.length_squared();
+            }
             if facing == CLUSTER_RAYS {
                 break;
             }
         }
-        if facing == 0 { 0.0 } else { arrived as f64 / facing as f64 }
+        if facing == 0 { 0.0 } else { arrived / facing as f64 }
     }
 
     /// Adds `integral g(x,y) V(x,y) Gamma_l(y) dA_y` over `rect` of `patch` (a node of face

@@ -60,7 +60,7 @@ def test_the_tolerance_sweep_still_prints_the_table_its_block_wants(tmp_path):
 
 
 
-HIERARCHY = ("hierarchy-cornell", "hierarchy-presubdivided", "hierarchy-real")
+HIERARCHY = ("hierarchy-cornell", "hierarchy-presubdivided", "hierarchy-real", "hierarchy-separation")
 
 
 def _rows(body):
