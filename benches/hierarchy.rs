@@ -44,6 +44,11 @@ fn reference_means(coarse: &Scene, fine_sys: &System) -> Vec<f64> {
     acc.into_iter().map(|(p, a)| if a > 0.0 { p / a } else { f64::NAN }).collect()
 }
 
+/// Per face of `h`, its mean radiosity's largest channel.
+fn face_means(h: &galerkin_radiosity::hierarchy::HierarchicalFrame) -> Vec<f64> {
+    (0..h.hierarchy.tree.faces.len()).map(|f| h.face_mean(f).iter().copied().fold(0.0, f64::max)).collect()
+}
+
 fn relative_rms(got: &[f64], want: &[f64]) -> f64 {
     let (mut num, mut den) = (0.0, 0.0);
     for (g, w) in got.iter().zip(want) {
@@ -68,9 +73,7 @@ fn run_case(case: &str, arg: &str) {
             let t = Instant::now();
             let h = pool.install(|| solve_frame(&coarse, 0.0, &hs, &no_progress).unwrap());
             let seconds = t.elapsed().as_secs_f64();
-            let got: Vec<f64> = (0..h.hierarchy.tree.faces.len())
-                .map(|f| h.face_mean(f).iter().copied().fold(0.0, f64::max))
-                .collect();
+            let got = face_means(&h);
             // The solve's own peak, before the reference is built beside it.
             eprintln!("peak {}", peak_rss_mib());
             let fine = scenes::cornell_box(8, Settings { basis_order: 2, ..settings });
@@ -123,11 +126,6 @@ fn separation(sep: f64) {
     let mut scene = read_scene(std::path::Path::new(path)).unwrap();
     scene.settings.basis_order = 1;
     scene.settings.corner_gather = false;
-    let means = |h: &galerkin_radiosity::hierarchy::HierarchicalFrame| -> Vec<f64> {
-        (0..h.hierarchy.tree.faces.len())
-            .map(|f| h.face_mean(f).iter().copied().fold(0.0, f64::max))
-            .collect()
-    };
     let hs = HierarchySettings { cluster_separation: sep, ..HierarchySettings::of(&scene.settings) };
     let t = Instant::now();
     let h = solve_frame(&scene, 0.0, &hs, &no_progress).unwrap();
@@ -135,13 +133,13 @@ fn separation(sep: f64) {
     eprintln!("peak {}", peak_rss_mib());
     let fine = HierarchySettings { accuracy: 2e-5, cluster_separation: 3.0, ..hs };
     let reference = solve_frame(&scene, 0.0, &fine, &no_progress).unwrap();
-    let mut want = means(&reference);
+    let mut want = face_means(&reference);
     for (w, e) in want.iter_mut().zip(&h.hierarchy.tree.faces) {
         if scene.materials[e.material as usize].emission.iter().any(|&x| x > 0.0) {
             *w = f64::NAN;
         }
     }
-    let error = relative_rms(&means(&h), &want);
+    let error = relative_rms(&face_means(&h), &want);
     let boxed = scenes::closed_box(4, 0.5, 1.0, Settings { basis_order: 1, ..Default::default() });
     let b = solve_frame(
         &boxed,
@@ -150,7 +148,7 @@ fn separation(sep: f64) {
         &no_progress,
     )
     .unwrap();
-    let off: Vec<f64> = means(&b).iter().map(|v| v / 2.0 - 1.0).collect();
+    let off: Vec<f64> = face_means(&b).iter().map(|v| v / 2.0 - 1.0).collect();
     let mean = off.iter().sum::<f64>() / off.len() as f64;
     let worst = off.iter().fold(0.0f64, |m, x| m.max(x.abs()));
     println!("{seconds} {} {error} {mean} {worst}", h.stats.links);

@@ -136,24 +136,36 @@ fn surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize, &Pat
     Computed { coupling: Some(Coupling::Surfaces(blocks)), partial, blocked: false }
 }
 
-/// The share of up to [`CLUSTER_RAYS`] segments between points of `a` and of `b` that face
-/// each other and arrive unobstructed, each weighted by `d^2 / r^2` (`d` the centres' distance,
-/// `r` the segment's length): the factor that turns the centres' `1/d^2` into the mean `1/r^2`
-/// over the pair, which nearer clusters need (eq. 1 integrated over both ends). 1 without
-/// visibility far apart, 0 when no sampled pair faces.
+/// The transmittance of the pair `a`, `b`: [`weighted_rays`] between points of the two, with
+/// `d` the centres' distance (eq. 1 integrated over both ends).
 fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Rays {
     let d2 = tree.node(a).centre.distance_squared(tree.node(b).centre);
     let mut rng = SplitMix(((a as u64) << 32) ^ b as u64 ^ 0x5851_F42D_4C95_7F2D);
+    weighted_rays(ctx.occluders, d2, || (sample_point(tree, a, &mut rng), sample_point(tree, b, &mut rng)))
+}
+
+/// An end of a sampled segment: face, position, normal.
+pub(crate) type End = (u32, DVec3, DVec3);
+
+/// Up to [`CLUSTER_RAYS`] segments from `draw` (of at most four times as many drawn) whose ends
+/// face each other, and of those the ones that arrive unobstructed, each weighted by `d2 / r^2`
+/// (`r` the segment's length): the factor that turns a centres' `1/d^2` into the mean `1/r^2`
+/// over the segments, which near clusters need. Far apart without visibility the weight is 1;
+/// with no segment facing, 0.
+pub(crate) fn weighted_rays(
+    occluders: Option<&Occluders>,
+    d2: f64,
+    mut draw: impl FnMut() -> (End, End),
+) -> Rays {
     let mut rays = Rays { facing: 0, arrived: 0, weighted: 0.0 };
     for _ in 0..4 * CLUSTER_RAYS {
-        let (fx, x, nx) = sample_point(tree, a, &mut rng);
-        let (fy, y, ny) = sample_point(tree, b, &mut rng);
+        let ((fx, x, nx), (fy, y, ny)) = draw();
         let d = y - x;
         if nx.dot(d) <= 0.0 || ny.dot(-d) <= 0.0 {
             continue;
         }
         rays.facing += 1;
-        if ctx.occluders.is_none_or(|occ| occ.segment_visible(x, y, fx, fy)) {
+        if occluders.is_none_or(|occ| occ.segment_visible(x, y, fx, fy)) {
             rays.arrived += 1;
             rays.weighted += d2 / d.length_squared();
         }
@@ -167,13 +179,13 @@ fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Rays {
     rays
 }
 
-/// What [`transmittance`]'s rays found.
-struct Rays {
+/// What [`weighted_rays`] found.
+pub(crate) struct Rays {
     /// Sampled segments whose ends face each other, and those of them that arrive.
-    facing: usize,
-    arrived: usize,
-    /// The arriving ones' `d^2 / r^2`, summed over `facing`.
-    weighted: f64,
+    pub facing: usize,
+    pub arrived: usize,
+    /// The arriving ones' `d^2 / r^2`, summed and divided by `facing`.
+    pub weighted: f64,
 }
 
 /// A point below node `id` (face, position, normal), area-weighted down the tree.

@@ -35,7 +35,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::coupling::{CLUSTER_RAYS, SplitMix, sample_point};
+use super::coupling::{SplitMix, sample_point, weighted_rays};
 use super::solve::{Incoming, State};
 use super::tree::{Kind, NodeId, Surface, Tree};
 use crate::basis::MAX_LEN as MAX_NB;
@@ -365,31 +365,17 @@ impl<'a> Gather<'a> {
         }
     }
 
-    /// The share of up to [`CLUSTER_RAYS`] segments from the corner to points below `source`
-    /// (area-weighted) that face each other and arrive unobstructed, each weighted by `d^2 / r^2`
-    /// (`d` to the cluster's centre, `r` the segment's length) as the links' own transmittance
-    /// is ([`super::coupling`]); 1 far away without visibility, 0 when no sampled point faces
-    /// the corner.
+    /// The transmittance from the corner to the cluster `source`: [`weighted_rays`] to points
+    /// below it (area-weighted), with `d` to its centre, as the links' own.
     fn point_transmittance(&self, rx: &Receiver, source: NodeId) -> f64 {
         let d2 = rx.x.distance_squared(self.inputs.tree.node(source).centre);
         let seed = rx.x.to_array().iter().fold(source as u64, |h, c| h.rotate_left(21) ^ c.to_bits());
         let mut rng = SplitMix(seed ^ 0x2545_F491_4F6C_DD1D);
-        let (mut facing, mut arrived) = (0, 0.0);
-        for _ in 0..4 * CLUSTER_RAYS {
-            let (face, y, ny) = sample_point(self.inputs.tree, source, &mut rng);
-            let d = y - rx.x;
-            if rx.n.dot(d) <= 0.0 || ny.dot(-d) <= 0.0 {
-                continue;
-            }
-            facing += 1;
-            if self.inputs.occluders.is_none_or(|o| o.segment_visible(rx.x, y, rx.face, face)) {
-                arrived += d2 / d.length_squared();
-            }
-            if facing == CLUSTER_RAYS {
-                break;
-            }
-        }
-        if facing == 0 { 0.0 } else { arrived / facing as f64 }
+        let corner = (rx.face, rx.x, rx.n);
+        weighted_rays(self.inputs.occluders, d2, || {
+            (corner, sample_point(self.inputs.tree, source, &mut rng))
+        })
+        .weighted
     }
 
     /// Adds `integral g(x,y) V(x,y) Gamma_l(y) dA_y` over `rect` of `patch` (a node of face

@@ -58,9 +58,9 @@ pub struct HierarchySettings {
     /// Links may end at clusters (off only to test the surface hierarchy alone).
     pub clusters: bool,
     /// How far apart, in sums of bounding-sphere radii, two nodes must be for a link between
-    /// them to end at a cluster (nearer pairs open the cluster): 3 keeps a closed box's balance
-    /// within 0.5%; 1.5 links a 20k-triangle model 2.2x faster but off by 1-2% there
-    /// (docs/method.md, "How near a cluster may link").
+    /// them to end at a cluster (nearer pairs open the cluster): 3 keeps a closed box's faces
+    /// within 0.5% of their balance; 1.5 links a 20k-triangle model 2.2x faster but puts a face
+    /// of that box 5.8% off (docs/method.md, "How near a cluster may link").
     pub cluster_separation: f64,
     /// How links between near surfaces are integrated.
     pub near: coupling::NearRule,
