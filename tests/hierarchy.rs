@@ -40,8 +40,13 @@ fn closed_box_balances_with_clusters() {
 fn on_the_faces_alone_the_hierarchy_is_the_flat_system() {
     let settings = Settings { basis_order: 2, tolerance: 1e-6, ..Default::default() };
     let scene = cornell_box(2, settings);
-    let hs =
-        HierarchySettings { max_depth: 0, clusters: false, near: NearRule::Adaptive, ..Default::default() };
+    let hs = HierarchySettings {
+        max_depth: 0,
+        clusters: false,
+        near: NearRule::Adaptive,
+        light_links: false,
+        ..Default::default()
+    };
     let h = solve_frame(&scene, 0.0, &hs, &no_progress).unwrap();
     let mut flat = System::build(&scene, 0.0, &no_progress).unwrap();
     flat.solve(1e-6, &|| false).unwrap();
@@ -105,6 +110,54 @@ fn the_hierarchy_refines_the_cornell_box_towards_the_fine_solution() {
     let (e_h, e_flat) = (rms(&got), rms(&before));
     assert!(e_h < e_flat, "hierarchy {e_h} vs flat on the same faces {e_flat}");
     assert!(e_h < 0.03, "hierarchy off the fine solution by {e_h} (rms over objects)");
+}
+
+/// Light links (issue 20): a surface link that can carry only a small share of the accuracy's
+/// power keeps `G^00` alone, from a 2 x 2 rule and the share of four segments that arrive
+/// (`coupling::Coupling::Constants`). On the decimated monastery, where nearly every surface
+/// link is light, the per-face means against a fine reference (every link in full, accuracy
+/// 2e-5) are no further off than with every link in full at the same accuracy.
+#[test]
+fn light_links_are_as_accurate_as_full_links() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real");
+    let mut scene = read_scene(&dir.join("monastery_scene.json")).unwrap();
+    scene.settings.basis_order = 1;
+    scene.settings.corner_gather = false;
+    let solve = |hs: HierarchySettings| solve_frame(&scene, 0.0, &hs, &no_progress).unwrap();
+    let full = HierarchySettings { light_links: false, ..HierarchySettings::of(&scene.settings) };
+    let light = solve(HierarchySettings { light_links: true, ..full });
+    assert!(
+        light.stats.constant_links > light.stats.surface_links,
+        "{} light links, {} in full: nothing tested",
+        light.stats.constant_links,
+        light.stats.surface_links
+    );
+    let reference = face_means(&solve(HierarchySettings { accuracy: 2e-5, ..full }));
+    // Over the lit faces: the light's own exitance would dominate the norm.
+    let lit: Vec<bool> = light
+        .hierarchy
+        .tree
+        .faces
+        .iter()
+        .map(|e| scene.materials[e.material as usize].emission.iter().all(|&x| x == 0.0))
+        .collect();
+    let off = |h: &galerkin_radiosity::hierarchy::HierarchicalFrame| {
+        let (num, den) = face_means(h)
+            .iter()
+            .zip(&reference)
+            .zip(&lit)
+            .filter(|(_, l)| **l)
+            .fold((0.0, 0.0), |(n, d), ((g, w), _)| (n + (g - w).powi(2), d + w * w));
+        (num / den).sqrt()
+    };
+    let (e_light, e_full) = (off(&light), off(&solve(full)));
+    println!("per-face error against the reference: light links {e_light:.4}, full {e_full:.4}");
+    assert!(e_light < 1.05 * e_full, "light links {e_light} vs full {e_full}");
+}
+
+/// Each face's mean radiosity (red channel; the scenes here are grey) of a hierarchical frame.
+fn face_means(h: &galerkin_radiosity::hierarchy::HierarchicalFrame) -> Vec<f64> {
+    (0..h.hierarchy.tree.faces.len()).map(|f| h.face_mean(f)[0]).collect()
 }
 
 /// A real mesh in CI: the pybullet monastery decimated to 1,000 triangles on a ground, lit by

@@ -13,7 +13,7 @@
 use rayon::prelude::*;
 
 pub use super::coupling::Link;
-use super::coupling::{self, LinkContext};
+use super::coupling::{self, LinkContext, Weight};
 use crate::budget;
 use crate::error::Result;
 
@@ -34,6 +34,9 @@ pub struct Oracle {
     /// Cluster links need their bounding spheres this many radii-sums apart
     /// ([`super::HierarchySettings::cluster_separation`]).
     pub cluster_separation: f64,
+    /// Surface links that carry at most [`coupling::LIGHT_SHARE`] of the threshold are made
+    /// light ([`super::HierarchySettings::light_links`]).
+    pub light_links: bool,
 }
 
 /// Hears the share of a batch of links computed (0 to 1); `false` cancels the refinement.
@@ -103,6 +106,20 @@ impl Oracle {
     /// The power a pair carries at most, without the smoothness factor (a partly visible pair).
     fn pair_power(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId) -> f64 {
         self.carried_as(tree, radiosity, a, b, false).max(self.carried_as(tree, radiosity, b, a, false))
+    }
+
+    /// How much of the accepted link between `a` and `b` to compute: light when both are
+    /// surfaces and all it can carry is a small share of the threshold.
+    fn weight(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId) -> Weight {
+        let surfaces = !tree.node(a).is_cluster() && !tree.node(b).is_cluster();
+        if self.light_links
+            && surfaces
+            && self.pair_power(tree, radiosity, a, b) <= coupling::LIGHT_SHARE * self.threshold
+        {
+            Weight::Light
+        } else {
+            Weight::Full
+        }
     }
 
     fn decide(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId, bar: f64) -> Verdict {
@@ -254,8 +271,11 @@ impl Hierarchy {
         let tree = &self.tree;
         let oracle = &self.oracle;
         self.links.retain(|l| {
-            // The same test that made the link, with the new brightness.
-            let keep = matches!(oracle.decide(tree, radiosity, l.a, l.b, bar), Verdict::Link);
+            // The same test that made the link, with the new brightness; a light link that may
+            // now carry more than a light link may is computed again in full.
+            let light = matches!(l.coupling, coupling::Coupling::Constants { .. });
+            let keep = matches!(oracle.decide(tree, radiosity, l.a, l.b, bar), Verdict::Link)
+                && !(light && oracle.weight(tree, radiosity, l.a, l.b) == Weight::Full);
             if !keep {
                 work.push((l.a, l.b));
             }
@@ -299,7 +319,7 @@ impl Hierarchy {
                             self.idle.push((a, b));
                         }
                     }
-                    Verdict::Link => accepted.push((a, b)),
+                    Verdict::Link => accepted.push((a, b, self.oracle.weight(&self.tree, radiosity, a, b))),
                     Verdict::Split(s) => {
                         self.split_pair(s, if s == a { b } else { a }, radiosity, &mut work)?
                     }
@@ -318,14 +338,14 @@ impl Hierarchy {
                 }
                 chunk
                     .par_iter()
-                    .map(|&(a, b)| coupling::compute(ctx, tree, a, b))
+                    .map(|&(a, b, weight)| coupling::compute_as(ctx, tree, a, b, weight))
                     .collect_into_vec(&mut part);
                 computed.append(&mut part);
             }
             budget::try_reserve(&mut self.links, computed.len(), LINKS)?;
             budget::try_reserve(&mut self.idle, computed.len(), LINKS)?;
             budget::try_reserve(&mut self.blocked, computed.len(), LINKS)?;
-            for (&(a, b), c) in accepted.iter().zip(computed) {
+            for (&(a, b, _), c) in accepted.iter().zip(computed) {
                 let Some(coupling) = c.coupling else {
                     if c.blocked {
                         self.blocked.push((a, b));
