@@ -268,22 +268,14 @@ pub(crate) struct Rays {
     pub weighted: f64,
 }
 
-/// A point below node `id` (face, position, normal), area-weighted down the tree.
-pub(crate) fn sample_point(tree: &Tree, mut id: NodeId, rng: &mut SplitMix) -> (u32, DVec3, DVec3) {
-    loop {
-        let node = tree.node(id);
-        match &node.kind {
-            Kind::Cluster { children } => {
-                let (l, r) = (tree.node(children[0]).area, tree.node(children[1]).area);
-                id = if rng.next() * (l + r) < l { children[0] } else { children[1] };
-            }
-            Kind::Surface(s) => {
-                let (u, v) = (rng.next(), rng.next());
-                let n = s.patch.area_vector(u, v).normalize_or_zero();
-                return (s.face, s.patch.point(u, v), n);
-            }
-        }
-    }
+/// A point below node `id` (face, position, normal): below a cluster, on a face drawn by area
+/// ([`Tree::draw_face`]); on a surface, uniform in its parameters.
+pub(crate) fn sample_point(tree: &Tree, id: NodeId, rng: &mut SplitMix) -> (u32, DVec3, DVec3) {
+    let id = if tree.node(id).is_cluster() { tree.draw_face(id, rng.next()) } else { id };
+    let Kind::Surface(s) = &tree.node(id).kind else { unreachable!("a drawn face is a surface") };
+    let (u, v) = (rng.next(), rng.next());
+    let n = s.patch.area_vector(u, v).normalize_or_zero();
+    (s.face, s.patch.point(u, v), n)
 }
 
 /// Deterministic uniform numbers in [0,1) (splitmix64).

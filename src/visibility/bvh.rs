@@ -183,6 +183,75 @@ impl Bvh {
     }
 }
 
+/// Up to this many segments traverse [`Bvh::occluded_packet`] together.
+pub const PACKET: usize = 8;
+
+impl Bvh {
+    /// [`Bvh::occluded`] for a few segments at once (at most [`PACKET`]), all skipping the same
+    /// two elements: `blocked[k]` is set when segment `k` (`origins[k] + t dirs[k]`, `t` in
+    /// `(t_min, t_max)`) hits a triangle of another element, and left as it is otherwise (set
+    /// ones are not traced). One traversal for the lot: the segments of a link between two near
+    /// parts run side by side through the same nodes, which a traversal each visited again.
+    #[allow(clippy::too_many_arguments)]
+    pub fn occluded_packet(
+        &self,
+        origins: &[DVec3],
+        dirs: &[DVec3],
+        t_min: f64,
+        t_max: f64,
+        skip_a: u32,
+        skip_b: u32,
+        blocked: &mut [bool],
+    ) {
+        let n = origins.len();
+        assert!(n <= PACKET && dirs.len() == n && blocked.len() == n, "a packet of at most {PACKET}");
+        if self.nodes.is_empty() || blocked.iter().all(|&b| b) {
+            return;
+        }
+        let mut inv = [DVec3::ZERO; PACKET];
+        for k in 0..n {
+            inv[k] = dirs[k].recip();
+        }
+        // The box of the segments' swept parts: a node outside it holds no hit for any of them.
+        let mut reach = Aabb::EMPTY;
+        for k in 0..n {
+            reach = reach.grow(origins[k] + dirs[k] * t_min).grow(origins[k] + dirs[k] * t_max);
+        }
+        let mut stack = [0u32; 64];
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let node = &self.nodes[stack[sp] as usize];
+            if !node.bounds.overlaps(&reach) {
+                continue;
+            }
+            let hit = (0..n).any(|k| !blocked[k] && slab_hit(&node.bounds, origins[k], inv[k], t_min, t_max));
+            if !hit {
+                continue;
+            }
+            if node.count > 0 {
+                for t in &self.triangles[node.start as usize..(node.start + node.count) as usize] {
+                    if t.element == skip_a || t.element == skip_b {
+                        continue;
+                    }
+                    for k in 0..n {
+                        if !blocked[k] && segment_hits(t, origins[k], dirs[k], t_min, t_max) {
+                            blocked[k] = true;
+                        }
+                    }
+                }
+                if blocked.iter().all(|&b| b) {
+                    return;
+                }
+            } else {
+                stack[sp] = node.start;
+                stack[sp + 1] = node.start + 1;
+                sp += 2;
+            }
+        }
+    }
+}
+
 /// Surface area of a box (SAH cost weight).
 fn half_area(b: &Aabb) -> f64 {
     let d = (b.max - b.min).max(DVec3::ZERO);
@@ -310,6 +379,41 @@ mod tests {
             }
         }
         tris
+    }
+
+    /// A packet's verdicts are each segment's own any-hit, whatever else is in the packet.
+    #[test]
+    fn packets_agree_with_single_segments() {
+        let mut tris = grid(12);
+        // A second, tilted layer, so that some segments pass and some do not.
+        for (k, t) in grid(12).into_iter().enumerate() {
+            if k % 3 == 0 {
+                let v = t.v.map(|p| DVec3::new(p.x + 0.3, p.y, 0.5 + 0.1 * p.x));
+                tris.push(Triangle { v, element: 1000 + k as u32 });
+            }
+        }
+        let bvh = Bvh::build(tris);
+        let point = |k: usize, z: f64| {
+            DVec3::new(0.2 + (k as f64 * 0.618).fract() * 11.5, 0.2 + (k as f64 * 0.414).fract() * 11.5, z)
+        };
+        let (mut hits, mut misses) = (0, 0);
+        for round in 0..300 {
+            let n = 1 + round % PACKET;
+            let origins: Vec<DVec3> =
+                (0..n).map(|k| point(round * 17 + k, -0.5 + 1.5 * (k % 2) as f64)).collect();
+            let dirs: Vec<DVec3> = (0..n)
+                .map(|k| point(round * 29 + k + 500, 2.0 - 2.5 * (k % 2) as f64) - origins[k])
+                .collect();
+            let (skip_a, skip_b) = ((round % 144) as u32, 1000 + (round % 50) as u32 * 3);
+            let mut blocked = vec![false; n];
+            bvh.occluded_packet(&origins, &dirs, 1e-9, 1.0 - 1e-9, skip_a, skip_b, &mut blocked);
+            for k in 0..n {
+                let want = bvh.occluded(origins[k], dirs[k], 1e-9, 1.0 - 1e-9, skip_a, skip_b);
+                assert_eq!(blocked[k], want, "round {round} segment {k}");
+                if want { hits += 1 } else { misses += 1 }
+            }
+        }
+        assert!(hits > 100 && misses > 100, "{hits} hits, {misses} misses: a weak test");
     }
 
     #[test]

@@ -326,27 +326,28 @@ impl Occluders {
     pub fn share_visible(&self, i: usize, pi: &Patch, j: usize, pj: &Patch) -> (usize, usize) {
         let (xi, xj) = (sample_points(pi, 2), sample_points(pj, 2));
         let (ni, nj) = (pi.centre_normal(), pj.centre_normal());
-        let (mut tested, mut arrived) = (0, 0);
-        for shift in [3, 0, 1, 2] {
+        let (mut origins, mut dirs) = ([DVec3::ZERO; SHARE_SEGMENTS], [DVec3::ZERO; SHARE_SEGMENTS]);
+        let mut tested = 0;
+        'pairs: for shift in [3, 0, 1, 2] {
             for k in 0..4 {
                 let (x, y) = (xi[k], xj[k ^ shift]);
                 let d = y - x;
                 if ni.dot(d) <= 0.0 || nj.dot(d) >= 0.0 {
                     continue;
                 }
+                (origins[tested], dirs[tested]) = (x, d);
                 tested += 1;
-                arrived += self.segment_visible(x, y, i as u32, j as u32) as usize;
                 if tested == SHARE_SEGMENTS {
-                    break;
+                    break 'pairs;
                 }
-            }
-            if tested == SHARE_SEGMENTS {
-                break;
             }
         }
         SEGMENTS_TESTED.fetch_add(tested as u64, std::sync::atomic::Ordering::Relaxed);
         if tested > 0 {
-            return (arrived, tested);
+            let mut blocked = [false; SHARE_SEGMENTS];
+            let (o, d, b) = (&origins[..tested], &dirs[..tested], &mut blocked[..tested]);
+            self.bvh.occluded_packet(o, d, 1e-9, 1.0 - 1e-9, i as u32, j as u32, b);
+            return (b.iter().filter(|&&x| !x).count(), tested);
         }
         // No two cell centres face each other (parts that see each other obliquely, or only in
         // part): the culled masks over all cell pairs decide.
