@@ -155,6 +155,14 @@ impl Bvh {
         if self.nodes.is_empty() {
             return false;
         }
+        let hits = |t: &Triangle| {
+            t.element != skip_a && t.element != skip_b && segment_hits(t, origin, dir, t_min, t_max)
+        };
+        if BLOCKERS
+            .with_borrow(|b| b.recent.iter().any(|&k| self.triangles.get(k as usize).is_some_and(hits)))
+        {
+            return true;
+        }
         let inv = dir.recip();
         let mut stack = [0u32; 64];
         let mut sp = 1;
@@ -165,11 +173,9 @@ impl Bvh {
                 continue;
             }
             if node.count > 0 {
-                for t in &self.triangles[node.start as usize..(node.start + node.count) as usize] {
-                    if t.element != skip_a
-                        && t.element != skip_b
-                        && segment_hits(t, origin, dir, t_min, t_max)
-                    {
+                for k in node.start..node.start + node.count {
+                    if hits(&self.triangles[k as usize]) {
+                        BLOCKERS.with_borrow_mut(|b| b.remember(k));
                         return true;
                     }
                 }
@@ -181,6 +187,28 @@ impl Bvh {
         }
         false
     }
+}
+
+/// The last triangles that blocked a segment on this thread, tried before a traversal. Any hit
+/// among them is a hit (they are looked up in the BVH being asked, whichever BVH put them
+/// there), so the verdicts are the traversal's own, only found sooner.
+struct Blockers {
+    recent: [u32; 8],
+    next: usize,
+}
+
+impl Blockers {
+    fn remember(&mut self, k: u32) {
+        if !self.recent.contains(&k) {
+            self.recent[self.next] = k;
+            self.next = (self.next + 1) % self.recent.len();
+        }
+    }
+}
+
+thread_local! {
+    static BLOCKERS: std::cell::RefCell<Blockers> =
+        const { std::cell::RefCell::new(Blockers { recent: [u32::MAX; 8], next: 0 }) };
 }
 
 /// Up to this many segments traverse [`Bvh::occluded_packet`] together.
@@ -208,6 +236,29 @@ impl Bvh {
         if self.nodes.is_empty() || blocked.iter().all(|&b| b) {
             return;
         }
+        // The triangles that blocked this thread's last segments first: neighbouring links,
+        // which follow each other here, are mostly blocked by the same few.
+        let test = |t: &Triangle, blocked: &mut [bool]| {
+            let mut any = false;
+            if t.element != skip_a && t.element != skip_b {
+                for k in 0..n {
+                    if !blocked[k] && segment_hits(t, origins[k], dirs[k], t_min, t_max) {
+                        blocked[k] = true;
+                        any = true;
+                    }
+                }
+            }
+            any
+        };
+        let recent = BLOCKERS.with_borrow(|b| b.recent);
+        for k in recent {
+            if let Some(t) = self.triangles.get(k as usize) {
+                test(t, blocked);
+            }
+        }
+        if blocked.iter().all(|&b| b) {
+            return;
+        }
         let mut inv = [DVec3::ZERO; PACKET];
         for k in 0..n {
             inv[k] = dirs[k].recip();
@@ -230,14 +281,9 @@ impl Bvh {
                 continue;
             }
             if node.count > 0 {
-                for t in &self.triangles[node.start as usize..(node.start + node.count) as usize] {
-                    if t.element == skip_a || t.element == skip_b {
-                        continue;
-                    }
-                    for k in 0..n {
-                        if !blocked[k] && segment_hits(t, origins[k], dirs[k], t_min, t_max) {
-                            blocked[k] = true;
-                        }
+                for k in node.start..node.start + node.count {
+                    if test(&self.triangles[k as usize], blocked) {
+                        BLOCKERS.with_borrow_mut(|b| b.remember(k));
                     }
                 }
                 if blocked.iter().all(|&b| b) {
