@@ -49,6 +49,9 @@ const LINK_CHUNK: usize = 4096;
 /// Accepted pairs decided before they are computed: a bound on the refinement's own memory.
 const BATCH: usize = 1 << 20;
 
+/// Pairs taken off the work stack and decided at once, in parallel.
+const DECIDE_CHUNK: usize = 1 << 14;
+
 /// How many pairs of distinct faces a pair of nodes stands for: the refinement's progress is the
 /// share of its work's pairs of faces settled (monotone, and 1 at the end, though a dense corner
 /// of a scene costs more per pair than an open one).
@@ -358,30 +361,45 @@ impl Hierarchy {
         let mut part = Vec::new();
         while !work.is_empty() {
             accepted.clear();
-            while accepted.len() < BATCH
-                && let Some((a, b)) = work.pop()
-            {
-                if a == b {
-                    // A cluster's light among its own parts; a surface does not light itself.
-                    let children = self.tree.children(a).to_vec();
-                    for (i, &x) in children.iter().enumerate() {
-                        for &y in &children[i..] {
-                            work.push((x, y));
+            while accepted.len() < BATCH && !work.is_empty() {
+                // The top of the stack decided in parallel (the tree and the estimates are only
+                // read), then filed in order (splits add nodes): the same verdicts as one at a
+                // time, for every thread count.
+                let top = work.split_off(work.len().saturating_sub(DECIDE_CHUNK));
+                let tree = &self.tree;
+                let oracle = &self.oracle;
+                let verdicts: Vec<Option<(Verdict, Weight)>> = top
+                    .par_iter()
+                    .map(|&(a, b)| {
+                        (a != b).then(|| match oracle.decide(tree, radiosity, a, b, bar) {
+                            Verdict::Link => (Verdict::Link, oracle.weight(tree, radiosity, a, b)),
+                            v => (v, Weight::Full),
+                        })
+                    })
+                    .collect();
+                for (&(a, b), verdict) in top.iter().zip(verdicts).rev() {
+                    let Some((verdict, weight)) = verdict else {
+                        // A cluster's light among its own parts; a surface does not light itself.
+                        let children = self.tree.children(a).to_vec();
+                        for (i, &x) in children.iter().enumerate() {
+                            for &y in &children[i..] {
+                                work.push((x, y));
+                            }
                         }
-                    }
-                    continue;
-                }
-                match self.oracle.decide(&self.tree, radiosity, a, b, bar) {
-                    Verdict::Skip => {
-                        settled += space.faces_between(&self.tree, a, b);
-                        if !self.same_face(a, b) {
-                            budget::try_reserve(&mut self.idle, 1, LINKS)?;
-                            self.idle.push((a, b));
+                        continue;
+                    };
+                    match verdict {
+                        Verdict::Skip => {
+                            settled += space.faces_between(&self.tree, a, b);
+                            if !self.same_face(a, b) {
+                                budget::try_reserve(&mut self.idle, 1, LINKS)?;
+                                self.idle.push((a, b));
+                            }
                         }
-                    }
-                    Verdict::Link => accepted.push((a, b, self.oracle.weight(&self.tree, radiosity, a, b))),
-                    Verdict::Split(s) => {
-                        self.split_pair(s, if s == a { b } else { a }, radiosity, &mut work)?
+                        Verdict::Link => accepted.push((a, b, weight)),
+                        Verdict::Split(s) => {
+                            self.split_pair(s, if s == a { b } else { a }, radiosity, &mut work)?
+                        }
                     }
                 }
             }
