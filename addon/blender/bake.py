@@ -654,6 +654,7 @@ def settings_from_scene(scene) -> BakeSettings:
         preview_material=p.preview_material,
         apply_to_materials=p.apply_to_materials,
         memory_limit_mb=p.memory_limit_mb,
+        hierarchy_accuracy=p.hierarchy_accuracy,
     )
 
 

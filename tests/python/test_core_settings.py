@@ -93,3 +93,41 @@ def test_the_memory_limit_goes_to_the_session_but_does_not_change_the_solution()
     assert in_panel_words("a lower settings.basis_order, or raise memory_budget_mb") == (
         "a lower Detail, or raise Memory Limit (MB)")
     assert "a lower Detail" in in_panel_words("use fewer faces or a lower basis order (a lower ...)")
+
+
+def test_the_hierarchy_takes_its_refinement_threshold_as_accuracy():
+    """Method hierarchical hands the Refinement Threshold to the library as ``accuracy``; the flat
+    methods leave it out, so changing it does not re-bake a flat bake."""
+    s = BakeSettings(method="hierarchical", hierarchy_accuracy=1e-4).validate()
+    assert s.native()["method"] == "hierarchical" and s.native()["accuracy"] == 1e-4
+    assert s.solve_signature() != s.replace(hierarchy_accuracy=1e-3).solve_signature()
+    flat = BakeSettings(method="incremental", hierarchy_accuracy=1e-4).validate()
+    assert "accuracy" not in flat.native()
+    assert flat.solve_signature() == flat.replace(hierarchy_accuracy=1e-2).solve_signature()
+    # The binding takes every key (a key it does not know is an error there).
+    from addon.native import binding
+
+    assert binding.METHODS["hierarchical"] == 3
+
+
+@pytest.mark.parametrize("bad", [0.0, -1e-3, 1e-7, 0.6, 1.0, float("nan"), float("inf")])
+def test_a_refinement_threshold_out_of_range_is_one_line(bad):
+    with pytest.raises(SettingsError) as info:
+        BakeSettings(method="hierarchical", hierarchy_accuracy=bad).validate()
+    line = str(info.value)
+    assert "\n" not in line and line.startswith(f"refinement threshold {bad:g} is outside 1e-06..0.5")
+    BakeSettings(method="full", hierarchy_accuracy=bad).validate()  # not read by the flat methods
+
+
+def test_the_headless_refinement_range_is_the_settings_one():
+    import importlib.util
+    from pathlib import Path
+
+    from addon.core.settings import HIERARCHY_ACCURACY_RANGE
+
+    path = Path(__file__).resolve().parents[2] / "addon" / "headless.py"
+    spec = importlib.util.spec_from_file_location("headless_for_test", path)
+    headless = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(headless)
+    assert headless.REFINEMENT_RANGE == HIERARCHY_ACCURACY_RANGE
+
