@@ -1,5 +1,5 @@
 """Method > Large Scenes (Hierarchy) through the add-on: the bake operator on the hierarchical
-method, its Refinement Threshold and the panel settings it reads."""
+method, its Refinement Threshold, the panel settings it reads and the live preview's refinement."""
 
 import numpy as np
 import pytest
@@ -112,6 +112,49 @@ def test_every_panel_setting_reaches_a_hierarchical_bake(blender):
     assert scenes.bake(bpy) == {"FINISHED"}
     f1, f2, f3 = (scenes.stored(floor.data, f) for f in FRAMES)
     np.testing.assert_allclose(f2, 0.5 * (f1 + f3), rtol=1e-5, atol=1e-7)
+
+
+def test_live_preview_on_the_hierarchy_refines_the_resting_frame(blender, monkeypatch):
+    """The library refines only the flat methods' preview frames (``Session.refine`` returns
+    None for a hierarchical one): the live preview solves the resting frame again in full, so it
+    shows what a frame solved without previews shows."""
+    bpy = blender
+    from addon.blender import bake, live
+
+    objs = scenes.cornell_box(bpy, n=3, light_frames=(1, 3))
+    floor, sc = objs["Floor"], bpy.context.scene
+    p = sc.radiosity
+    p.method, p.basis_order, p.tolerance, p.live_refine_when_idle = "HIERARCHICAL", 1, 1e-7, True
+
+    def scrub_to_3():
+        sc.frame_set(1)
+        bake.drop_held(sc)
+        p.live_preview = True
+        if bpy.app.timers.is_registered(live.on_idle):
+            live.on_idle()
+        sc.frame_set(2)
+        sc.frame_set(3)
+
+    scrub_to_3()  # background mode: every frame solved in full
+    full3 = scenes.stored_named(floor.data, "Radiosity")
+    p.live_preview = False
+    refinements = live.stats["refinements"]
+    with monkeypatch.context() as m:
+        m.setattr(live, "_timers_run", lambda: True)
+        scrub_to_3()
+        assert live.stats["refinements"] == refinements + 1  # frame 1, re-solved
+        preview3 = scenes.stored_named(floor.data, "Radiosity")
+        assert np.abs(preview3 - full3).max() > 0.05 * full3.max()  # the leaves, not the gather
+        assert bake.held(sc).preview
+        assert live.on_idle() is None
+        assert live.stats["refinements"] == refinements + 2
+        assert not bake.held(sc).preview
+        # The same frame reached through previews: within 1% of the peak of the full chain's.
+        refined3 = scenes.stored_named(floor.data, "Radiosity")
+        assert np.abs(refined3 - full3).max() < 0.01 * full3.max()
+        live.on_idle()  # nothing pending
+        assert live.stats["refinements"] == refinements + 2
+        p.live_preview = False
 
 
 def test_a_bad_refinement_threshold_is_one_clear_line(blender):
