@@ -43,6 +43,13 @@ DEFAULT_CHECKPOINT = 10
 # because usage is checked before the add-on package is imported).
 REFINEMENT_RANGE = (1e-6, 0.5)
 
+# The panel's names in messages, with this script's options for them.
+OPTION_NAMES = (
+    ("Memory Limit (MB)", "Memory Limit (MB), --memory-limit"),
+    ("Refinement Threshold", "Refinement Threshold (--refinement)"),
+    ("set Method to Large Scenes (Hierarchy)", "use --method hierarchical"),
+)
+
 
 def parse(argv):
     p = argparse.ArgumentParser(prog="headless.py", description=__doc__.split("\n\n")[0])
@@ -286,7 +293,8 @@ def _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt, lines):
             p.use_scene_range = False
             p.frame_start, p.frame_end = settings.frame_start, frames[min(k, len(frames)) - 1]
             try:
-                job = bake.BakeJob(ctx, bake.settings_from_scene(scene), p.collection)
+                job = bake.BakeJob(ctx, bake.settings_from_scene(scene), p.collection,
+                                   log=lambda line: print(in_option_words(line)))
                 interrupt.job = job
                 # Frames left: this chunk's (known once it started) and the chunks after it.
                 lines.expect(job, len(frames) - min(k, len(frames)))
@@ -313,10 +321,15 @@ def _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt, lines):
     return None
 
 
+def in_option_words(message):
+    """A message with the panel's names followed by this script's options for them."""
+    for panel, option in OPTION_NAMES:
+        message = message.replace(panel, option)
+    return message
+
+
 def fail(message):
-    # The panel's name of the memory budget, with this script's option for it.
-    message = message.replace("Memory Limit (MB)", "Memory Limit (MB), --memory-limit")
-    print(f"{PREFIX}: error: {message}", file=sys.stderr)
+    print(f"{PREFIX}: error: {in_option_words(message)}", file=sys.stderr)
     return 1
 
 

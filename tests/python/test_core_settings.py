@@ -131,3 +131,26 @@ def test_the_headless_refinement_range_is_the_settings_one():
     spec.loader.exec_module(headless)
     assert headless.REFINEMENT_RANGE == HIERARCHY_ACCURACY_RANGE
 
+
+def test_memory_refusals_of_flat_bakes_suggest_the_hierarchy():
+    from addon.core.settings import large_flat_hint, library_message
+
+    over = ("over the memory budget: this bake needs up to 9 MB (...) but the budget is 1 MB "
+            "(settings.memory_budget_mb); use fewer faces or a lower settings.basis_order, turn "
+            "corner_gather off, bake fewer frames at once, or raise memory_budget_mb")
+    plain = ("over the memory budget: this bake needs up to 9 MB (...) but the budget is 1 MB (Memory Limit "
+             "(MB)); use fewer faces or a lower Detail, turn Sharp Corners off, or raise Memory Limit (MB)")
+    assert library_message(over, "incremental", hierarchy_fits=False) == plain
+    assert library_message(over, "full", hierarchy_fits=True) == (
+        plain + "; or set Method to Large Scenes (Hierarchy), whose estimate for this scene is within the "
+        "limit (its memory grows about linearly with the faces)")
+    oom = "out of memory while building the link store: could not allocate 94 MB; use a lower basis order"
+    assert library_message(oom, "exact").endswith(
+        "a lower Detail; or set Method to Large Scenes (Hierarchy), whose memory grows about linearly "
+        "with the faces")
+    assert library_message(oom, "hierarchical") == oom.replace("basis order", "Detail")
+    assert library_message("settings.accuracy 2 is outside (0,1)", "hierarchical") == (
+        "Refinement Threshold 2 is outside (0,1)")
+    assert library_message("no emitters", "incremental") == "no emitters"
+    assert large_flat_hint(1999, "incremental") is None and large_flat_hint(10**5, "hierarchical") is None
+    assert large_flat_hint(12345, "full").startswith("12,345 faces: ")

@@ -78,6 +78,30 @@ def test_headless_hierarchical_bake_takes_its_refinement_threshold(blender, tmp_
         assert f"--refinement {bad}: must be in 1e-06..0.5" in usage.stderr.strip().splitlines()[-1]
 
 
+def test_headless_memory_refusals_name_the_options_to_change(blender, tmp_path):
+    """A 1,537-face room at order 2 over a 1,000 MB limit: the flat bake's one line suggests
+    ``--method hierarchical`` (whose own estimate fits); the hierarchy over 1 MB names
+    ``--refinement``."""
+    bpy = blender
+    src = tmp_path / "big.blend"
+    scenes.cornell_box(bpy, n=16, light_frames=(1, 2), box=False)
+    bpy.ops.wm.save_as_mainfile(filepath=str(src))
+    env = {"BLENDER_USER_RESOURCES": str(tmp_path)}
+    common = ["--blend", str(src), "--frames", "1-1", "--order", "2"]
+    flat = _run([*common, "--memory-limit", "1000"], env=env)
+    assert flat.returncode == 1, flat.stderr
+    line = flat.stderr.strip().splitlines()[-1]
+    assert line.startswith("galerkin-radiosity: error: over the memory budget: this bake needs"), line
+    assert line.endswith("or raise Memory Limit (MB), --memory-limit; or use --method hierarchical, whose "
+                         "estimate for this scene is within the limit (its memory grows about linearly "
+                         "with the faces)"), line
+    hier = _run([*common, "--memory-limit", "1", "--method", "hierarchical"], env=env)
+    assert hier.returncode == 1, hier.stderr
+    line = hier.stderr.strip().splitlines()[-1]
+    assert "this hierarchical bake may need up to" in line, line
+    assert "a larger Refinement Threshold (--refinement) or a lower Detail" in line, line
+
+
 def test_headless_failure_is_one_clear_line(blender, tmp_path):
     src = tmp_path / "dark.blend"
     _save_box(blender, src, light=False)

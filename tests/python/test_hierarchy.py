@@ -1,5 +1,6 @@
 """Method > Large Scenes (Hierarchy) through the add-on: the bake operator on the hierarchical
-method, its Refinement Threshold, the panel settings it reads and the live preview's refinement."""
+method, its Refinement Threshold, the panel settings it reads, the live preview's refinement, and
+the hint a flat bake too large for memory gives."""
 
 import numpy as np
 import pytest
@@ -179,6 +180,67 @@ def test_a_bad_refinement_threshold_is_one_clear_line(blender):
     sc.radiosity.hierarchy_accuracy = 0.0  # the property clamps (to a float32 a hair below 1e-6)
     assert sc.radiosity.hierarchy_accuracy == pytest.approx(HIERARCHY_ACCURACY_RANGE[0])
     bake.settings_from_scene(sc).validate()  # and its minimum is a valid setting
+
+
+def test_a_flat_bake_refused_for_memory_suggests_the_hierarchy_when_it_fits(blender):
+    """A 1,537-face room at Detail 2: the flat estimate is about 2.2 GB, the hierarchy's 0.9 GB.
+    With a 1,000 MB limit the flat bake is refused in one line that suggests the hierarchy (whose
+    session, made only to ask, passes the check); with 1 MB neither fits, and there is no hint;
+    the hierarchy's own refusal speaks of the Refinement Threshold. Nothing is baked."""
+    bpy = blender
+    objs = scenes.cornell_box(bpy, n=16, light_frames=(1, 2), box=False)
+    sc = bpy.context.scene
+    p = sc.radiosity
+    p.basis_order, p.memory_limit_mb = 2, 1000
+    with pytest.raises(RuntimeError) as info:
+        bpy.ops.radiosity.bake()
+    line = str(info.value).strip()
+    print(line)
+    assert "\n" not in line and "over the memory budget: this bake needs up to" in line, line
+    assert line.endswith("or set Method to Large Scenes (Hierarchy), whose estimate for this scene is "
+                         "within the limit (its memory grows about linearly with the faces)"), line
+
+    p.memory_limit_mb = 1
+    with pytest.raises(RuntimeError) as info:
+        bpy.ops.radiosity.bake()
+    line = str(info.value).strip()
+    print(line)
+    assert "over the memory budget" in line and "Hierarchy" not in line, line
+
+    p.method = "HIERARCHICAL"
+    with pytest.raises(RuntimeError) as info:
+        bpy.ops.radiosity.bake()
+    line = str(info.value).strip()
+    print(line)
+    assert "\n" not in line and "this hierarchical bake may need up to" in line, line
+    assert "a larger Refinement Threshold or a lower Detail" in line, line
+    assert "raise Memory Limit (MB)" in line and "settings." not in line and "set Method" not in line, line
+    assert not scenes.rad_frames(objs["Floor"].data)
+
+
+def test_a_flat_bake_of_many_faces_gets_a_note_at_once(blender, capfd):
+    """2,167 faces on a flat method: before anything is solved the bake prints a note that
+    suggests the hierarchy, and keeps it in ``hints`` (the operator reports it in the status bar
+    when the bake starts in the UI); the hierarchical method gets none. The bakes here are
+    refused by a 1 MB limit right after the note, so nothing is solved."""
+    bpy = blender
+    from addon.blender import bake
+
+    scenes.cornell_box(bpy, n=19, light_frames=(1, 2), box=False)
+    sc = bpy.context.scene
+    sc.radiosity.memory_limit_mb = 1
+    job = bake.BakeJob(bpy.context, bake.settings_from_scene(sc))
+    with pytest.raises(bake.BakeError):
+        job.run()
+    out = capfd.readouterr().out
+    assert "Radiosity: note: 2,167 faces: the Update and From Scratch methods link every pair" in out, out
+    assert len(job.hints) == 1 and "set Method to Large Scenes (Hierarchy)" in job.hints[0]
+
+    sc.radiosity.method = "HIERARCHICAL"
+    job = bake.BakeJob(bpy.context, bake.settings_from_scene(sc))
+    with pytest.raises(bake.BakeError):
+        job.run()
+    assert "note:" not in capfd.readouterr().out and not job.hints
 
 
 def test_the_panel_shows_the_refinement_threshold_with_the_hierarchy_only(blender):
