@@ -68,7 +68,6 @@ class Held:
     state: FrameState            # what the session holds now (matrices, geometry, emission digests)
     frame: float | None = None   # last solved frame
     export: object = None        # the Export the session was built from
-    preview: bool = False        # the last solved frame is a live preview not refined yet
 
     def close(self):
         try:
@@ -470,7 +469,6 @@ class BakeJob:
         lines = [with_object_names(w, self.names) for w in self.stats.get("warnings", [])]
         self.warnings += [w for w in lines if w not in self.warnings]
         self.held.frame = float(f)
-        self.held.preview = False
         self.frame_seconds = time.perf_counter() - t
         self.seconds_solving += self.frame_seconds
 

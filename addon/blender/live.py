@@ -11,8 +11,8 @@ polynomials, the Galerkin solution itself). Once no frame change or move has com
 ``IDLE_SECONDS``, a timer refines the frame the timeline rests on: the rest of its solve, then its
 gather. Scrubbing pays the kernel update and a shorter solve; the resting frame gets what a bake
 gives. This needs the UI's event loop, which runs the timer; in background mode (``blender -b``)
-every frame is solved in full at once. With Large Scenes (Hierarchy) the library does not refine
-a preview: the resting frame is solved again, in full (an update in which nothing moved).
+every frame is solved in full at once. With Large Scenes (Hierarchy) the library refines a preview
+as an update in which nothing moved: its solve to the tolerance, then its gather.
 
 The baked switch is muted in the viewport while the preview is on, so the viewport shows the
 live attribute; turning the preview off un-mutes it. Objects whose colours need a copy (display
@@ -128,7 +128,6 @@ def _update(scene) -> bool:
     finally:
         h.session.set_preview(False)
     h.frame = frame
-    h.preview = preview
     stats["solves"] += 1
     stats["last_seconds"] = time.perf_counter() - t
     stats["last_error"] = None
@@ -186,13 +185,7 @@ def refine(scene) -> bool:
         if [o.name for o in sel.objects] != [o.data.name for o in h.export.objects]:
             return False  # the previewed objects changed: the next update starts over
         if h.session.refine(progress=lambda fraction, stage: True) is None:
-            if not h.preview:
-                return False
-            # The library refines only the flat methods' previews (a hierarchical frame is never
-            # marked unrefined): the frame is solved again in full, an update in which nothing
-            # moved, so only its solve to the tolerance and its gather are done.
-            h.session.solve_frame(h.frame, progress=lambda fraction, stage: True)
-        h.preview = False
+            return False
         stats["refinements"] += 1
         _write_corners(h, h.export, sel.objects)
         return True

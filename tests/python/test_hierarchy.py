@@ -121,9 +121,9 @@ def test_every_panel_setting_reaches_a_hierarchical_bake(blender):
 
 
 def test_live_preview_on_the_hierarchy_refines_the_resting_frame(blender, monkeypatch):
-    """The library refines only the flat methods' preview frames (``Session.refine`` returns
-    None for a hierarchical one): the live preview solves the resting frame again in full, so it
-    shows what a frame solved without previews shows."""
+    """The live preview on the hierarchy shows the leaves while the timeline moves and, once it
+    rests, the library's refinement of the frame (an update in which nothing moved: its solve to
+    the tolerance, then its gather): what a frame solved without previews shows."""
     bpy = blender
     from addon.blender import bake, live
 
@@ -151,13 +151,11 @@ def test_live_preview_on_the_hierarchy_refines_the_resting_frame(blender, monkey
         assert live.stats["refinements"] == refinements + 1  # frame 1, re-solved
         preview3 = scenes.stored_named(floor.data, "Radiosity")
         assert np.abs(preview3 - full3).max() > 0.05 * full3.max()  # the leaves, not the gather
-        assert bake.held(sc).preview
         assert live.on_idle() is None
         assert live.stats["refinements"] == refinements + 2
-        assert not bake.held(sc).preview
-        # The same frame reached through previews: within 1% of the peak of the full chain's.
+        # The same frame reached through previews: the full chain's, to the solve's tolerance.
         refined3 = scenes.stored_named(floor.data, "Radiosity")
-        assert np.abs(refined3 - full3).max() < 0.01 * full3.max()
+        assert np.abs(refined3 - full3).max() < 1e-5 * full3.max()  # measured 1.2e-7
         live.on_idle()  # nothing pending
         assert live.stats["refinements"] == refinements + 2
         p.live_preview = False
