@@ -168,7 +168,7 @@ def library_message(message: str, method: str, hierarchy_fits: bool | None = Non
     """A library error as the bake reports it: in the panel's words and, when a flat method ran
     out of memory, with the hint to use the hierarchy. ``hierarchy_fits``: whether the
     hierarchy's own estimate is within the budget (False: no hint, since the hierarchy plans
-    more than the flat path below about 1,000 faces; None: not asked, an allocation failed)."""
+    more than the flat path below about 400 faces; None: not asked, an allocation failed)."""
     message = in_panel_words(message)
     if method not in FLAT_METHODS or not is_memory_refusal(message) or hierarchy_fits is False:
         return message
