@@ -41,8 +41,10 @@ def report(title, mask_sets, ours, cyc, mean):
             continue
         share = float(np.sum((ours[m] - cyc[m]) ** 2)) / total
         ratio = float(ours[m].mean() / cyc[m].mean()) if cyc[m].mean() > 0 else float("nan")
-        print(f"| {name} | {int(m.sum())} | {100 * share:.0f}% | {100 * rel_rmse(ours[m], cyc[m], mean):.1f}% "
-              f"| {ratio:.3f} |")
+        print(
+            f"| {name} | {int(m.sum())} | {100 * share:.0f}% | {100 * rel_rmse(ours[m], cyc[m], mean):.1f}% "
+            f"| {ratio:.3f} |"
+        )
 
 
 def bins(values, edges, fmt):
@@ -71,20 +73,33 @@ def main(argv=None):
         bf2 = r["h_dir"] + r["h_ind2"]
         ours_ind = ours - r["h_ours_dir"]
         print(f"\n## {name}: {len(r)} corners, mean H (Cycles) {mean:.4f}")
-        print(f"ours vs Cycles {100 * rel_rmse(ours, h_cyc, mean):.2f}% (mean ratio {ours.mean() / mean:.4f})")
-        print(f"brute force from the solution vs Cycles {100 * rel_rmse(bf, h_cyc, mean):.2f}% "
-              f"(mean ratio {bf.mean() / mean:.4f})")
-        print(f"brute force, near hits gathered again, vs Cycles {100 * rel_rmse(bf2, h_cyc, mean):.2f}% "
-              f"(mean ratio {bf2.mean() / mean:.4f})")
+        print(
+            f"ours vs Cycles {100 * rel_rmse(ours, h_cyc, mean):.2f}% (mean ratio {ours.mean() / mean:.4f})"
+        )
+        print(
+            f"brute force from the solution vs Cycles {100 * rel_rmse(bf, h_cyc, mean):.2f}% "
+            f"(mean ratio {bf.mean() / mean:.4f})"
+        )
+        print(
+            f"brute force, near hits gathered again, vs Cycles {100 * rel_rmse(bf2, h_cyc, mean):.2f}% "
+            f"(mean ratio {bf2.mean() / mean:.4f})"
+        )
         print(f"ours vs brute force (the gather's own error) {100 * rel_rmse(ours, bf, mean):.2f}%")
-        print(f"  direct: ours vs brute force {100 * rel_rmse(r['h_ours_dir'], r['h_dir'], mean):.2f}%, "
-              f"indirect {100 * rel_rmse(ours_ind, r['h_ind'], mean):.2f}%")
-        print(f"  mean direct share (brute force) {r['h_dir'].sum() / bf.sum():.3f}; back-face rays "
-              f"{100 * r['back'].mean():.2f}%")
+        print(
+            f"  direct: ours vs brute force {100 * rel_rmse(r['h_ours_dir'], r['h_dir'], mean):.2f}%, "
+            f"indirect {100 * rel_rmse(ours_ind, r['h_ind'], mean):.2f}%"
+        )
+        print(
+            f"  mean direct share (brute force) {r['h_dir'].sum() / bf.sum():.3f}; back-face rays "
+            f"{100 * r['back'].mean():.2f}%"
+        )
         # The Cycles indirect: Cycles minus our brute-force direct (exact up to its noise).
         cyc_ind = h_cyc - r["h_dir"]
-        print(f"  indirect alone: brute force vs Cycles - direct {100 * rel_rmse(r['h_ind'], cyc_ind, mean):.2f}%, "
-              f"near gathered again {100 * rel_rmse(r['h_ind2'], cyc_ind, mean):.2f}%")
+        print(
+            "  indirect alone: brute force vs Cycles - direct "
+            f"{100 * rel_rmse(r['h_ind'], cyc_ind, mean):.2f}%, "
+            f"near gathered again {100 * rel_rmse(r['h_ind2'], cyc_ind, mean):.2f}%"
+        )
         nz = r["nz"]
         facing = [("up (nz > 0.5)", nz > 0.5), ("side", np.abs(nz) <= 0.5), ("down (nz < -0.5)", nz < -0.5)]
         dir_share = np.where(bf > 0, r["h_dir"] / np.maximum(bf, 1e-30), 0)
@@ -97,8 +112,13 @@ def main(argv=None):
         q = np.quantile(area, [0, 0.25, 0.5, 0.75, 1.0])
         q[-1] += 1
         sizes = bins(area, q, "face area {:.2g}-{:.2g}")
-        for title, sets in [("facing", facing), ("direct share of H", lit), ("share of indirect from near hits", near),
-                            ("height", height), ("face area", sizes)]:
+        for title, sets in [
+            ("facing", facing),
+            ("direct share of H", lit),
+            ("share of indirect from near hits", near),
+            ("height", height),
+            ("face area", sizes),
+        ]:
             report(f"{name}, ours vs Cycles, by {title}", sets, ours, h_cyc, mean)
         report(f"{name}, the gather vs brute force (same solution), by facing", facing, ours, bf, mean)
         report(f"{name}, brute force vs Cycles, by facing", facing, bf, h_cyc, mean)
