@@ -53,9 +53,25 @@ impl Estimate {
 /// The estimate for `scene` baked over `frames` frames whose results are all kept (1 for a host
 /// that reads each frame as it is solved).
 pub fn estimate(scene: &Scene, frames: u64) -> Estimate {
+    estimate_for(scene, frames, flat_elements(scene))
+}
+
+/// The elements the flat path will solve: a face each, and with visibility on the parts of
+/// the faces split where another object comes close ([`crate::contact_split::plan`], at the
+/// first frame; up to twice the faces).
+fn flat_elements(scene: &Scene) -> u64 {
+    let faces = (scene.face_count() - scene.degenerate_faces.len()) as u64;
+    if !scene.settings.visibility || faces == 0 {
+        return faces;
+    }
+    let elements = crate::system::build_elements(scene, scene.frames.0 as f64, crate::basis::Basis::new(0));
+    crate::contact_split::plan(scene, &elements).iter().map(|parts| parts.len() as u64).sum()
+}
+
+/// [`estimate`] with `n` elements.
+fn estimate_for(scene: &Scene, frames: u64, n: u64) -> Estimate {
     let s = &scene.settings;
     let nb = ((s.basis_order + 1) * (s.basis_order + 1)) as u64;
-    let n = (scene.face_count() - scene.degenerate_faces.len()) as u64;
     let pairs = n.saturating_mul(n.saturating_sub(1)) / 2;
     // Coefficients with 1/16 growth room, the pair record (two ids and a visibility), its id in
     // both adjacency lists and the column's receiver list, and a partial mask (4 u64 boxed).
@@ -158,8 +174,10 @@ const HIERARCHY_FULL_LINKS: f64 = 20_000.0;
 pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
     let s = &scene.settings;
     let nb = ((s.basis_order + 1) * (s.basis_order + 1)) as u64;
-    let flat = estimate(scene, frames);
     let faces = (scene.face_count() - scene.degenerate_faces.len()) as u64;
+    // Elements and results as the flat path's without its contact split (the hierarchy splits
+    // faces by its own rule, counted in its nodes).
+    let flat = estimate_for(scene, frames, faces);
     let growth = (1e-3 / s.accuracy.clamp(1e-12, 1.0)).powf(HIERARCHY_LINK_GROWTH);
     let link_count = faces.saturating_mul((HIERARCHY_LINKS_PER_FACE * growth).max(1.0) as u64);
     let full_count = link_count.min((HIERARCHY_FULL_LINKS * growth) as u64);
