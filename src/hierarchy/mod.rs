@@ -150,7 +150,13 @@ pub fn solve_frame(
     let reflectance = face_reflectance(scene, &faces);
     let lit = Lighting::new(scene, frame, &faces);
     let total_area: f64 = faces.iter().map(|e| e.area).sum();
-    let tree = Tree::new(faces, reflectance, basis);
+    // Faces split ahead where another object comes close, as the flat path splits them: only
+    // shadows need it, and there are none without visibility.
+    let contacts = scene.settings.visibility.then(|| crate::contact_split::plan(scene, &faces));
+    let mut tree = Tree::new(faces, reflectance, basis);
+    if let Some(parts) = contacts {
+        tree.split_for_contacts(&parts);
+    }
     let mut state = State::new(&tree);
     state.add_sources(&tree, &lit.emission, lit.lights.as_ref());
     state.start_from_sources(&tree);

@@ -190,6 +190,12 @@ impl Oracle {
         if behind(a, b) || behind(b, a) {
             return Verdict::Skip;
         }
+        // A surface split ahead for a contact is linked through its parts only.
+        for x in [a, b] {
+            if tree.opened(x) {
+                return Verdict::Split(x);
+            }
+        }
         let separated = na.centre.distance(nb.centre) > self.cluster_separation * (na.radius + nb.radius);
         let clustered = na.is_cluster() || nb.is_cluster();
         let carried = self.pair_carried(tree, radiosity, a, b);

@@ -92,6 +92,10 @@ pub struct Tree {
     rule: GaussLegendre,
     /// Where a point below a cluster is drawn from ([`Tree::draw_face`]).
     draws: FaceDraws,
+    /// Per node: split ahead of linking where another object comes close
+    /// ([`Tree::split_for_contacts`]), so that no link may end at it (its children, not its
+    /// polynomial, carry the contact's light). Nodes added later are not.
+    opened: Vec<bool>,
 }
 
 /// The faces in the order of the cluster tree's leaves, each cluster's faces a run of it, and
@@ -119,6 +123,7 @@ impl Tree {
             reflectance,
             rule: GaussLegendre::new(4),
             draws: FaceDraws::default(),
+            opened: Vec::new(),
         };
         for f in 0..tree.faces.len() {
             let e = &tree.faces[f];
@@ -149,6 +154,40 @@ impl Tree {
         tree.draws = FaceDraws { order: ids, run: runs, area_before: Vec::new() };
         tree.sum_draw_areas();
         tree
+    }
+
+    /// Splits each face's quadtree down to its `parts` (per face, the quadtree rectangles of
+    /// [`crate::contact_split::plan`]; `[Rect::UNIT]` where nothing comes close), and marks every
+    /// node split on the way as opened: the refinement links below it only (a face half under
+    /// another object is one polynomial too bright beside the contact and negative under it;
+    /// docs/validation-real.md, "The contact split").
+    pub fn split_for_contacts(&mut self, parts: &[Vec<Rect>]) {
+        for (f, parts) in parts.iter().enumerate() {
+            for part in parts.iter().filter(|r| **r != Rect::UNIT) {
+                let mut id = f as NodeId;
+                while let Kind::Surface(s) = &self.nodes[id as usize].kind {
+                    if s.domain == *part || s.domain.s1 - s.domain.s0 <= part.s1 - part.s0 {
+                        break;
+                    }
+                    let children = self.split(id);
+                    self.opened.resize(self.nodes.len(), false);
+                    self.opened[id as usize] = true;
+                    let (cs, ct) = ((part.s0 + part.s1) * 0.5, (part.t0 + part.t1) * 0.5);
+                    id = *children
+                        .iter()
+                        .find(|&&c| {
+                            let d = &self.nodes[c as usize].surface().expect("a quadrant").domain;
+                            (d.s0..=d.s1).contains(&cs) && (d.t0..=d.t1).contains(&ct)
+                        })
+                        .expect("a quadrant holds the part's centre");
+                }
+            }
+        }
+    }
+
+    /// Whether node `id` was split ahead of linking ([`Tree::split_for_contacts`]).
+    pub fn opened(&self, id: NodeId) -> bool {
+        self.opened.get(id as usize).copied().unwrap_or(false)
     }
 
     /// The running area sums of [`FaceDraws`], from the faces' current areas.
