@@ -219,9 +219,62 @@ fn light_surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize
 /// The transmittance of the pair `a`, `b`: [`weighted_rays`] between points of the two, with
 /// `d` the centres' distance (eq. 1 integrated over both ends).
 fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Rays {
-    let d2 = tree.node(a).centre.distance_squared(tree.node(b).centre);
+    let (ca, cb) = (tree.node(a).centre, tree.node(b).centre);
     let mut rng = SplitMix(((a as u64) << 32) ^ b as u64 ^ 0x5851_F42D_4C95_7F2D);
-    weighted_rays(ctx.occluders, d2, || (sample_point(tree, a, &mut rng), sample_point(tree, b, &mut rng)))
+    kernel_weighted_rays(ctx.occluders, ca, cb, || {
+        (sample_point(tree, a, &mut rng), sample_point(tree, b, &mut rng))
+    })
+}
+
+/// The most [`kernel_weighted_rays`] may scale the centres' model by: near pairs of clusters see
+/// each other a little brighter than their centres say (the mean of `cos cos / r^2` over the
+/// pairs of points exceeds its value at the centres), never by this much; a larger ratio is the
+/// sampling's noise where the model's cosines vanish.
+const MAX_KERNEL_RATIO: f64 = 4.0;
+
+/// The ratio of the exact kernel to the centres' model, `sum V cos_x cos_y / r^2` over `sum
+/// cos_x(w)+ cos_y(-w)+ / d^2` on the same drawn pairs (`w` the centres' direction, each drawn
+/// face's own cosine in it: the lobes are sums of those), as [`Rays::weighted`]: the solve's
+/// cluster transfer is the model times it. Drawn pairs that do not face each other count in the
+/// model's sum only. Falls back to [`weighted_rays`]' `d^2/r^2` weight where no drawn pair
+/// faces along `w`.
+pub(crate) fn kernel_weighted_rays(
+    occluders: Option<&Occluders>,
+    ca: DVec3,
+    cb: DVec3,
+    mut draw: impl FnMut() -> (End, End),
+) -> Rays {
+    let d2 = ca.distance_squared(cb);
+    let w = (cb - ca).normalize_or_zero();
+    let mut rays = Rays { facing: 0, arrived: 0, weighted: 0.0 };
+    let (mut exact, mut model, mut distance_only) = (0.0, 0.0, 0.0);
+    for _ in 0..4 * CLUSTER_RAYS {
+        let ((fx, x, nx), (fy, y, ny)) = draw();
+        model += nx.dot(w).max(0.0) * ny.dot(-w).max(0.0);
+        let d = y - x;
+        let (cx, cy) = (nx.dot(d), ny.dot(-d));
+        if cx <= 0.0 || cy <= 0.0 {
+            continue;
+        }
+        rays.facing += 1;
+        if occluders.is_none_or(|occ| occ.segment_visible(x, y, fx, fy)) {
+            rays.arrived += 1;
+            let r2 = d.length_squared();
+            exact += cx * cy / (r2 * r2) * d2;
+            distance_only += d2 / r2;
+        }
+        if rays.facing == CLUSTER_RAYS {
+            break;
+        }
+    }
+    if rays.facing > 0 {
+        rays.weighted = if model > 0.0 {
+            (exact / model).min(MAX_KERNEL_RATIO)
+        } else {
+            distance_only / rays.facing as f64
+        };
+    }
+    rays
 }
 
 /// An end of a sampled segment: face, position, normal.
