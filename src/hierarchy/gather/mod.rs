@@ -17,16 +17,18 @@
 //! hemisphere bound, [`crate::hemisphere`]) and `E_d` the lights' direct irradiance at the point.
 //! A corner inside another closed surface receives nothing ([`crate::solids`]).
 //!
-//! Two ways to take the sources ([`Mode`]). The exhaustive gather integrates every source from
-//! the point with its own rays: a shaft query and up to nine rays per source and sub-rectangle,
-//! near sources split to the twelfth level; about 25 ms a corner on dense meshes, and its cost
-//! grows with corners x sources. The fast gather (the default) keeps the rays where the corner's
-//! own visibility decides ([`near`]): a near source (closer than [`NEAR_RATIO`] of its radius)
-//! is integrated from the point with rays tested only against the occluders in each part's own
-//! shaft, a part with none taken whole by its exact polygon form factor; a far source takes the
-//! light its link carries to the point without rays (the link's blocks evaluated at the point,
-//! or the unoccluded light times the link's transmittance), unless it is among the few that
-//! carry most of the point's light, which are cast from the point as before ([`far`]).
+//! Two ways to take the sources ([`Mode`]). The exhaustive gather ([`exhaustive`]) integrates
+//! every source from the point with its own rays: a shaft query and up to nine rays per source
+//! and sub-rectangle, near sources split to the twelfth level; its cost grows with corners x
+//! sources, and a corner under a cluster inherits all of the cluster's links. The fast gather
+//! (the default) spends the rays where the light is ([`rank`]): a cluster's sources are split
+//! once into the few brightest, which each corner below takes as its own, and a tail of
+//! irradiance lobes ([`sources`]); a corner's sources are ranked by the light they could bring
+//! it, and the brightest are cast in full (a near source by [`near`]'s recursion, whose parts
+//! keep only the occluders of their own shaft and are taken by their exact polygon form factor
+//! where none is left; a far one whole by the Gauss rule, [`far`]) until the rest could bring at
+//! most a tenth of the corner's light; those take one Gauss sum with a ray per node (a surface)
+//! or their link's transmittance (a cluster).
 //!
 //! Three things the first version lacked, measured on the 300-triangle bunny against Cycles per
 //! corner (tests/hierarchy.rs; Bunny / Ground relative RMSE at accuracy 1e-4):
