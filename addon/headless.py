@@ -16,6 +16,9 @@ given keep the file's Radiosity settings.
 before anything is changed, with one line giving the estimate, the limit and what to lower (0, the
 panel's default, is 80% of the memory available when the bake starts).
 
+``--method hierarchical`` is the panel's Large Scenes (Hierarchy), for scenes of thousands of faces
+and more, and ``--refinement A`` its Refinement Threshold (default 0.001; smaller is finer and slower).
+
 SIGINT (Ctrl-C) or SIGTERM stops the bake within one progress poll of the library (<= 50 ms
 inside a frame), keeps every complete frame, saves them to ``--save`` and exits 130 or 143. With
 ``--save``, the file is also saved every ``--checkpoint N`` solved frames (default 10), so a killed
@@ -36,6 +39,17 @@ PREFIX = "galerkin-radiosity"
 # Solved frames between two saves of ``--save`` during a bake.
 DEFAULT_CHECKPOINT = 10
 
+# The Refinement Threshold's range (addon/core/settings.py, HIERARCHY_ACCURACY_RANGE; repeated
+# because usage is checked before the add-on package is imported).
+REFINEMENT_RANGE = (1e-6, 0.5)
+
+# The panel's names in messages, with this script's options for them.
+OPTION_NAMES = (
+    ("Memory Limit (MB)", "Memory Limit (MB), --memory-limit"),
+    ("Refinement Threshold", "Refinement Threshold (--refinement)"),
+    ("set Method to Large Scenes (Hierarchy)", "use --method hierarchical"),
+)
+
 
 def parse(argv):
     p = argparse.ArgumentParser(prog="headless.py", description=__doc__.split("\n\n")[0])
@@ -47,7 +61,11 @@ def parse(argv):
     p.add_argument("--order", type=int, help="basis order 0..3")
     p.add_argument("--quality", choices=["DRAFT", "MEDIUM", "HIGH", "ULTRA"], type=str.upper)
     p.add_argument("--tolerance", type=float)
-    p.add_argument("--method", choices=["incremental", "exact", "full"], type=str.lower)
+    p.add_argument("--method", choices=["incremental", "exact", "full", "hierarchical"], type=str.lower,
+                   help="hierarchical: for large scenes (the panel's Large Scenes (Hierarchy))")
+    p.add_argument("--refinement", type=float, metavar="A",
+                   help="the hierarchical method's Refinement Threshold: smaller is finer and slower "
+                        "(default 0.001)")
     p.add_argument("--threads", type=int, help="0 = all cores")
     p.add_argument("--memory-limit", type=int, metavar="MB",
                    help="refuse a bake that would need more than MB megabytes, at once "
@@ -71,6 +89,11 @@ def parse(argv):
     args = p.parse_args(argv)
     if not args.progress_interval >= 0:
         p.error(f"--progress-interval {args.progress_interval}: must be at least 0")
+    if args.refinement is not None:
+        lo, hi = REFINEMENT_RANGE
+        if not lo <= args.refinement <= hi:  # also NaN; Blender would clamp it silently
+            p.error(f"--refinement {args.refinement:g}: must be in {lo:g}..{hi:g} "
+                    "(smaller is finer and slower; default 0.001)")
     if args.memory_limit is not None and args.memory_limit < 0:
         p.error(f"--memory-limit {args.memory_limit}: must be 0 (automatic) or more megabytes")
     if args.checkpoint < 1:
@@ -186,7 +209,7 @@ def _main(args, bpy, pkg):
         p.frame_start, p.frame_end = frames_arg(args.frames)
     for name, attr in (("step", "frame_step"), ("order", "basis_order"), ("quality", "quality"),
                        ("tolerance", "tolerance"), ("threads", "threads"), ("subdiv", "display_subdivision"),
-                       ("memory_limit", "memory_limit_mb")):
+                       ("memory_limit", "memory_limit_mb"), ("refinement", "hierarchy_accuracy")):
         value = getattr(args, name)
         if value is not None:
             try:
@@ -270,7 +293,8 @@ def _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt, lines):
             p.use_scene_range = False
             p.frame_start, p.frame_end = settings.frame_start, frames[min(k, len(frames)) - 1]
             try:
-                job = bake.BakeJob(ctx, bake.settings_from_scene(scene), p.collection)
+                job = bake.BakeJob(ctx, bake.settings_from_scene(scene), p.collection,
+                                   log=lambda line: print(in_option_words(line)))
                 interrupt.job = job
                 # Frames left: this chunk's (known once it started) and the chunks after it.
                 lines.expect(job, len(frames) - min(k, len(frames)))
@@ -297,10 +321,15 @@ def _bake_in_chunks(args, bpy, bake, ctx, scene, interrupt, lines):
     return None
 
 
+def in_option_words(message):
+    """A message with the panel's names followed by this script's options for them."""
+    for panel, option in OPTION_NAMES:
+        message = message.replace(panel, option)
+    return message
+
+
 def fail(message):
-    # The panel's name of the memory budget, with this script's option for it.
-    message = message.replace("Memory Limit (MB)", "Memory Limit (MB), --memory-limit")
-    print(f"{PREFIX}: error: {message}", file=sys.stderr)
+    print(f"{PREFIX}: error: {in_option_words(message)}", file=sys.stderr)
     return 1
 
 

@@ -60,7 +60,7 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
         return bake.BakeJob(context, settings, context.scene.radiosity.collection, verbose=verbose)
 
     def _report_end(self, job):
-        for line in job.warnings:
+        for line in job.hints + job.warnings:
             self.report({"WARNING"}, line)
         self.report({"INFO"}, job.summary)
 
@@ -101,6 +101,8 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
         except bake.BakeError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
+        for line in job.hints:  # in the status bar while the bake runs, not only at its end
+            self.report({"WARNING"}, line)
         self._job = job
         if not job.has_next():
             job.finish()
@@ -153,9 +155,9 @@ class RADIOSITY_OT_bake(bpy.types.Operator):
             job.cancelled = True
             return self._end(context)
         if outcome is not None:
-            from .core.settings import in_panel_words
+            from .core.settings import library_message
 
-            self._error = in_panel_words(str(outcome))
+            self._error = library_message(str(outcome), job.settings.method)
             return self._end(context, failed=True)
         try:
             job.commit()  # the frame completed: keep it, even if Esc came meanwhile

@@ -31,6 +31,8 @@ class RENDER_PT_radiosity(bpy.types.Panel):
         col.prop(p, "corner_gather")
         col = layout.column()
         col.prop(p, "method")
+        if p.method == "HIERARCHICAL":
+            col.prop(p, "hierarchy_accuracy")
         col.prop(p, "threads")
         col.prop(p, "memory_limit_mb")
         col.prop(p, "collection")

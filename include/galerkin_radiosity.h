@@ -130,9 +130,10 @@ enum GrMethod
    */
   GR_METHOD_FULL = 2,
   /**
-   * Every frame from scratch on the hierarchy of clusters and elements below faces, for
-   * scenes of 10^4 faces and more; `accuracy` is its knob. Corners are the leaves'
-   * polynomials (no corner gather yet).
+   * The hierarchy of clusters and elements below faces, for scenes of 10^4 faces and more;
+   * `accuracy` is its knob. A frame after the first is updated from the one before (the
+   * links a move touched linked again, the solve warm-started); corners are gathered with
+   * `corner_gather`, else read from the leaves' polynomials.
    */
   GR_METHOD_HIERARCHICAL = 3,
 };

@@ -88,6 +88,8 @@ TABLES: dict[str, Table | None] = {
                             "(the same run)"),
     "hierarchy-separation": Table("cargo bench --bench hierarchy", 3,
                                   "cargo bench --bench hierarchy -- --quick", "(the same run)"),
+    "hierarchy-light": Table("cargo bench --bench hierarchy", 4,
+                             "cargo bench --bench hierarchy -- --quick", "(the same run)"),
     "gather-real": Table("cargo bench --bench gather", 0, "cargo bench --bench gather -- --quick",
                          "about 2 min"),
     # A fresh clone's `.ci/run` (= scripts/test.sh): its stage lines kept in docs/test-stages.log.

@@ -83,7 +83,7 @@ if [ "$PYTHON_TESTS" = 1 ]; then
     stage "ruff" .venv/bin/ruff check addon tests/python tools
     stage "pytest under bpy" limited 2400 .venv/bin/python -m pytest -q tests/python
     # Blender 4.5 LTS: the add-on's install, headless, bake, progress, cancel, re-bake and live,
-    # export, lights and clear tests under the bpy 4.5 module (.venv45, 1 GB, made in the
+    # export, lights, clear and hierarchy tests under the bpy 4.5 module (.venv45, 1 GB, made in the
     # background above; about 30 s to run). The World's Cycles comparison runs under 5.0 only: under
     # 4.5 it would check Cycles again (24 s), while the World's reading is in the other light tests. SKIP_BPY45=1 skips it; BPY45_PYTHON names another Python
     # with bpy 4.5 (then no venv is made).
@@ -98,6 +98,7 @@ if [ "$PYTHON_TESTS" = 1 ]; then
             tests/python/test_bake.py tests/python/test_cancel_and_errors.py \
             tests/python/test_rebake_and_live.py tests/python/test_export_options.py \
             tests/python/test_lights.py tests/python/test_clear_leftovers.py tests/python/test_eevee.py \
+            tests/python/test_hierarchy.py \
             --deselect tests/python/test_lights.py::test_a_room_lit_by_the_world_agrees_with_cycles
     fi
 fi

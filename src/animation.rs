@@ -317,7 +317,10 @@ pub fn advance(
     let s = &next.settings;
     let basis = sys.basis;
     let nb = basis.len();
-    let new_elements = build_elements_reusing(next, frame, basis, &sys.elements);
+    // Split faces keep their parts (crate::contact_split), decided when the system was built.
+    let faces = build_elements_reusing(next, frame, basis, &sys.elements);
+    let parts = crate::contact_split::parts_of(&faces, &sys.elements);
+    let new_elements = crate::contact_split::split_faces(faces, &parts, basis, &sys.elements);
     if new_elements.len() != sys.elements.len()
         || new_elements.iter().zip(&sys.elements).any(|(a, b)| (a.object, a.face) != (b.object, b.face))
     {

@@ -53,9 +53,25 @@ impl Estimate {
 /// The estimate for `scene` baked over `frames` frames whose results are all kept (1 for a host
 /// that reads each frame as it is solved).
 pub fn estimate(scene: &Scene, frames: u64) -> Estimate {
+    estimate_for(scene, frames, flat_elements(scene))
+}
+
+/// The elements the flat path will solve: a face each, and with visibility on the parts of
+/// the faces split where another object comes close ([`crate::contact_split::plan`], at the
+/// first frame; up to twice the faces).
+fn flat_elements(scene: &Scene) -> u64 {
+    let faces = (scene.face_count() - scene.degenerate_faces.len()) as u64;
+    if !scene.settings.visibility || faces == 0 {
+        return faces;
+    }
+    let elements = crate::system::build_elements(scene, scene.frames.0 as f64, crate::basis::Basis::new(0));
+    crate::contact_split::plan(scene, &elements).iter().map(|parts| parts.len() as u64).sum()
+}
+
+/// [`estimate`] with `n` elements.
+fn estimate_for(scene: &Scene, frames: u64, n: u64) -> Estimate {
     let s = &scene.settings;
     let nb = ((s.basis_order + 1) * (s.basis_order + 1)) as u64;
-    let n = (scene.face_count() - scene.degenerate_faces.len()) as u64;
     let pairs = n.saturating_mul(n.saturating_sub(1)) / 2;
     // Coefficients with 1/16 growth room, the pair record (two ids and a visibility), its id in
     // both adjacency lists and the column's receiver list, and a partial mask (4 u64 boxed).
@@ -123,52 +139,63 @@ pub fn check(scene: &Scene, frames: u64) -> Result<()> {
 }
 
 /// Links per face a hierarchical bake plans for at accuracy 1e-3 ([`hierarchical_estimate`]):
-/// measured 127 on the full monastery (15.9M links, 124,707 faces), 158 on the modelled Cornell
-/// box (2,521 links, 16 faces), 60 on the decimated monastery at order 2 (docs/benchmarks.md,
+/// measured 122 on the full monastery (15.2M links, 124,707 faces), 205 on the modelled Cornell
+/// box (3,279 links, 16 faces), 58 on the decimated monastery at order 1 (docs/benchmarks.md,
 /// "Hierarchy").
 const HIERARCHY_LINKS_PER_FACE: f64 = 160.0;
 
-/// How the links grow as the accuracy tightens: the Cornell box's 390, 2,521 and 13,187 links at
-/// 1e-2, 1e-3 and 1e-4 are a power of 0.76 of 1 / accuracy.
+/// How the links grow as the accuracy tightens: the Cornell box's 514, 3,279 and 18,912 links at
+/// 1e-2, 1e-3 and 1e-4 are about a power of 0.76 of 1 / accuracy.
 const HIERARCHY_LINK_GROWTH: f64 = 0.76;
+
+/// Blocked and idle pairs the hierarchy keeps per link (for the gather and for updates): 6.3 on
+/// the full monastery (43.7M and 51.0M for 15.2M links).
+const HIERARCHY_KEPT_PAIRS_PER_LINK: u64 = 7;
+
+/// Links with all their coefficients at accuracy 1e-3, whatever the scene's size: every other
+/// surface link is light (one `G^00` each way, `hierarchy::coupling::LIGHT_SHARE`), so a full
+/// link carries a share of the bar and their number follows the accuracy, not the faces
+/// (the Cornell box: about 3,000; the full monastery: 5,049 with blocks).
+const HIERARCHY_FULL_LINKS: f64 = 20_000.0;
 
 /// What a hierarchical bake ([`crate::session::Method::Hierarchical`]) will need. Its links grow
 /// about linearly with the faces, not with their pairs, and how many there are is known only
 /// once the oracle has decided them: the links are `faces x` [`HIERARCHY_LINKS_PER_FACE`] scaled
-/// by `(1e-3 / accuracy)^`[`HIERARCHY_LINK_GROWTH`], each its record, both `nb x nb` f32
-/// transfers (as if every link joined two surfaces), its allocation and its two entries of the
-/// solve's incoming lists, twice over (the link vector's growth room, and a batch of computed
-/// links held before they are stored). Nodes are two per face (the face and its share of the
-/// clusters) and one per four links (the quadrants split for them: 2,217 nodes for 3,572 links
-/// on the 91-face Cornell box at order 2, about 250k for 15.9M on the monastery), each its
-/// record, moments, the solve's three coefficient vectors and its mixer's columns. Elements and results as
-/// [`estimate`]; no corner gather (the hierarchy's corners come from its leaves). Against the
-/// measured peaks: the full monastery at order 1, 6.4 GiB (about 12 GB estimated); the decimated
-/// one at order 2, 56 MB (0.3 GB estimated).
+/// by `(1e-3 / accuracy)^`[`HIERARCHY_LINK_GROWTH`]. Each link has its record (twice: the
+/// vector's growth room), its two entries of the solve's incoming lists, its packed constant
+/// terms, and [`HIERARCHY_KEPT_PAIRS_PER_LINK`] blocked or idle pairs (twice); of them at most
+/// [`HIERARCHY_FULL_LINKS`] (scaled alike) also hold two `nb x nb` f32 blocks, their allocation
+/// and the solve's packed copy. Nodes are two per face (the face and its share of the clusters)
+/// and one per full link (the quadrants split where the light asks for them: 2,785 leaves for
+/// 3,279 links on the modelled Cornell box), each its record, moments, the solve's three
+/// coefficient vectors and its mixer's columns. Elements and results as [`estimate`]. Against the measured peaks: the full monastery at
+/// order 1, 2.2 GB (4.3 GB estimated without the gather); a 9,912-face crop of it, 104 MB
+/// (0.33 GB).
 pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
     let s = &scene.settings;
     let nb = ((s.basis_order + 1) * (s.basis_order + 1)) as u64;
-    let flat = estimate(scene, frames);
     let faces = (scene.face_count() - scene.degenerate_faces.len()) as u64;
+    // Elements and results as the flat path's without its contact split (the hierarchy splits
+    // faces by its own rule, counted in its nodes).
+    let flat = estimate_for(scene, frames, faces);
     let growth = (1e-3 / s.accuracy.clamp(1e-12, 1.0)).powf(HIERARCHY_LINK_GROWTH);
-    let links_per_face = (HIERARCHY_LINKS_PER_FACE * growth).max(1.0) as u64;
-    // A link's record, its two blocks, its two incoming entries, and the solve's copy of its
-    // blocks packed by receiver (`hierarchy::solve::ReceivedBlocks`) with their two sources.
-    let per_link = size_of::<crate::hierarchy::coupling::Link>() as u64
-        + 16
-        + 2 * nb * nb * 4
+    let link_count = faces.saturating_mul((HIERARCHY_LINKS_PER_FACE * growth).max(1.0) as u64);
+    let full_count = link_count.min((HIERARCHY_FULL_LINKS * growth) as u64);
+    let per_link = 2 * size_of::<crate::hierarchy::coupling::Link>() as u64
         + 2 * 8
-        + 2 * nb * nb * 4
-        + 2 * 4;
-    let link_count = faces.saturating_mul(links_per_face);
-    let links = link_count.saturating_mul(per_link).saturating_mul(2);
-    let nodes = faces.saturating_mul(2).saturating_add(link_count / 4);
+        + 2 * 8
+        + 2 * 8 * HIERARCHY_KEPT_PAIRS_PER_LINK;
+    let per_full_link = 2 * nb * nb * 4 + 16 + 2 * nb * nb * 4;
+    let links = link_count.saturating_mul(per_link).saturating_add(full_count.saturating_mul(per_full_link));
+    let nodes = faces.saturating_mul(2).saturating_add(full_count);
     // The solve's Anderson mixer holds `2 depth + 4` copies of the leaves' coefficients
     // (`hierarchy::solve::Accelerated`); most nodes are leaves.
     let mixer = (2 * crate::hierarchy::solve::ANDERSON_DEPTH as u64 + 4) * nb * 3 * 8;
     let per_node =
         size_of::<crate::hierarchy::tree::Node>() as u64 + 16 + nb * 8 + 3 * nb * 3 * 8 + mixer + 64;
     let elements = flat.elements.saturating_add(nodes.saturating_mul(per_node));
+    // The hierarchy's corner gather keeps nothing per corner between points but its values,
+    // which the results count.
     Estimate { links, gather: 0, elements, results: flat.results }
 }
 

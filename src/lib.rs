@@ -10,6 +10,7 @@
 pub mod animation;
 pub mod basis;
 pub mod budget;
+pub mod contact_split;
 pub mod diagnose;
 pub mod error;
 pub mod ffi;

@@ -254,7 +254,7 @@ impl Session {
 
     /// Whether the readable frame is a preview not yet refined.
     pub fn unrefined(&self) -> bool {
-        self.unrefined && self.system.is_some()
+        self.unrefined && (self.system.is_some() || self.hierarchical.is_some())
     }
 
     /// Brings the readable frame from a preview to what [`Session::solve_frame`] gives without
@@ -267,13 +267,27 @@ impl Session {
     /// inside the gather, the next gather starts afresh). After a cancelled
     /// [`Session::solve_frame`] the readable frame's solution is back but its links are the
     /// cancelled frame's, so the frame is then built and solved afresh
-    /// ([`Refinement::rebuilt`]).
+    /// ([`Refinement::rebuilt`]). On [`Method::Hierarchical`] the preview is updated with
+    /// nothing moved (its links kept, the solve warm-started to the tolerance, relinked where
+    /// the brighter solution asks for it) and its corners gathered.
     pub fn refine(&mut self, progress: Progress) -> Result<Option<Refinement>> {
         if !self.unrefined() {
             return Ok(None);
         }
         let frame = self.frame.expect("a system is only kept with its frame");
         let placed = self.scene_at(frame);
+        if self.method == Method::Hierarchical && self.hierarchical.is_some() {
+            // The frame updated from its preview with nothing moved: its links kept, the solve
+            // warm-started to the scene's tolerance, then its corners gathered.
+            let start = Instant::now();
+            let s = self.solve_hierarchical(&placed, frame, start, false, progress)?;
+            return Ok(Some(Refinement {
+                solve_seconds: s.solve_seconds,
+                shots: s.shots,
+                rebuilt: s.full_rebuild.then_some(s.kernel_seconds),
+                gather: placed.settings.corner_gather.then_some((s.gather_seconds, GatherStats::default())),
+            }));
+        }
         if self.stale {
             // The next frame's update was cancelled: its solution was put back, its links were
             // not, and shooting through them would mix the two frames. Solved afresh.
@@ -409,7 +423,7 @@ impl Session {
             placed.settings.tolerance = preview_tolerance(placed.settings.tolerance);
         }
         if self.method == Method::Hierarchical {
-            return self.solve_hierarchical(&placed, frame, start, progress);
+            return self.solve_hierarchical(&placed, frame, start, self.preview, progress);
         }
         let gather = placed.settings.corner_gather && !self.preview;
         let incremental = self.method != Method::Full && !self.stale;
@@ -515,6 +529,7 @@ impl Session {
         placed: &Scene,
         frame: f64,
         start: Instant,
+        preview: bool,
         progress: Progress,
     ) -> Result<FrameStats> {
         // Nothing with area to link: the flat path's frame of exitances (as a flat session bakes
@@ -532,7 +547,7 @@ impl Session {
         }
         let mut settings = crate::hierarchy::HierarchySettings::of(&placed.settings);
         // A preview reads the leaves, as the flat path's preview skips its gather.
-        settings.corner_gather &= !self.preview;
+        settings.corner_gather &= !preview;
         // A later frame starts from the last one's hierarchy and solution, unless an update
         // failed on its way (it took the links) or the surfaces were replaced since.
         let previous = self.hierarchical.as_mut().filter(|_| !self.stale);
@@ -560,11 +575,12 @@ impl Session {
             links_recomputed: h.links - h.kept_links,
             gather_seconds: h.gather_seconds,
             full_rebuild: !h.updated,
-            preview: self.preview,
+            preview,
             ..Default::default()
         };
         self.hierarchical = Some(solved);
         self.frame = Some(frame);
+        self.unrefined = preview;
         Ok(stats)
     }
 

@@ -203,7 +203,15 @@ impl System {
             adaptive: s.adaptive_quadrature,
         };
         let start = Instant::now();
-        let elements = build_elements(scene, frame, basis);
+        let faces = build_elements(scene, frame, basis);
+        // Faces split where another object comes close (crate::contact_split): only shadows
+        // need it, and there are none without visibility.
+        let elements = if s.visibility {
+            let parts = crate::contact_split::plan(scene, &faces);
+            crate::contact_split::split_faces(faces, &parts, basis, &[])
+        } else {
+            faces
+        };
         let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
         let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
         let geom = ElementGeometry::new(&patches, &ctx);
@@ -421,37 +429,41 @@ impl System {
             }
         }
         let gathered = self.corners.is_some();
-        let mut elements = self.elements.iter().enumerate().peekable();
         for (o, obj) in scene.objects.iter().enumerate() {
             for (f, face) in obj.faces.iter().enumerate() {
                 let res = &mut out[o];
-                match elements.peek() {
-                    Some((e, el)) if el.object as usize == o && el.face as usize == f => {
-                        let e = *e;
-                        elements.next();
-                        res.face_radiosity.push(to_f32(self.mean(e)));
-                        if gathered {
-                            continue;
-                        }
-                        for (s, t) in corner_params(face.len()) {
-                            let s = if self.elements[e].mirrored { 1.0 - s } else { s };
-                            let v =
-                                if face.len() == 3 && t == 1.0 { self.apex(e) } else { self.eval(e, s, t) };
-                            res.corner_radiosity.push(to_f32(v));
-                            let (rho, emission) =
-                                (self.surface_reflectance[e], self.emission[e * self.basis.len()]);
-                            res.corner_irradiance.push(to_f32(irradiance_from_radiosity(v, emission, rho)));
-                        }
+                // The face's elements (several where it was split, crate::contact_split).
+                let start = self.elements.partition_point(|e| (e.object as usize, e.face as usize) < (o, f));
+                let count = self.elements[start..]
+                    .iter()
+                    .take_while(|e| e.object as usize == o && e.face as usize == f)
+                    .count();
+                if count == 0 {
+                    // A skipped zero-area face shows its own exitance.
+                    let e = to_f32(scene.emission_of(o, f, obj.face_materials[f], frame));
+                    res.face_radiosity.push(e);
+                    if !gathered {
+                        res.corner_radiosity.extend(std::iter::repeat_n(e, face.len()));
+                        res.corner_irradiance.extend(std::iter::repeat_n([0.0; 3], face.len()));
                     }
-                    _ => {
-                        // A skipped zero-area face shows its own exitance.
-                        let e = to_f32(scene.emission_of(o, f, obj.face_materials[f], frame));
-                        res.face_radiosity.push(e);
-                        if !gathered {
-                            res.corner_radiosity.extend(std::iter::repeat_n(e, face.len()));
-                            res.corner_irradiance.extend(std::iter::repeat_n([0.0; 3], face.len()));
-                        }
-                    }
+                    continue;
+                }
+                let (mut sum, mut area) = ([0.0; 3], 0.0);
+                for e in start..start + count {
+                    let (m, a) = (self.mean(e), self.elements[e].area);
+                    (0..3).for_each(|c| sum[c] += m[c] * a);
+                    area += a;
+                }
+                res.face_radiosity.push(to_f32(sum.map(|x| x / area.max(f64::MIN_POSITIVE))));
+                if gathered {
+                    continue;
+                }
+                for (s, t) in corner_params(face.len()) {
+                    let (e, ls, lt) = self.element_of_face(o, f, s, t).expect("a corner lies on its face");
+                    let v = if face.len() == 3 && t == 1.0 { self.apex(e) } else { self.eval(e, ls, lt) };
+                    res.corner_radiosity.push(to_f32(v));
+                    let (rho, emission) = (self.surface_reflectance[e], self.emission[e * self.basis.len()]);
+                    res.corner_irradiance.push(to_f32(irradiance_from_radiosity(v, emission, rho)));
                 }
             }
         }

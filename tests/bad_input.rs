@@ -3,7 +3,11 @@
 use std::process::Command;
 
 fn bake(scene: &str) -> (i32, String) {
-    let dir = std::env::temp_dir().join(format!("gr-bad-{}-{}", std::process::id(), scene.len()));
+    // A directory of its own per call: tests run in parallel, and two scenes of the same length
+    // (a valid quad and one with a vertex index out of range) once shared one and raced.
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("gr-bad-{}-{call}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let input = dir.join("scene.json");
     std::fs::write(&input, scene).unwrap();

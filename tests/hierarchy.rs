@@ -40,8 +40,13 @@ fn closed_box_balances_with_clusters() {
 fn on_the_faces_alone_the_hierarchy_is_the_flat_system() {
     let settings = Settings { basis_order: 2, tolerance: 1e-6, ..Default::default() };
     let scene = cornell_box(2, settings);
-    let hs =
-        HierarchySettings { max_depth: 0, clusters: false, near: NearRule::Adaptive, ..Default::default() };
+    let hs = HierarchySettings {
+        max_depth: 0,
+        clusters: false,
+        near: NearRule::Adaptive,
+        light_links: false,
+        ..Default::default()
+    };
     let h = solve_frame(&scene, 0.0, &hs, &no_progress).unwrap();
     let mut flat = System::build(&scene, 0.0, &no_progress).unwrap();
     flat.solve(1e-6, &|| false).unwrap();
@@ -105,6 +110,54 @@ fn the_hierarchy_refines_the_cornell_box_towards_the_fine_solution() {
     let (e_h, e_flat) = (rms(&got), rms(&before));
     assert!(e_h < e_flat, "hierarchy {e_h} vs flat on the same faces {e_flat}");
     assert!(e_h < 0.03, "hierarchy off the fine solution by {e_h} (rms over objects)");
+}
+
+/// Light links (issue 20): a surface link that can carry only a small share of the accuracy's
+/// power keeps `G^00` alone, from a 2 x 2 rule and the share of four segments that arrive
+/// (`coupling::Coupling::Constants`). On the decimated monastery, where nearly every surface
+/// link is light, the per-face means against a fine reference (every link in full, accuracy
+/// 2e-5) are no further off than with every link in full at the same accuracy.
+#[test]
+fn light_links_are_as_accurate_as_full_links() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real");
+    let mut scene = read_scene(&dir.join("monastery_scene.json")).unwrap();
+    scene.settings.basis_order = 1;
+    scene.settings.corner_gather = false;
+    let solve = |hs: HierarchySettings| solve_frame(&scene, 0.0, &hs, &no_progress).unwrap();
+    let full = HierarchySettings { light_links: false, ..HierarchySettings::of(&scene.settings) };
+    let light = solve(HierarchySettings { light_links: true, ..full });
+    assert!(
+        light.stats.constant_links > light.stats.surface_links,
+        "{} light links, {} in full: nothing tested",
+        light.stats.constant_links,
+        light.stats.surface_links
+    );
+    let reference = face_means(&solve(HierarchySettings { accuracy: 2e-5, ..full }));
+    // Over the lit faces: the light's own exitance would dominate the norm.
+    let lit: Vec<bool> = light
+        .hierarchy
+        .tree
+        .faces
+        .iter()
+        .map(|e| scene.materials[e.material as usize].emission.iter().all(|&x| x == 0.0))
+        .collect();
+    let off = |h: &galerkin_radiosity::hierarchy::HierarchicalFrame| {
+        let (num, den) = face_means(h)
+            .iter()
+            .zip(&reference)
+            .zip(&lit)
+            .filter(|(_, l)| **l)
+            .fold((0.0, 0.0), |(n, d), ((g, w), _)| (n + (g - w).powi(2), d + w * w));
+        (num / den).sqrt()
+    };
+    let (e_light, e_full) = (off(&light), off(&solve(full)));
+    println!("per-face error against the reference: light links {e_light:.4}, full {e_full:.4}");
+    assert!(e_light < 1.05 * e_full, "light links {e_light} vs full {e_full}");
+}
+
+/// Each face's mean radiosity (red channel; the scenes here are grey) of a hierarchical frame.
+fn face_means(h: &galerkin_radiosity::hierarchy::HierarchicalFrame) -> Vec<f64> {
+    (0..h.hierarchy.tree.faces.len()).map(|f| h.face_mean(f)[0]).collect()
 }
 
 /// A real mesh in CI: the pybullet monastery decimated to 1,000 triangles on a ground, lit by
@@ -249,4 +302,46 @@ fn assert_faces_agree(
             }
         }
     }
+}
+
+/// A hierarchical session previewing frames 2-4 (a host scrubbing the timeline: looser solves,
+/// corners from the leaves) leaves each frame unrefined; refining frame 4 (an update in which
+/// nothing moved, solved to the tolerance, then its corners gathered) gives the corners of a
+/// session solving every frame in full (measured 7.9e-8 of the peak apart; the preview's own
+/// corners, from the leaves, 2.0e-3).
+#[test]
+fn a_refined_hierarchical_preview_equals_solving_every_frame() {
+    let settings = Settings { basis_order: 1, tolerance: 1e-5, ..Settings::default() };
+    let scene = galerkin_radiosity::scenes::cornell_box_animated(2, 4, settings);
+    let corners = |s: &Session| -> Vec<[f32; 3]> {
+        s.face_results().unwrap().into_iter().flat_map(|r| r.corner_radiosity).collect()
+    };
+    let mut every = Session::new(scene.clone(), Method::Hierarchical).unwrap();
+    let mut preview = Session::new(scene, Method::Hierarchical).unwrap();
+    every.solve_frame(1.0, &no_progress).unwrap();
+    preview.solve_frame(1.0, &no_progress).unwrap();
+    assert!(!preview.unrefined());
+    preview.set_preview(true);
+    for f in 2..=4 {
+        every.solve_frame(f as f64, &no_progress).unwrap();
+        let stats = preview.solve_frame(f as f64, &no_progress).unwrap();
+        assert!(stats.preview && stats.gather_seconds == 0.0, "frame {f}: {stats:?}");
+        assert!(preview.unrefined(), "frame {f}");
+    }
+    let before = corners(&preview);
+    let r = preview.refine(&no_progress).unwrap().expect("frame 4 is a preview");
+    assert!(r.gather.is_some(), "corner_gather is on: {r:?}");
+    assert!(!preview.unrefined());
+    assert!(preview.refine(&no_progress).unwrap().is_none(), "nothing left to refine");
+    let want = corners(&every);
+    let peak = want.iter().flatten().fold(0.0f32, |m, x| m.max(*x));
+    let off = |got: &[[f32; 3]]| {
+        got.iter().zip(&want).flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).abs())).fold(0.0, f32::max)
+            / peak
+    };
+    let (preview_off, refined_off) = (off(&before), off(&corners(&preview)));
+    println!(
+        "frame 4's corners off the full chain's, of the peak: preview {preview_off:.2e}, refined {refined_off:.2e}"
+    );
+    assert!(refined_off < 1e-5 && preview_off > 1e-4, "refined {refined_off}, preview {preview_off}");
 }

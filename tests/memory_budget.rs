@@ -114,6 +114,34 @@ fn a_scene_inside_its_budget_bakes() {
     assert!(budget::check(&scene, 100_000).is_err());
 }
 
+/// The hierarchical estimate bounds what a real hierarchical frame's links hold (their records
+/// and blocks, the incoming lists, the blocked and idle pairs), on a real mesh where nearly every
+/// link is light and on a box where most are full, at orders 1 and 2.
+#[test]
+fn the_hierarchical_estimate_bounds_a_real_frames_links() {
+    use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real");
+    let monastery = galerkin_radiosity::scene::json::read_scene(&dir.join("monastery_scene.json")).unwrap();
+    let cornell = scenes::cornell_box(4, Settings::default());
+    for mut scene in [monastery, cornell] {
+        scene.settings.corner_gather = false;
+        for order in [1, 2] {
+            scene.settings.basis_order = order;
+            let e = budget::hierarchical_estimate(&scene, 1);
+            let hs = HierarchySettings::of(&scene.settings);
+            let h = solve_frame(&scene, 0.0, &hs, &galerkin_radiosity::system::no_progress).unwrap();
+            let kept = (h.hierarchy.blocked.len() + h.hierarchy.idle.len()) as u64 * 8;
+            let held = h.stats.link_bytes as u64 + 16 * h.stats.links as u64 + kept;
+            println!(
+                "{} faces, order {order}: links hold {held} bytes, estimated {}",
+                scene.face_count(),
+                e.links
+            );
+            assert!(held <= e.links, "{} faces, order {order}: {held} > {}", scene.face_count(), e.links);
+        }
+    }
+}
+
 /// Past the estimate (a budget set far above what the process may have), the allocator's refusal
 /// in the big arrays is an error with exit 1, not an abort: the CLI on a 1,456-face box at order 2
 /// under a 300 MB address-space limit (`prlimit --as`; one thread, whose small allocations fit).

@@ -31,7 +31,7 @@ from ..core.grids import Grid, subdivide
 from ..core.marshal import with_object_names
 from ..core.materials import radiance_from_radiosity
 from ..core.record import BakeRecord, FrameState, first_changed
-from ..core.settings import BakeSettings, SettingsError, in_panel_words
+from ..core.settings import BakeSettings, SettingsError, large_flat_hint, library_message
 from . import attributes, light_nodes, switch, world
 from .export import TopologyChanged, collect, export, sample
 
@@ -103,14 +103,29 @@ def session_key(settings: BakeSettings, exp) -> str:
 def new_session(settings: BakeSettings, exp, state: FrameState, scene_key: str) -> Held:
     b = binding()
     rho, emission = exp.materials.arrays()
+    objects = [o.data.native() for o in exp.objects]
     try:
-        session = b.Session(settings.native(), rho, emission, [o.data.native() for o in exp.objects])
+        session = b.Session(settings.native(), rho, emission, objects)
         if exp.lights:
             session.set_lights(exp.lights)
         world.apply(session, exp.world, exp.two_sided)
     except b.RadiosityError as e:
-        raise BakeError(in_panel_words(str(e))) from e
+        fits = None
+        if str(e).startswith("over the memory budget") and settings.method != "hierarchical":
+            fits = _hierarchy_fits(settings, rho, emission, objects)
+        raise BakeError(library_message(str(e), settings.method, fits)) from e
     return Held(session, scene_key, state, None, exp)
+
+
+def _hierarchy_fits(settings: BakeSettings, rho, emission, objects) -> bool:
+    """Whether a hierarchical session of the same scene passes its own memory check: the session
+    is made (the check runs before anything is allocated) and freed at once."""
+    b = binding()
+    try:
+        b.Session(settings.replace(method="hierarchical").native(), rho, emission, objects).close()
+    except b.RadiosityError:
+        return False
+    return True
 
 
 def apply_sample(h: Held, smp, state: FrameState) -> int:
@@ -192,6 +207,8 @@ class BakeJob:
         self.verbose = verbose
         self.log = log
         self.warnings: list[str] = []
+        # Advice known when the bake starts (a large scene on a flat method), logged at once.
+        self.hints: list[str] = []
         self.cancel_event = threading.Event()
         self.cancelled = False
         self.failed = False  # set by whoever catches a failure before calling finish()
@@ -258,6 +275,9 @@ class BakeJob:
         for line in (rest.problems_line(), rest.degenerate_line()):
             if line:
                 self.warnings.append(line)
+        if hint := large_flat_hint(good, s.method):
+            self.hints.append(hint)
+            self.log(f"Radiosity: note: {hint}")
         self.names = [o.obj.name for o in rest.objects]
         level = s.display_subdivision
         modes = []
@@ -625,7 +645,7 @@ class BakeJob:
         except b.RadiosityError as e:
             self.failed = True
             self.finish()
-            raise BakeError(in_panel_words(str(e))) from e
+            raise BakeError(library_message(str(e), self.settings.method)) from e
         except BaseException:
             self.failed = True
             self.finish()
@@ -654,6 +674,7 @@ def settings_from_scene(scene) -> BakeSettings:
         preview_material=p.preview_material,
         apply_to_materials=p.apply_to_materials,
         memory_limit_mb=p.memory_limit_mb,
+        hierarchy_accuracy=p.hierarchy_accuracy,
     )
 
 

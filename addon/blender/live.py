@@ -11,7 +11,8 @@ polynomials, the Galerkin solution itself). Once no frame change or move has com
 ``IDLE_SECONDS``, a timer refines the frame the timeline rests on: the rest of its solve, then its
 gather. Scrubbing pays the kernel update and a shorter solve; the resting frame gets what a bake
 gives. This needs the UI's event loop, which runs the timer; in background mode (``blender -b``)
-every frame is solved in full at once.
+every frame is solved in full at once. With Large Scenes (Hierarchy) the library refines a preview
+as an update in which nothing moved: its solve to the tolerance, then its gather.
 
 The baked switch is muted in the viewport while the preview is on, so the viewport shows the
 live attribute; turning the preview off un-mutes it. Objects whose colours need a copy (display

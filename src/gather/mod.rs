@@ -541,7 +541,7 @@ impl CornerGather {
         // are is decided again only when something moved.
         let buried = match kept_buried {
             Some(b) => b,
-            None if occluders.is_some() => buried_points(sys, scene, &patches, &points),
+            None if occluders.is_some() => buried_points(sys, scene, frame, &patches, &points),
             None => Vec::new(),
         };
         for (k, _) in buried.iter().enumerate().filter(|(_, b)| **b) {
@@ -672,8 +672,19 @@ fn foot_on(source: &Patch, foot: DVec3, radius: f64) -> Option<Touch> {
 }
 
 /// Per point, whether it lies inside another closed surface of the scene ([`Solids`]).
-fn buried_points(sys: &System, scene: &Scene, patches: &[Patch], points: &[CornerPoint]) -> Vec<bool> {
-    let solids = Solids::new(&sys.elements, scene.objects.len());
+/// The solids are made of the faces, not of the elements: a face split into parts
+/// ([`crate::contact_split`]) leaves edges that only its own parts share. (Without parts the
+/// elements are the faces: nothing more is allocated, which a bake near its memory limit needs.)
+fn buried_points(
+    sys: &System,
+    scene: &Scene,
+    frame: f64,
+    patches: &[Patch],
+    points: &[CornerPoint],
+) -> Vec<bool> {
+    let split = sys.elements.iter().any(|e| e.domain != Rect::UNIT);
+    let faces = split.then(|| crate::system::build_elements(scene, frame, crate::basis::Basis::new(0)));
+    let solids = Solids::new(faces.as_deref().unwrap_or(&sys.elements), scene.objects.len());
     if solids.is_empty() {
         return Vec::new();
     }

@@ -21,10 +21,23 @@ use crate::visibility::{Occluders, Visibility};
 /// Rays per cluster link (pairs of points that face each other).
 pub(crate) const CLUSTER_RAYS: usize = 8;
 
+/// A surface link that may carry at most this share of the oracle's bar is made light
+/// ([`Coupling::Constants`]): below [`super::refine`]'s share for shadow refinement, so that a
+/// light link is never one the oracle would split for a shadow boundary.
+pub const LIGHT_SHARE: f64 = 1.0 / 16.0;
+
+/// Gauss points per axis for a light link's outer integral.
+pub const LIGHT_POINTS: usize = 2;
+
 #[derive(Clone, Debug)]
 pub enum Coupling {
     /// `G_ab` then `G_ba`, `nb x nb` each, row = the receiver's function (eq. 6).
     Surfaces(Box<[f32]>),
+    /// Two surfaces whose link carries so little (at most [`LIGHT_SHARE`] of the oracle's bar)
+    /// that its error may be all it carries: `G^00` each way (`a` receiving from `b`, then `b`
+    /// from `a`), integrated with [`LIGHT_POINTS`] points per axis and the share of
+    /// [`crate::visibility::Occluders::share_visible`]'s segments that arrive folded in.
+    Constants { ab: f32, ba: f32 },
     /// A cluster at one end at least: the mean over sampled segments between the nodes of
     /// `V d^2 / r^2` (`transmittance` below), which turns the centres' `1/d^2` into the pair's.
     Clusters { transmittance: f32 },
@@ -46,6 +59,8 @@ pub struct LinkContext<'a> {
     rules: Vec<GaussLegendre>,
     /// How near surface pairs are integrated.
     pub near: NearRule,
+    /// The rule of light links' outer integral ([`LIGHT_POINTS`]).
+    light_rule: GaussLegendre,
 }
 
 /// How a link between two near surfaces (bounding spheres within [`SEPARATION`] radii-sums) is
@@ -61,7 +76,13 @@ pub enum NearRule {
 
 impl<'a> LinkContext<'a> {
     pub fn new(pair: PairContext<'a>, occluders: Option<&'a Occluders>) -> Self {
-        Self { pair, occluders, rules: (1..=8).map(GaussLegendre::new).collect(), near: NearRule::Coarse }
+        Self {
+            pair,
+            occluders,
+            rules: (1..=8).map(GaussLegendre::new).collect(),
+            near: NearRule::Coarse,
+            light_rule: GaussLegendre::new(LIGHT_POINTS),
+        }
     }
 }
 
@@ -76,12 +97,31 @@ pub struct Computed {
     pub blocked: bool,
 }
 
-/// Computes the link between `a` and `b`.
+/// How much of a link to compute.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Weight {
+    /// Every coefficient, visibility over the sample cells.
+    Full,
+    /// A surface pair that carries little: [`Coupling::Constants`].
+    Light,
+}
+
+/// Computes the link between `a` and `b`, in full.
 pub fn compute(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Computed {
+    compute_as(ctx, tree, a, b, Weight::Full)
+}
+
+/// Computes the link between `a` and `b`; `weight` applies to surface pairs (a cluster link is
+/// light as it is).
+pub fn compute_as(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId, weight: Weight) -> Computed {
     let (na, nb) = (tree.node(a), tree.node(b));
     match (&na.kind, &nb.kind) {
         (Kind::Surface(sa), Kind::Surface(sb)) => {
-            surfaces(ctx, (sa.face as usize, &sa.patch), (sb.face as usize, &sb.patch))
+            let (ea, eb) = ((sa.face as usize, &sa.patch), (sb.face as usize, &sb.patch));
+            match weight {
+                Weight::Full => surfaces(ctx, ea, eb),
+                Weight::Light => light_surfaces(ctx, ea, eb),
+            }
         }
         _ => {
             let rays = transmittance(ctx, tree, a, b);
@@ -136,6 +176,46 @@ fn surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize, &Pat
     Computed { coupling: Some(Coupling::Surfaces(blocks)), partial, blocked: false }
 }
 
+/// A light link between two surfaces: `G^00` both ways with [`LIGHT_POINTS`] points per axis
+/// (near pairs by the coarse analytic rule, as full links), unoccluded, times the share of a few
+/// sampled segments between them that arrive. What it leaves out (the higher coefficients, the
+/// visibility's variation over the pair) is at most what it carries, which the oracle bounds.
+fn light_surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize, &Patch)) -> Computed {
+    let none = Computed { coupling: None, partial: false, blocked: false };
+    if fa == fb || !may_face(pa, pb) || !may_face(pb, pa) {
+        return none;
+    }
+    let (arrived, tested) = ctx.occluders.map_or((1, 1), |o| o.share_visible(fa, pa, fb, pb));
+    if arrived == 0 {
+        return Computed { blocked: true, ..none };
+    }
+    let p = PairContext {
+        basis: crate::basis::Basis::new(0),
+        rule: &ctx.light_rule,
+        vis_axis: ctx.pair.vis_axis,
+        adaptive: ctx.pair.adaptive,
+    };
+    let ((ca, ra), (cb, rb)) = (pa.bounding_sphere(), pb.bounding_sphere());
+    let ratio = ca.distance(cb) / (ra + rb);
+    let c = if ratio > SEPARATION {
+        let rule = &ctx.rules[p.points_for(ratio).min(LIGHT_POINTS) - 1];
+        let make =
+            |patch: &Patch| Samples::new(patch, &crate::geometry::Rect::UNIT, rule, p.basis, p.vis_axis);
+        let (x, y) = (make(pa), make(pb));
+        integrate_pair(&p, pa, pb, |second, _| if second { &y } else { &x }, &Visibility::Full)
+    } else {
+        let mut c = crate::kernel::pair::PairCoefficients::zeros(1);
+        integrate_near_coarse(&p, pa, pb, &Visibility::Full, &mut c.ij, &mut c.ji);
+        c
+    };
+    let share = arrived as f64 / tested as f64;
+    let (ab, ba) = ((c.ij[0] * share) as f32, (c.ji[0] * share) as f32);
+    if ab == 0.0 && ba == 0.0 {
+        return none;
+    }
+    Computed { coupling: Some(Coupling::Constants { ab, ba }), partial: arrived < tested, blocked: false }
+}
+
 /// The transmittance of the pair `a`, `b`: [`weighted_rays`] between points of the two, with
 /// `d` the centres' distance (eq. 1 integrated over both ends).
 fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Rays {
@@ -188,22 +268,14 @@ pub(crate) struct Rays {
     pub weighted: f64,
 }
 
-/// A point below node `id` (face, position, normal), area-weighted down the tree.
-pub(crate) fn sample_point(tree: &Tree, mut id: NodeId, rng: &mut SplitMix) -> (u32, DVec3, DVec3) {
-    loop {
-        let node = tree.node(id);
-        match &node.kind {
-            Kind::Cluster { children } => {
-                let (l, r) = (tree.node(children[0]).area, tree.node(children[1]).area);
-                id = if rng.next() * (l + r) < l { children[0] } else { children[1] };
-            }
-            Kind::Surface(s) => {
-                let (u, v) = (rng.next(), rng.next());
-                let n = s.patch.area_vector(u, v).normalize_or_zero();
-                return (s.face, s.patch.point(u, v), n);
-            }
-        }
-    }
+/// A point below node `id` (face, position, normal): below a cluster, on a face drawn by area
+/// ([`Tree::draw_face`]); on a surface, uniform in its parameters.
+pub(crate) fn sample_point(tree: &Tree, id: NodeId, rng: &mut SplitMix) -> (u32, DVec3, DVec3) {
+    let id = if tree.node(id).is_cluster() { tree.draw_face(id, rng.next()) } else { id };
+    let Kind::Surface(s) = &tree.node(id).kind else { unreachable!("a drawn face is a surface") };
+    let (u, v) = (rng.next(), rng.next());
+    let n = s.patch.area_vector(u, v).normalize_or_zero();
+    (s.face, s.patch.point(u, v), n)
 }
 
 /// Deterministic uniform numbers in [0,1) (splitmix64).

@@ -64,6 +64,10 @@ pub struct HierarchySettings {
     pub cluster_separation: f64,
     /// How links between near surfaces are integrated.
     pub near: coupling::NearRule,
+    /// Surface links that can carry only a small share of the accuracy's power keep their
+    /// constant coefficients only, from a cheaper rule and a few visibility segments
+    /// ([`coupling::Coupling::Constants`]); off: every surface link in full.
+    pub light_links: bool,
     /// Corners gathered through the links ([`gather`]); else read from the leaf polynomials.
     pub corner_gather: bool,
 }
@@ -87,6 +91,7 @@ impl Default for HierarchySettings {
             clusters: true,
             cluster_separation: 3.0,
             near: coupling::NearRule::Coarse,
+            light_links: true,
             corner_gather: false,
         }
     }
@@ -99,7 +104,10 @@ pub struct HierarchyStats {
     pub nodes: usize,
     pub leaves: usize,
     pub links: usize,
+    /// Links between surfaces with all their coefficients, and those that carry so little that
+    /// they keep only the constant ones ([`coupling::Coupling::Constants`]).
     pub surface_links: usize,
+    pub constant_links: usize,
     pub cluster_links: usize,
     pub link_bytes: usize,
     pub sweeps: usize,
@@ -142,7 +150,13 @@ pub fn solve_frame(
     let reflectance = face_reflectance(scene, &faces);
     let lit = Lighting::new(scene, frame, &faces);
     let total_area: f64 = faces.iter().map(|e| e.area).sum();
-    let tree = Tree::new(faces, reflectance, basis);
+    // Faces split ahead where another object comes close, as the flat path splits them: only
+    // shadows need it, and there are none without visibility.
+    let contacts = scene.settings.visibility.then(|| crate::contact_split::plan(scene, &faces));
+    let mut tree = Tree::new(faces, reflectance, basis);
+    if let Some(parts) = contacts {
+        tree.split_for_contacts(&parts);
+    }
     let mut state = State::new(&tree);
     state.add_sources(&tree, &lit.emission, lit.lights.as_ref());
     state.start_from_sources(&tree);
@@ -192,6 +206,7 @@ impl Oracle {
             max_depth: hs.max_depth,
             clusters: hs.clusters,
             cluster_separation: hs.cluster_separation,
+            light_links: hs.light_links,
         }
     }
 }
@@ -291,7 +306,9 @@ fn finish(
     stats.links = hierarchy.links.len();
     stats.surface_links =
         hierarchy.links.iter().filter(|l| matches!(l.coupling, coupling::Coupling::Surfaces(_))).count();
-    stats.cluster_links = stats.links - stats.surface_links;
+    stats.constant_links =
+        hierarchy.links.iter().filter(|l| matches!(l.coupling, coupling::Coupling::Constants { .. })).count();
+    stats.cluster_links = stats.links - stats.surface_links - stats.constant_links;
     stats.link_bytes = hierarchy
         .links
         .iter()
@@ -299,7 +316,7 @@ fn finish(
             std::mem::size_of::<coupling::Link>()
                 + match &l.coupling {
                     coupling::Coupling::Surfaces(b) => 4 * b.len(),
-                    coupling::Coupling::Clusters { .. } => 0,
+                    coupling::Coupling::Constants { .. } | coupling::Coupling::Clusters { .. } => 0,
                 }
         })
         .sum();

@@ -13,7 +13,7 @@
 use rayon::prelude::*;
 
 pub use super::coupling::Link;
-use super::coupling::{self, LinkContext};
+use super::coupling::{self, LinkContext, Weight};
 use crate::budget;
 use crate::error::Result;
 
@@ -34,6 +34,9 @@ pub struct Oracle {
     /// Cluster links need their bounding spheres this many radii-sums apart
     /// ([`super::HierarchySettings::cluster_separation`]).
     pub cluster_separation: f64,
+    /// Surface links that carry at most [`coupling::LIGHT_SHARE`] of the threshold are made
+    /// light ([`super::HierarchySettings::light_links`]).
+    pub light_links: bool,
 }
 
 /// Hears the share of a batch of links computed (0 to 1); `false` cancels the refinement.
@@ -42,6 +45,58 @@ pub type LinkProgress<'a> = &'a (dyn Fn(f64) -> bool + Sync);
 /// Links computed between two progress reports: a few hundred ms on two cores for the costliest
 /// (near, partly visible) pairs, far less than a sweep for the usual ones.
 const LINK_CHUNK: usize = 4096;
+
+/// Accepted pairs decided before they are computed: a bound on the refinement's own memory.
+const BATCH: usize = 1 << 20;
+
+/// Pairs taken off the work stack and decided at once, in parallel.
+const DECIDE_CHUNK: usize = 1 << 14;
+
+/// How many pairs of distinct faces a pair of nodes stands for: the refinement's progress is the
+/// share of its work's pairs of faces settled (monotone, and 1 at the end, though a dense corner
+/// of a scene costs more per pair than an open one).
+struct PairSpace {
+    /// Faces below each cluster present when the refinement starts (the nodes it adds are
+    /// surfaces).
+    faces: Vec<f64>,
+}
+
+impl PairSpace {
+    fn new(tree: &Tree) -> Self {
+        let mut faces = vec![0.0; tree.nodes.len()];
+        // Children come before their parents in the node list: clusters are appended above
+        // their members, quadrants after their face.
+        for (id, node) in tree.nodes.iter().enumerate() {
+            faces[id] = match &node.kind {
+                Kind::Cluster { children } => children.iter().map(|&c| faces[c as usize]).sum(),
+                Kind::Surface(s) => 0.25f64.powi(s.depth as i32),
+            };
+        }
+        Self { faces }
+    }
+
+    /// Faces (or shares of a face) below node `id`.
+    fn below(&self, tree: &Tree, id: NodeId) -> f64 {
+        match (self.faces.get(id as usize), &tree.node(id).kind) {
+            (_, Kind::Surface(s)) => 0.25f64.powi(s.depth as i32),
+            (Some(&n), Kind::Cluster { .. }) => n,
+            (None, Kind::Cluster { .. }) => unreachable!("the refinement adds no clusters"),
+        }
+    }
+
+    /// Pairs of distinct faces between `a` and `b` (within `a` when they are the same node);
+    /// 0 for two parts of one face.
+    fn faces_between(&self, tree: &Tree, a: NodeId, b: NodeId) -> f64 {
+        let (na, nb) = (tree.node(a), tree.node(b));
+        if let (Some(x), Some(y)) = (na.surface(), nb.surface())
+            && x.face == y.face
+        {
+            return 0.0;
+        }
+        let n = self.below(tree, a);
+        if a == b { 0.5 * n * (n - 1.0).max(0.0) } else { n * self.below(tree, b) }
+    }
+}
 
 /// Partially visible links are split while they can carry more than this share of the threshold.
 const PARTIAL_SHARE: f64 = 0.25;
@@ -105,6 +160,20 @@ impl Oracle {
         self.carried_as(tree, radiosity, a, b, false).max(self.carried_as(tree, radiosity, b, a, false))
     }
 
+    /// How much of the accepted link between `a` and `b` to compute: light when both are
+    /// surfaces and all it can carry is a small share of the threshold.
+    fn weight(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId) -> Weight {
+        let surfaces = !tree.node(a).is_cluster() && !tree.node(b).is_cluster();
+        if self.light_links
+            && surfaces
+            && self.pair_power(tree, radiosity, a, b) <= coupling::LIGHT_SHARE * self.threshold
+        {
+            Weight::Light
+        } else {
+            Weight::Full
+        }
+    }
+
     fn decide(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId, bar: f64) -> Verdict {
         let (na, nb) = (tree.node(a), tree.node(b));
         if let (Some(sa), Some(sb)) = (na.surface(), nb.surface())
@@ -120,6 +189,12 @@ impl Oracle {
         };
         if behind(a, b) || behind(b, a) {
             return Verdict::Skip;
+        }
+        // A surface split ahead for a contact is linked through its parts only.
+        for x in [a, b] {
+            if tree.opened(x) {
+                return Verdict::Split(x);
+            }
         }
         let separated = na.centre.distance(nb.centre) > self.cluster_separation * (na.radius + nb.radius);
         let clustered = na.is_cluster() || nb.is_cluster();
@@ -254,8 +329,11 @@ impl Hierarchy {
         let tree = &self.tree;
         let oracle = &self.oracle;
         self.links.retain(|l| {
-            // The same test that made the link, with the new brightness.
-            let keep = matches!(oracle.decide(tree, radiosity, l.a, l.b, bar), Verdict::Link);
+            // The same test that made the link, with the new brightness; a light link that may
+            // now carry more than a light link may is computed again in full.
+            let light = matches!(l.coupling, coupling::Coupling::Constants { .. });
+            let keep = matches!(oracle.decide(tree, radiosity, l.a, l.b, bar), Verdict::Link)
+                && !(light && oracle.weight(tree, radiosity, l.a, l.b) == Weight::Full);
             if !keep {
                 work.push((l.a, l.b));
             }
@@ -269,7 +347,10 @@ impl Hierarchy {
 
     /// Refines `work` into links: decide (splitting nodes) one pair at a time, compute the
     /// accepted links in parallel, and send partially visible ones that carry enough back.
-    /// `progress` hears the share of each batch's links computed, and may cancel between chunks.
+    /// Decisions are made in batches of at most [`BATCH`] accepted pairs, each computed before
+    /// the next is decided (a first frame of the full monastery accepts about 100M pairs).
+    /// `progress` hears the share of `work`'s pairs of faces settled so far (linked, blocked or
+    /// idle: [`PairSpace`]), and may cancel between chunks of computed links.
     fn refine_pairs(
         &mut self,
         ctx: &LinkContext,
@@ -279,74 +360,113 @@ impl Hierarchy {
         progress: LinkProgress,
     ) -> Result<()> {
         let bar = self.oracle.threshold;
+        let space = PairSpace::new(&self.tree);
+        let total: f64 = work.iter().map(|&(a, b)| space.faces_between(&self.tree, a, b)).sum();
+        let mut settled = 0.0;
+        let mut accepted = Vec::new();
+        let mut part = Vec::new();
         while !work.is_empty() {
-            let mut accepted = Vec::new();
-            while let Some((a, b)) = work.pop() {
-                if a == b {
-                    // A cluster's light among its own parts; a surface does not light itself.
-                    let children = self.tree.children(a).to_vec();
-                    for (i, &x) in children.iter().enumerate() {
-                        for &y in &children[i..] {
-                            work.push((x, y));
+            accepted.clear();
+            while accepted.len() < BATCH && !work.is_empty() {
+                // The top of the stack decided in parallel (the tree and the estimates are only
+                // read), then filed in order (splits add nodes): the same verdicts as one at a
+                // time, for every thread count.
+                let top = work.split_off(work.len().saturating_sub(DECIDE_CHUNK));
+                let tree = &self.tree;
+                let oracle = &self.oracle;
+                let verdicts: Vec<Option<(Verdict, Weight)>> = top
+                    .par_iter()
+                    .map(|&(a, b)| {
+                        (a != b).then(|| match oracle.decide(tree, radiosity, a, b, bar) {
+                            Verdict::Link => (Verdict::Link, oracle.weight(tree, radiosity, a, b)),
+                            v => (v, Weight::Full),
+                        })
+                    })
+                    .collect();
+                for (&(a, b), verdict) in top.iter().zip(verdicts).rev() {
+                    let Some((verdict, weight)) = verdict else {
+                        // A cluster's light among its own parts; a surface does not light itself.
+                        let children = self.tree.children(a).to_vec();
+                        for (i, &x) in children.iter().enumerate() {
+                            for &y in &children[i..] {
+                                work.push((x, y));
+                            }
                         }
-                    }
-                    continue;
-                }
-                match self.oracle.decide(&self.tree, radiosity, a, b, bar) {
-                    Verdict::Skip => {
-                        if !self.same_face(a, b) {
-                            budget::try_reserve(&mut self.idle, 1, LINKS)?;
-                            self.idle.push((a, b));
+                        continue;
+                    };
+                    match verdict {
+                        Verdict::Skip => {
+                            settled += space.faces_between(&self.tree, a, b);
+                            if !self.same_face(a, b) {
+                                budget::try_reserve(&mut self.idle, 1, LINKS)?;
+                                self.idle.push((a, b));
+                            }
                         }
-                    }
-                    Verdict::Link => accepted.push((a, b)),
-                    Verdict::Split(s) => {
-                        self.split_pair(s, if s == a { b } else { a }, radiosity, &mut work)?
+                        Verdict::Link => accepted.push((a, b, weight)),
+                        Verdict::Split(s) => {
+                            self.split_pair(s, if s == a { b } else { a }, radiosity, &mut work)?
+                        }
                     }
                 }
             }
-            let tree = &self.tree;
-            // The batch and the links it adds are reserved first: the allocator's refusal of the
-            // large vectors is an error (each link's own transfers are small allocations).
-            let mut computed: Vec<coupling::Computed> = budget::try_vec(accepted.len(), LINKS)?;
-            // In chunks, so that a batch of millions of links (a first frame of a large scene
-            // takes minutes) reports its progress and can be cancelled.
-            let mut part = Vec::new();
+            // In chunks, so that the batch reports its progress and can be cancelled, and so
+            // that what a chunk computed becomes links before the next is computed.
             for chunk in accepted.chunks(LINK_CHUNK) {
-                if !progress(computed.len() as f64 / accepted.len() as f64) {
+                if !progress((settled / total).min(1.0)) {
                     return Err(crate::Error::Cancelled);
                 }
+                let tree = &self.tree;
                 chunk
                     .par_iter()
-                    .map(|&(a, b)| coupling::compute(ctx, tree, a, b))
+                    .map(|&(a, b, weight)| coupling::compute_as(ctx, tree, a, b, weight))
                     .collect_into_vec(&mut part);
-                computed.append(&mut part);
-            }
-            budget::try_reserve(&mut self.links, computed.len(), LINKS)?;
-            budget::try_reserve(&mut self.idle, computed.len(), LINKS)?;
-            budget::try_reserve(&mut self.blocked, computed.len(), LINKS)?;
-            for (&(a, b), c) in accepted.iter().zip(computed) {
-                let Some(coupling) = c.coupling else {
-                    if c.blocked {
-                        self.blocked.push((a, b));
-                    } else if !self.same_face(a, b) {
-                        self.idle.push((a, b));
+                // Reserved first: the allocator's refusal of the large vectors is an error (a
+                // full link's own blocks are small allocations).
+                budget::try_reserve(&mut self.links, part.len(), LINKS)?;
+                budget::try_reserve(&mut self.idle, part.len(), LINKS)?;
+                budget::try_reserve(&mut self.blocked, part.len(), LINKS)?;
+                for (&(a, b, _), c) in chunk.iter().zip(part.drain(..)) {
+                    if self.take_computed(a, b, c, radiosity, &mut work, stats)? {
+                        settled += space.faces_between(&self.tree, a, b);
                     }
-                    continue;
-                };
-                let refine_shadow = c.partial
-                    && self.oracle.pair_power(&self.tree, radiosity, a, b) > PARTIAL_SHARE * bar
-                    && (self.oracle.splittable(&self.tree, a) || self.oracle.splittable(&self.tree, b));
-                if refine_shadow {
-                    stats.split_for_shadows += 1;
-                    let s = self.larger_splittable(a, b);
-                    self.split_pair(s, if s == a { b } else { a }, radiosity, &mut work)?;
-                } else {
-                    self.links.push(Link { a, b, coupling });
                 }
             }
         }
         Ok(())
+    }
+
+    /// Files the computed link between `a` and `b`: a link, a blocked or an idle pair (`true`:
+    /// the pair is settled), or, when a shadow boundary crosses a link that carries enough, its
+    /// larger node split onto `work` (`false`).
+    fn take_computed(
+        &mut self,
+        a: NodeId,
+        b: NodeId,
+        c: coupling::Computed,
+        radiosity: &mut Vec<f64>,
+        work: &mut Vec<(NodeId, NodeId)>,
+        stats: &mut RefineStats,
+    ) -> Result<bool> {
+        let Some(coupling) = c.coupling else {
+            if c.blocked {
+                self.blocked.push((a, b));
+            } else if !self.same_face(a, b) {
+                self.idle.push((a, b));
+            }
+            return Ok(true);
+        };
+        let refine_shadow = c.partial
+            && self.oracle.pair_power(&self.tree, radiosity, a, b) > PARTIAL_SHARE * self.oracle.threshold
+            && (self.oracle.splittable(&self.tree, a) || self.oracle.splittable(&self.tree, b));
+        if refine_shadow {
+            stats.split_for_shadows += 1;
+            let s = self.larger_splittable(a, b);
+            self.split_pair(s, if s == a { b } else { a }, radiosity, work)?;
+            Ok(false)
+        } else {
+            self.links.push(Link { a, b, coupling });
+            Ok(true)
+        }
     }
 
     /// Pairs each child of `s` (split now if it is a surface leaf) with `other`, onto `work`; new

@@ -82,12 +82,16 @@ impl Incoming {
 }
 
 /// Per receiving node, the blocks of its surface links (its side's `nb x nb`, row = its own
-/// function) packed one after the other, with each link's source: a sweep reads them in order.
+/// function) packed one after the other, with each link's source, and its constant links'
+/// `G^00` with theirs: a sweep reads them in order.
 pub struct ReceivedBlocks {
     /// `offsets[r]..offsets[r + 1]`: node `r`'s links in `sources` (and, times `nb^2`, in `blocks`).
     offsets: Vec<usize>,
     sources: Vec<NodeId>,
     blocks: Vec<f32>,
+    /// `constant_offsets[r]..constant_offsets[r + 1]`: node `r`'s constant links in `constants`.
+    constant_offsets: Vec<usize>,
+    constants: Vec<(NodeId, f32)>,
     nb: usize,
 }
 
@@ -97,24 +101,45 @@ impl ReceivedBlocks {
     pub fn new(links: &[Link], incoming: &Incoming, nb: usize) -> Result<Self> {
         let what = "the hierarchy's links packed for the solve";
         let nodes = incoming.offsets.len() - 1;
-        let surface = |&(l, _): &(u32, u8)| matches!(links[l as usize].coupling, Coupling::Surfaces(_));
-        let count = incoming.entries.iter().filter(|e| surface(e)).count();
+        let of_kind = |constant: bool| {
+            incoming
+                .entries
+                .iter()
+                .filter(|&&(l, _)| match links[l as usize].coupling {
+                    Coupling::Surfaces(_) => !constant,
+                    Coupling::Constants { .. } => constant,
+                    Coupling::Clusters { .. } => false,
+                })
+                .count()
+        };
+        let (count, constant_count) = (of_kind(false), of_kind(true));
         let mut offsets = budget::try_vec(nodes + 1, what)?;
         let mut sources = budget::try_vec(count, what)?;
         let mut blocks = budget::try_vec(count.saturating_mul(nb * nb), what)?;
+        let mut constant_offsets = budget::try_vec(nodes + 1, what)?;
+        let mut constants = budget::try_vec(constant_count, what)?;
         offsets.push(0);
+        constant_offsets.push(0);
         for r in 0..nodes {
             for &(l, side) in incoming.of(r) {
                 let link = &links[l as usize];
-                if let Coupling::Surfaces(both) = &link.coupling {
-                    let side = side as usize;
-                    sources.push(if side == 0 { link.b } else { link.a });
-                    blocks.extend_from_slice(&both[side * nb * nb..(side + 1) * nb * nb]);
+                let source = if side == 0 { link.b } else { link.a };
+                match &link.coupling {
+                    Coupling::Surfaces(both) => {
+                        let side = side as usize;
+                        sources.push(source);
+                        blocks.extend_from_slice(&both[side * nb * nb..(side + 1) * nb * nb]);
+                    }
+                    Coupling::Constants { ab, ba } => {
+                        constants.push((source, if side == 0 { *ab } else { *ba }))
+                    }
+                    Coupling::Clusters { .. } => {}
                 }
             }
             offsets.push(sources.len());
+            constant_offsets.push(constants.len());
         }
-        Ok(Self { offsets, sources, blocks, nb })
+        Ok(Self { offsets, sources, blocks, constant_offsets, constants, nb })
     }
 
     /// Node `r`'s surface links: their sources and their blocks, `nb^2` each.
@@ -122,6 +147,11 @@ impl ReceivedBlocks {
         let (a, b) = (self.offsets[r], self.offsets[r + 1]);
         let nb2 = self.nb * self.nb;
         (&self.sources[a..b], &self.blocks[a * nb2..b * nb2])
+    }
+
+    /// Node `r`'s constant links: their sources and `G^00`.
+    fn constants_of(&self, r: usize) -> &[(NodeId, f32)] {
+        &self.constants[self.constant_offsets[r]..self.constant_offsets[r + 1]]
     }
 }
 
@@ -425,11 +455,19 @@ impl State {
                     }
                 }
             }
+            // Constant links: the receiver's constant term from the source's.
+            for &(s, g) in blocks.constants_of(r) {
+                let b0 = &self.b[s as usize * nb];
+                let g = g as f64;
+                for c in 0..3 {
+                    hr[0][c] += g * b0[c];
+                }
+            }
             for &(l, side) in incoming.of(r) {
                 let link = &links[l as usize];
                 let s = if side == 0 { link.b } else { link.a } as usize;
                 match &link.coupling {
-                    Coupling::Surfaces(_) => {}
+                    Coupling::Surfaces(_) | Coupling::Constants { .. } => {}
                     Coupling::Clusters { transmittance } => {
                         let (nr, ns) = (&tree.nodes[r], &tree.nodes[s]);
                         let v = nr.centre - ns.centre;

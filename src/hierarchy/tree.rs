@@ -90,14 +90,41 @@ pub struct Tree {
     /// Each face's reflectance.
     pub reflectance: Vec<[f64; 3]>,
     rule: GaussLegendre,
+    /// Where a point below a cluster is drawn from ([`Tree::draw_face`]).
+    draws: FaceDraws,
+    /// Per node: split ahead of linking where another object comes close
+    /// ([`Tree::split_for_contacts`]), so that no link may end at it (its children, not its
+    /// polynomial, carry the contact's light). Nodes added later are not.
+    opened: Vec<bool>,
+}
+
+/// The faces in the order of the cluster tree's leaves, each cluster's faces a run of it, and
+/// the running sum of their areas: a face below a cluster drawn by area is a binary search in
+/// that cluster's run, instead of a walk down the tree with a random number per level (the
+/// cluster links' and the gather's sampled segments spent a tenth of the link phase walking).
+#[derive(Clone, Default)]
+struct FaceDraws {
+    order: Vec<NodeId>,
+    /// Per cluster node id (the build's nodes): its faces' run in `order`.
+    run: Vec<(u32, u32)>,
+    /// `area_before[k]`: the area of `order[..k]`.
+    area_before: Vec<f64>,
 }
 
 impl Tree {
     /// Clusters over `faces` (non-empty), each face a surface node.
     pub fn new(faces: Vec<Element>, reflectance: Vec<[f64; 3]>, basis: Basis) -> Self {
         assert!(!faces.is_empty(), "a tree needs a face");
-        let mut tree =
-            Tree { basis, nodes: Vec::new(), root: 0, faces, reflectance, rule: GaussLegendre::new(4) };
+        let mut tree = Tree {
+            basis,
+            nodes: Vec::new(),
+            root: 0,
+            faces,
+            reflectance,
+            rule: GaussLegendre::new(4),
+            draws: FaceDraws::default(),
+            opened: Vec::new(),
+        };
         for f in 0..tree.faces.len() {
             let e = &tree.faces[f];
             let (centre, radius) = e.patch.bounding_sphere();
@@ -122,14 +149,84 @@ impl Tree {
         }
         let mut ids: Vec<NodeId> = (0..tree.faces.len() as NodeId).collect();
         let bounds: Vec<Aabb> = tree.faces.iter().map(|e| e.patch.bounds()).collect();
-        tree.root = tree.cluster(&mut ids, &bounds);
+        let mut runs = vec![(0, 0); tree.faces.len()];
+        tree.root = tree.cluster(&mut ids, 0, &bounds, &mut runs);
+        tree.draws = FaceDraws { order: ids, run: runs, area_before: Vec::new() };
+        tree.sum_draw_areas();
         tree
     }
 
+    /// Splits each face's quadtree down to its `parts` (per face, the quadtree rectangles of
+    /// [`crate::contact_split::plan`]; `[Rect::UNIT]` where nothing comes close), and marks every
+    /// node split on the way as opened: the refinement links below it only (a face half under
+    /// another object is one polynomial too bright beside the contact and negative under it;
+    /// docs/validation-real.md, "The contact split").
+    pub fn split_for_contacts(&mut self, parts: &[Vec<Rect>]) {
+        for (f, parts) in parts.iter().enumerate() {
+            for part in parts.iter().filter(|r| **r != Rect::UNIT) {
+                let mut id = f as NodeId;
+                while let Kind::Surface(s) = &self.nodes[id as usize].kind {
+                    if s.domain == *part || s.domain.s1 - s.domain.s0 <= part.s1 - part.s0 {
+                        break;
+                    }
+                    let children = self.split(id);
+                    self.opened.resize(self.nodes.len(), false);
+                    self.opened[id as usize] = true;
+                    let (cs, ct) = ((part.s0 + part.s1) * 0.5, (part.t0 + part.t1) * 0.5);
+                    id = *children
+                        .iter()
+                        .find(|&&c| {
+                            let d = &self.nodes[c as usize].surface().expect("a quadrant").domain;
+                            (d.s0..=d.s1).contains(&cs) && (d.t0..=d.t1).contains(&ct)
+                        })
+                        .expect("a quadrant holds the part's centre");
+                }
+            }
+        }
+    }
+
+    /// Whether node `id` was split ahead of linking ([`Tree::split_for_contacts`]).
+    pub fn opened(&self, id: NodeId) -> bool {
+        self.opened.get(id as usize).copied().unwrap_or(false)
+    }
+
+    /// The running area sums of [`FaceDraws`], from the faces' current areas.
+    fn sum_draw_areas(&mut self) {
+        let mut sum = 0.0;
+        let mut before = Vec::with_capacity(self.draws.order.len() + 1);
+        before.push(0.0);
+        for &f in &self.draws.order {
+            sum += self.nodes[f as usize].area;
+            before.push(sum);
+        }
+        self.draws.area_before = before;
+    }
+
+    /// A face below cluster `id` drawn with probability proportional to its area, from `u` in
+    /// [0, 1).
+    pub fn draw_face(&self, id: NodeId, u: f64) -> NodeId {
+        let (lo, hi) = self.draws.run[id as usize];
+        let before = &self.draws.area_before;
+        let (start, end) = (before[lo as usize], before[hi as usize]);
+        let target = start + u * (end - start);
+        // The last face whose run starts at or below the target: `before[lo + k] <= target`.
+        let k = before[lo as usize + 1..hi as usize].partition_point(|&x| x <= target);
+        self.draws.order[lo as usize + k]
+    }
+
     /// A cluster over the face nodes `ids` (their node id is their face index), by median split
-    /// of the centroids along the longest axis of their spread.
-    fn cluster(&mut self, ids: &mut [NodeId], bounds: &[Aabb]) -> NodeId {
+    /// of the centroids along the longest axis of their spread; `ids` starts at `start` in the
+    /// whole order, and `runs` gets each new cluster's run in it (indexed by node id less the
+    /// faces).
+    fn cluster(
+        &mut self,
+        ids: &mut [NodeId],
+        start: u32,
+        bounds: &[Aabb],
+        runs: &mut Vec<(u32, u32)>,
+    ) -> NodeId {
         if ids.len() == 1 {
+            runs[ids[0] as usize] = (start, start + 1);
             return ids[0];
         }
         let spread = ids.iter().fold(Aabb::EMPTY, |b, &i| b.grow(bounds[i as usize].centre()));
@@ -146,8 +243,8 @@ impl Tree {
             bounds[a as usize].centre()[axis].total_cmp(&bounds[b as usize].centre()[axis])
         });
         let (lo, hi) = ids.split_at_mut(mid);
-        let a = self.cluster(lo, bounds);
-        let b = self.cluster(hi, bounds);
+        let a = self.cluster(lo, start, bounds, runs);
+        let b = self.cluster(hi, start + mid as u32, bounds, runs);
         let box_of = |ids: &[NodeId]| ids.iter().fold(Aabb::EMPTY, |u, &i| u.union(bounds[i as usize]));
         let all = box_of(lo).union(box_of(hi));
         let (na, nb) = (&self.nodes[a as usize], &self.nodes[b as usize]);
@@ -164,6 +261,7 @@ impl Tree {
             kind: Kind::Cluster { children: [a, b] },
         };
         self.nodes.push(node);
+        runs.push((start, start + (lo.len() + hi.len()) as u32));
         (self.nodes.len() - 1) as NodeId
     }
 
@@ -228,6 +326,7 @@ impl Tree {
             node.plane_normal =
                 (normal_sum.length() >= PLANAR * area && area > 0.0).then(|| normal_sum.normalize());
         }
+        self.sum_draw_areas();
         moved
     }
 
@@ -336,6 +435,47 @@ impl Tree {
         } else {
             for &c in children {
                 self.leaves_below(c, out);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Settings;
+
+    /// A face drawn below a cluster comes up as often as its share of the cluster's area: with
+    /// `u` on a grid of `n` points, each face's count is its share of `n` within one.
+    #[test]
+    fn faces_are_drawn_by_area() {
+        let scene = crate::scenes::cornell_box(3, Settings { basis_order: 1, ..Default::default() });
+        let faces = crate::system::build_elements(&scene, 0.0, Basis::new(1));
+        let reflectance = vec![[0.5; 3]; faces.len()];
+        let tree = Tree::new(faces, reflectance, Basis::new(1));
+        let clusters: Vec<NodeId> =
+            (0..tree.nodes.len() as NodeId).filter(|&id| tree.node(id).is_cluster()).collect();
+        assert!(clusters.len() > 10);
+        let n = 20_000;
+        for &c in clusters.iter().step_by(7).chain([&tree.root]) {
+            let mut below = Vec::new();
+            tree.leaves_below(c, &mut below);
+            let mut count = vec![0usize; tree.faces.len()];
+            for k in 0..n {
+                count[tree.draw_face(c, (k as f64 + 0.5) / n as f64) as usize] += 1;
+            }
+            let area = tree.node(c).area;
+            for f in 0..tree.faces.len() {
+                let want = if below.contains(&(f as NodeId)) {
+                    n as f64 * tree.node(f as NodeId).area / area
+                } else {
+                    0.0
+                };
+                assert!(
+                    (count[f] as f64 - want).abs() <= 1.0,
+                    "cluster {c}, face {f}: {} draws, want {want}",
+                    count[f]
+                );
             }
         }
     }

@@ -155,6 +155,14 @@ impl Bvh {
         if self.nodes.is_empty() {
             return false;
         }
+        let hits = |t: &Triangle| {
+            t.element != skip_a && t.element != skip_b && segment_hits(t, origin, dir, t_min, t_max)
+        };
+        if BLOCKERS
+            .with_borrow(|b| b.recent.iter().any(|&k| self.triangles.get(k as usize).is_some_and(hits)))
+        {
+            return true;
+        }
         let inv = dir.recip();
         let mut stack = [0u32; 64];
         let mut sp = 1;
@@ -165,11 +173,9 @@ impl Bvh {
                 continue;
             }
             if node.count > 0 {
-                for t in &self.triangles[node.start as usize..(node.start + node.count) as usize] {
-                    if t.element != skip_a
-                        && t.element != skip_b
-                        && segment_hits(t, origin, dir, t_min, t_max)
-                    {
+                for k in node.start..node.start + node.count {
+                    if hits(&self.triangles[k as usize]) {
+                        BLOCKERS.with_borrow_mut(|b| b.remember(k));
                         return true;
                     }
                 }
@@ -180,6 +186,115 @@ impl Bvh {
             }
         }
         false
+    }
+}
+
+/// The last triangles that blocked a segment on this thread, tried before a traversal. Any hit
+/// among them is a hit (they are looked up in the BVH being asked, whichever BVH put them
+/// there), so the verdicts are the traversal's own, only found sooner.
+struct Blockers {
+    recent: [u32; 8],
+    next: usize,
+}
+
+impl Blockers {
+    fn remember(&mut self, k: u32) {
+        if !self.recent.contains(&k) {
+            self.recent[self.next] = k;
+            self.next = (self.next + 1) % self.recent.len();
+        }
+    }
+}
+
+thread_local! {
+    static BLOCKERS: std::cell::RefCell<Blockers> =
+        const { std::cell::RefCell::new(Blockers { recent: [u32::MAX; 8], next: 0 }) };
+}
+
+/// Up to this many segments traverse [`Bvh::occluded_packet`] together.
+pub const PACKET: usize = 8;
+
+impl Bvh {
+    /// [`Bvh::occluded`] for a few segments at once (at most [`PACKET`]), all skipping the same
+    /// two elements: `blocked[k]` is set when segment `k` (`origins[k] + t dirs[k]`, `t` in
+    /// `(t_min, t_max)`) hits a triangle of another element, and left as it is otherwise (set
+    /// ones are not traced). One traversal for the lot: the segments of a link between two near
+    /// parts run side by side through the same nodes, which a traversal each visited again.
+    #[allow(clippy::too_many_arguments)]
+    pub fn occluded_packet(
+        &self,
+        origins: &[DVec3],
+        dirs: &[DVec3],
+        t_min: f64,
+        t_max: f64,
+        skip_a: u32,
+        skip_b: u32,
+        blocked: &mut [bool],
+    ) {
+        let n = origins.len();
+        assert!(n <= PACKET && dirs.len() == n && blocked.len() == n, "a packet of at most {PACKET}");
+        if self.nodes.is_empty() || blocked.iter().all(|&b| b) {
+            return;
+        }
+        // The triangles that blocked this thread's last segments first: neighbouring links,
+        // which follow each other here, are mostly blocked by the same few.
+        let test = |t: &Triangle, blocked: &mut [bool]| {
+            let mut any = false;
+            if t.element != skip_a && t.element != skip_b {
+                for k in 0..n {
+                    if !blocked[k] && segment_hits(t, origins[k], dirs[k], t_min, t_max) {
+                        blocked[k] = true;
+                        any = true;
+                    }
+                }
+            }
+            any
+        };
+        let recent = BLOCKERS.with_borrow(|b| b.recent);
+        for k in recent {
+            if let Some(t) = self.triangles.get(k as usize) {
+                test(t, blocked);
+            }
+        }
+        if blocked.iter().all(|&b| b) {
+            return;
+        }
+        let mut inv = [DVec3::ZERO; PACKET];
+        for k in 0..n {
+            inv[k] = dirs[k].recip();
+        }
+        // The box of the segments' swept parts: a node outside it holds no hit for any of them.
+        let mut reach = Aabb::EMPTY;
+        for k in 0..n {
+            reach = reach.grow(origins[k] + dirs[k] * t_min).grow(origins[k] + dirs[k] * t_max);
+        }
+        let mut stack = [0u32; 64];
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let node = &self.nodes[stack[sp] as usize];
+            if !node.bounds.overlaps(&reach) {
+                continue;
+            }
+            let hit = (0..n).any(|k| !blocked[k] && slab_hit(&node.bounds, origins[k], inv[k], t_min, t_max));
+            if !hit {
+                continue;
+            }
+            if node.count > 0 {
+                for k in node.start..node.start + node.count {
+                    if test(&self.triangles[k as usize], blocked) {
+                        BLOCKERS.with_borrow_mut(|b| b.remember(k));
+                    }
+                }
+                if blocked.iter().all(|&b| b) {
+                    return;
+                }
+            } else {
+                stack[sp] = node.start;
+                stack[sp + 1] = node.start + 1;
+                sp += 2;
+            }
+        }
     }
 }
 
@@ -310,6 +425,41 @@ mod tests {
             }
         }
         tris
+    }
+
+    /// A packet's verdicts are each segment's own any-hit, whatever else is in the packet.
+    #[test]
+    fn packets_agree_with_single_segments() {
+        let mut tris = grid(12);
+        // A second, tilted layer, so that some segments pass and some do not.
+        for (k, t) in grid(12).into_iter().enumerate() {
+            if k % 3 == 0 {
+                let v = t.v.map(|p| DVec3::new(p.x + 0.3, p.y, 0.5 + 0.1 * p.x));
+                tris.push(Triangle { v, element: 1000 + k as u32 });
+            }
+        }
+        let bvh = Bvh::build(tris);
+        let point = |k: usize, z: f64| {
+            DVec3::new(0.2 + (k as f64 * 0.618).fract() * 11.5, 0.2 + (k as f64 * 0.414).fract() * 11.5, z)
+        };
+        let (mut hits, mut misses) = (0, 0);
+        for round in 0..300 {
+            let n = 1 + round % PACKET;
+            let origins: Vec<DVec3> =
+                (0..n).map(|k| point(round * 17 + k, -0.5 + 1.5 * (k % 2) as f64)).collect();
+            let dirs: Vec<DVec3> = (0..n)
+                .map(|k| point(round * 29 + k + 500, 2.0 - 2.5 * (k % 2) as f64) - origins[k])
+                .collect();
+            let (skip_a, skip_b) = ((round % 144) as u32, 1000 + (round % 50) as u32 * 3);
+            let mut blocked = vec![false; n];
+            bvh.occluded_packet(&origins, &dirs, 1e-9, 1.0 - 1e-9, skip_a, skip_b, &mut blocked);
+            for k in 0..n {
+                let want = bvh.occluded(origins[k], dirs[k], 1e-9, 1.0 - 1e-9, skip_a, skip_b);
+                assert_eq!(blocked[k], want, "round {round} segment {k}");
+                if want { hits += 1 } else { misses += 1 }
+            }
+        }
+        assert!(hits > 100 && misses > 100, "{hits} hits, {misses} misses: a weak test");
     }
 
     #[test]

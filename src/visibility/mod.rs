@@ -27,6 +27,9 @@ pub fn segments_tested() -> u64 {
 /// Candidate lists longer than this go through the BVH instead.
 const BRUTE_FORCE_CANDIDATES: usize = 24;
 
+/// Segments [`Occluders::share_visible`] tests at most.
+const SHARE_SEGMENTS: usize = 4;
+
 /// Visibility between two elements over their sample cells.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Visibility {
@@ -311,6 +314,50 @@ impl Occluders {
             }
             self.cast_between(i, xi, j, xj, candidates, count == 0)
         })
+    }
+
+    /// How many of up to [`SHARE_SEGMENTS`] segments between parts of elements (`pi` on element
+    /// `i`, `pj` on `j`) arrive unobstructed, and how many were tested: a light link's
+    /// visibility, one share for the whole pair. The segments join the centres of the two parts'
+    /// `2 x 2` cells, crossed first (cell `k` to cell `3 - k`, so that they span both parts), and
+    /// only those whose ends face each other count: the kernel is zero along the others, and a
+    /// facing segment lies in front of both planes, so plain any-hit rays give what the culled
+    /// masks of [`Occluders::part_visibility`] give. When no pair of cell centres faces, the
+    /// share of [`Occluders::part_visibility`]'s mask.
+    pub fn share_visible(&self, i: usize, pi: &Patch, j: usize, pj: &Patch) -> (usize, usize) {
+        let (xi, xj) = (sample_points(pi, 2), sample_points(pj, 2));
+        let (ni, nj) = (pi.centre_normal(), pj.centre_normal());
+        let (mut origins, mut dirs) = ([DVec3::ZERO; SHARE_SEGMENTS], [DVec3::ZERO; SHARE_SEGMENTS]);
+        let mut tested = 0;
+        'pairs: for shift in [3, 0, 1, 2] {
+            for k in 0..4 {
+                let (x, y) = (xi[k], xj[k ^ shift]);
+                let d = y - x;
+                if ni.dot(d) <= 0.0 || nj.dot(d) >= 0.0 {
+                    continue;
+                }
+                (origins[tested], dirs[tested]) = (x, d);
+                tested += 1;
+                if tested == SHARE_SEGMENTS {
+                    break 'pairs;
+                }
+            }
+        }
+        SEGMENTS_TESTED.fetch_add(tested as u64, std::sync::atomic::Ordering::Relaxed);
+        if tested > 0 {
+            let mut blocked = [false; SHARE_SEGMENTS];
+            let (o, d, b) = (&origins[..tested], &dirs[..tested], &mut blocked[..tested]);
+            self.bvh.occluded_packet(o, d, 1e-9, 1.0 - 1e-9, i as u32, j as u32, b);
+            return (b.iter().filter(|&&x| !x).count(), tested);
+        }
+        // No two cell centres face each other (parts that see each other obliquely, or only in
+        // part): the culled masks over all cell pairs decide.
+        let cells = self.samples_per_axis * self.samples_per_axis;
+        match self.part_visibility(i, pi, j, pj) {
+            Visibility::Full => (1, 1),
+            Visibility::Blocked => (0, 1),
+            Visibility::Partial(bits) => (bits.iter().map(|b| b.count_ones() as usize).sum(), cells * cells),
+        }
     }
 
     /// Whether element `e`'s plane culls occluders in [`Occluders::link_visibility`] (some

@@ -3,7 +3,7 @@
 //! every pair of leaves, its warm-started solve equals a cold one on the same links, and it
 //! agrees with a frame solved from scratch.
 
-use galerkin_radiosity::hierarchy::coupling::{self, Coupling};
+use galerkin_radiosity::hierarchy::coupling::{self, Coupling, Weight};
 use galerkin_radiosity::hierarchy::solve::State;
 use galerkin_radiosity::hierarchy::tree::NodeId;
 use galerkin_radiosity::hierarchy::update::update_frame;
@@ -39,12 +39,19 @@ fn check_pairs(
     let rule = GaussLegendre::new(scene.settings.quadrature_order);
     let ctx = link_context(scene, hs, &rule, lit.occluders.as_ref());
     for l in &h.hierarchy.links {
-        let c = coupling::compute(&ctx, tree, l.a, l.b);
+        let weight = match l.coupling {
+            Coupling::Constants { .. } => Weight::Light,
+            _ => Weight::Full,
+        };
+        let c = coupling::compute_as(&ctx, tree, l.a, l.b, weight);
         let fresh =
             c.coupling.unwrap_or_else(|| panic!("link {}-{} carries nothing when computed again", l.a, l.b));
         match (&l.coupling, &fresh) {
             (Coupling::Surfaces(x), Coupling::Surfaces(y)) => {
                 assert_eq!(x, y, "frame {frame}: surface link {}-{} is stale", l.a, l.b)
+            }
+            (Coupling::Constants { ab: x, ba: u }, Coupling::Constants { ab: y, ba: v }) => {
+                assert_eq!((x, u), (y, v), "frame {frame}: light link {}-{} is stale", l.a, l.b)
             }
             (Coupling::Clusters { transmittance: x }, Coupling::Clusters { transmittance: y }) => {
                 assert_eq!(x, y, "frame {frame}: cluster link {}-{} is stale", l.a, l.b)
@@ -52,13 +59,22 @@ fn check_pairs(
             _ => panic!("frame {frame}: link {}-{} changed kind", l.a, l.b),
         }
     }
+    // A blocked or idle pair does not say whether it was computed light or in full: it must be
+    // so under one of the two.
+    let under_either = |a, b, test: &dyn Fn(&coupling::Computed) -> bool| {
+        [Weight::Light, Weight::Full].into_iter().any(|w| test(&coupling::compute_as(&ctx, tree, a, b, w)))
+    };
     for &(a, b) in &h.hierarchy.blocked {
-        let c = coupling::compute(&ctx, tree, a, b);
-        assert!(c.coupling.is_none() && c.blocked, "frame {frame}: blocked pair {a}-{b} is not blocked now");
+        assert!(
+            under_either(a, b, &|c| c.coupling.is_none() && c.blocked),
+            "frame {frame}: blocked pair {a}-{b} is not blocked now"
+        );
     }
     for &(a, b) in &h.hierarchy.idle {
-        let c = coupling::compute(&ctx, tree, a, b);
-        assert!(c.coupling.is_none(), "frame {frame}: idle pair {a}-{b} carries light now");
+        assert!(
+            under_either(a, b, &|c| c.coupling.is_none()),
+            "frame {frame}: idle pair {a}-{b} carries light now"
+        );
     }
     (h.hierarchy.links.len(), h.hierarchy.blocked.len(), h.hierarchy.idle.len())
 }

@@ -93,3 +93,64 @@ def test_the_memory_limit_goes_to_the_session_but_does_not_change_the_solution()
     assert in_panel_words("a lower settings.basis_order, or raise memory_budget_mb") == (
         "a lower Detail, or raise Memory Limit (MB)")
     assert "a lower Detail" in in_panel_words("use fewer faces or a lower basis order (a lower ...)")
+
+
+def test_the_hierarchy_takes_its_refinement_threshold_as_accuracy():
+    """Method hierarchical hands the Refinement Threshold to the library as ``accuracy``; the flat
+    methods leave it out, so changing it does not re-bake a flat bake."""
+    s = BakeSettings(method="hierarchical", hierarchy_accuracy=1e-4).validate()
+    assert s.native()["method"] == "hierarchical" and s.native()["accuracy"] == 1e-4
+    assert s.solve_signature() != s.replace(hierarchy_accuracy=1e-3).solve_signature()
+    flat = BakeSettings(method="incremental", hierarchy_accuracy=1e-4).validate()
+    assert "accuracy" not in flat.native()
+    assert flat.solve_signature() == flat.replace(hierarchy_accuracy=1e-2).solve_signature()
+    # The binding takes every key (a key it does not know is an error there).
+    from addon.native import binding
+
+    assert binding.METHODS["hierarchical"] == 3
+
+
+@pytest.mark.parametrize("bad", [0.0, -1e-3, 1e-7, 0.6, 1.0, float("nan"), float("inf")])
+def test_a_refinement_threshold_out_of_range_is_one_line(bad):
+    with pytest.raises(SettingsError) as info:
+        BakeSettings(method="hierarchical", hierarchy_accuracy=bad).validate()
+    line = str(info.value)
+    assert "\n" not in line and line.startswith(f"refinement threshold {bad:g} is outside 1e-06..0.5")
+    BakeSettings(method="full", hierarchy_accuracy=bad).validate()  # not read by the flat methods
+
+
+def test_the_headless_refinement_range_is_the_settings_one():
+    import importlib.util
+    from pathlib import Path
+
+    from addon.core.settings import HIERARCHY_ACCURACY_RANGE
+
+    path = Path(__file__).resolve().parents[2] / "addon" / "headless.py"
+    spec = importlib.util.spec_from_file_location("headless_for_test", path)
+    headless = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(headless)
+    assert headless.REFINEMENT_RANGE == HIERARCHY_ACCURACY_RANGE
+
+
+def test_memory_refusals_of_flat_bakes_suggest_the_hierarchy():
+    from addon.core.settings import large_flat_hint, library_message
+
+    over = ("over the memory budget: this bake needs up to 9 MB (...) but the budget is 1 MB "
+            "(settings.memory_budget_mb); use fewer faces or a lower settings.basis_order, turn "
+            "corner_gather off, bake fewer frames at once, or raise memory_budget_mb")
+    plain = ("over the memory budget: this bake needs up to 9 MB (...) but the budget is 1 MB (Memory Limit "
+             "(MB)); use fewer faces or a lower Detail, turn Sharp Corners off, or raise Memory Limit (MB)")
+    assert library_message(over, "incremental", hierarchy_fits=False) == plain
+    assert library_message(over, "full", hierarchy_fits=True) == (
+        plain + "; or set Method to Large Scenes (Hierarchy), whose estimate for this scene is within the "
+        "limit (its memory grows about linearly with the faces)")
+    oom = "out of memory while building the link store: could not allocate 94 MB; use a lower basis order"
+    assert library_message(oom, "exact").endswith(
+        "a lower Detail; or set Method to Large Scenes (Hierarchy), whose memory grows about linearly "
+        "with the faces")
+    assert library_message(oom, "hierarchical") == oom.replace("basis order", "Detail")
+    assert library_message("settings.accuracy 2 is outside (0,1)", "hierarchical") == (
+        "Refinement Threshold 2 is outside (0,1)")
+    assert library_message("no emitters", "incremental") == "no emitters"
+    assert large_flat_hint(1999, "incremental") is None and large_flat_hint(10**5, "hierarchical") is None
+    assert large_flat_hint(12345, "full").startswith("12,345 faces: ")

@@ -7,6 +7,7 @@ import sys
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 import scenes
 
@@ -41,6 +42,64 @@ def test_headless_bake_saves_a_file_that_plays_back(blender, tmp_path):
     res = scenes.evaluate_in_fresh_process(out, ["Floor"], [1, 2])
     for f in ("1", "2"):
         assert min(min(c) for c in res["frames"][f]["Floor"]) > 0
+
+
+def test_headless_hierarchical_bake_takes_its_refinement_threshold(blender, tmp_path):
+    """``--method hierarchical --refinement 0.01``: the saved file carries both and its colours;
+    the same bake in this process gives the same colours, and the default threshold others, so
+    the option reached the library. A threshold outside the range is a usage error."""
+    bpy = blender
+    src, out = tmp_path / "in.blend", tmp_path / "out.blend"
+    _save_box(bpy, src)
+    args = ["--blend", str(src), "--frames", "1-2", "--order", "1", "--method", "hierarchical",
+            "--refinement", "0.01", "--save", str(out)]
+    proc = _run(args, env={"BLENDER_USER_RESOURCES": str(tmp_path)})
+    assert proc.returncode == 0, proc.stderr
+    assert "Radiosity: frame 2 done (2/2)" in proc.stdout and "colours for frames 1-2" in proc.stdout
+    assert "note:" not in proc.stdout and "warning" not in proc.stdout, proc.stdout
+
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    p = bpy.context.scene.radiosity
+    assert p.method == "HIERARCHICAL" and p.hierarchy_accuracy == pytest.approx(0.01)
+    floor = bpy.data.objects["Floor"].data
+    headless = [scenes.stored(floor, f) for f in (1, 2)]
+    assert all(np.isfinite(v).all() and v.min() > 0 for v in headless)
+    assert bpy.ops.radiosity.clear() == {"FINISHED"}
+    assert bpy.ops.radiosity.bake() == {"FINISHED"}
+    for f, v in zip((1, 2), headless, strict=True):
+        np.testing.assert_allclose(scenes.stored(floor, f), v, rtol=1e-4, atol=1e-6)
+    p.hierarchy_accuracy = 1e-3
+    assert bpy.ops.radiosity.bake() == {"FINISHED"}
+    assert np.abs(scenes.stored(floor, 1) - headless[0]).max() > 1e-3 * headless[0].max()
+
+    for bad in ("0", "0.7", "nan"):
+        usage = _run([*args[:-2], "--refinement", bad], env={"BLENDER_USER_RESOURCES": str(tmp_path)})
+        assert usage.returncode == 2, usage.stderr
+        assert f"--refinement {bad}: must be in 1e-06..0.5" in usage.stderr.strip().splitlines()[-1]
+
+
+def test_headless_memory_refusals_name_the_options_to_change(blender, tmp_path):
+    """A 1,537-face room at order 2 over a 1,000 MB limit: the flat bake's one line suggests
+    ``--method hierarchical`` (whose own estimate fits); the hierarchy over 1 MB names
+    ``--refinement``."""
+    bpy = blender
+    src = tmp_path / "big.blend"
+    scenes.cornell_box(bpy, n=16, light_frames=(1, 2), box=False)
+    bpy.ops.wm.save_as_mainfile(filepath=str(src))
+    env = {"BLENDER_USER_RESOURCES": str(tmp_path)}
+    common = ["--blend", str(src), "--frames", "1-1", "--order", "2"]
+    flat = _run([*common, "--memory-limit", "1000"], env=env)
+    assert flat.returncode == 1, flat.stderr
+    line = flat.stderr.strip().splitlines()[-1]
+    assert line.startswith("galerkin-radiosity: error: over the memory budget: this bake needs"), line
+    assert line.endswith("or raise Memory Limit (MB), --memory-limit; or use --method hierarchical, whose "
+                         "estimate for this scene is within the limit (its memory grows about linearly "
+                         "with the faces)"), line
+    hier = _run([*common, "--memory-limit", "1", "--method", "hierarchical"], env=env)
+    assert hier.returncode == 1, hier.stderr
+    line = hier.stderr.strip().splitlines()[-1]
+    assert "this hierarchical bake may need up to" in line, line
+    assert "a larger Refinement Threshold (--refinement) or a lower Detail" in line, line
 
 
 def test_headless_failure_is_one_clear_line(blender, tmp_path):

@@ -176,7 +176,8 @@ impl<'a> Sources<'a> {
                 let t = match linked.via {
                     Via::Link { index, .. } => match &self.links[index as usize].coupling {
                         Coupling::Clusters { transmittance } => *transmittance as f64,
-                        Coupling::Surfaces(_) => 1.0,
+                        // (A cluster receives through cluster links only.)
+                        Coupling::Surfaces(_) | Coupling::Constants { .. } => 1.0,
                     },
                     Via::Blocked => 0.0,
                 };
