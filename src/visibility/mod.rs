@@ -6,6 +6,7 @@
 //! triangles do, rays are tested against that short list only, otherwise against the [`bvh`].
 
 pub mod bvh;
+mod points;
 pub mod shaft;
 
 use glam::DVec3;

@@ -1,0 +1,117 @@
+//! The far sources and clusters cast from the point with rays, and the light a cluster's link
+//! carries to the point without rays.
+//!
+//! A far source (at least [`super::NEAR_RATIO`] of its radius from the point) cast in full is
+//! taken whole by the Gauss rule, as the exhaustive gather takes it; a cluster by its intensity
+//! towards the point times the point's own transmittance to it. Past the bright sources
+//! ([`super::rank`]) a cluster takes what its link says arrives ([`Gather::link_estimate`]): the
+//! light it sends to the point unoccluded (its intensity lobes) times the link's transmittance
+//! `T`, nothing for a blocked pair. That misses what lies next to the point: a cluster link's
+//! `T` is shared by every face of its receiving cluster.
+
+use glam::DVec3;
+
+use super::sources::{Linked, Via};
+use super::surface::{Rays, Source};
+use super::{Counters, FAR_RATIO, Gather, Received, Receiver};
+use crate::basis::MAX_LEN as MAX_NB;
+use crate::geometry::Rect;
+use crate::hierarchy::coupling::{Coupling, SplitMix, sample_point, weighted_rays};
+use crate::hierarchy::tree::NodeId;
+
+impl Gather<'_> {
+    /// What the link of the cluster source `linked` carries to the point without rays, given
+    /// what the source would bring unoccluded (`H` and the form factor): that times the link's
+    /// transmittance; nothing through a blocked pair.
+    pub(super) fn link_estimate(&self, linked: Linked, (h, form_factor): ([f64; 3], f64)) -> ([f64; 3], f64) {
+        match linked.via {
+            Via::Blocked => ([0.0; 3], 0.0),
+            Via::Link { index } => match &self.inputs.links[index as usize].coupling {
+                Coupling::Clusters { transmittance } => {
+                    let t = *transmittance as f64;
+                    (h.map(|u| u * t), form_factor * t)
+                }
+                // (A cluster's links are cluster links.)
+                _ => (h, form_factor),
+            },
+        }
+    }
+
+    /// Adds the far source `source`'s light at the point to `got`, with its own rays: a surface's
+    /// moments by the Gauss rule, a cluster's intensity times the point's transmittance.
+    pub(super) fn far_cast(&self, rx: &Receiver, source: NodeId, got: &mut Received) {
+        let tree = self.inputs.tree;
+        let node = tree.node(source);
+        match node.surface() {
+            Some(s) => {
+                let nb = tree.basis.len();
+                let mut m = [0.0; MAX_NB];
+                let far = rx.x.distance(node.centre) >= FAR_RATIO * node.radius;
+                let rule = if far { &self.far_rule } else { &self.rule };
+                let src = Source { face: s.face, patch: &s.patch };
+                self.gauss(rx, src, &Rect::UNIT, rule, Rays::Bvh, &mut m[..nb]);
+                got.add(self.light(source, &m[..nb]), m[0]);
+            }
+            None => got.add(self.cluster_cast(rx, source), 0.0),
+        }
+    }
+
+    /// `sum_l m^l b^l` of the surface node `source`.
+    pub(super) fn light(&self, source: NodeId, m: &[f64]) -> [f64; 3] {
+        let b = self.inputs.state.coefficients(source);
+        let mut h = [0.0; 3];
+        for (m, b) in m.iter().zip(b) {
+            for c in 0..3 {
+                h[c] += m * b[c];
+            }
+        }
+        h
+    }
+
+    /// The cluster `source`'s light at the point unoccluded: its intensity towards the point over
+    /// the squared distance, times the cosine there.
+    pub(super) fn cluster_light(&self, rx: &Receiver, source: NodeId) -> [f64; 3] {
+        let ns = self.inputs.tree.node(source);
+        let v = rx.x - ns.centre;
+        let d2 = v.length_squared();
+        if d2 <= 0.0 {
+            return [0.0; 3];
+        }
+        let w = v / d2.sqrt();
+        let cos = (-rx.n.dot(w)).max(0.0);
+        if cos == 0.0 {
+            return [0.0; 3];
+        }
+        let intensity = crate::hierarchy::lobes::eval(self.inputs.state.lobes(source), w);
+        intensity.map(|i| i * cos / d2)
+    }
+
+    /// The cluster `source`'s light at the point with the point's own transmittance: rays from
+    /// the point to points of the cluster facing it (the link's own transmittance is between the
+    /// two nodes, blind to the shadows inside the receiving node).
+    pub(super) fn cluster_cast(&self, rx: &Receiver, source: NodeId) -> [f64; 3] {
+        let light = self.cluster_light(rx, source);
+        // The intensity first: a dark cluster costs no rays.
+        if light == [0.0; 3] {
+            return light;
+        }
+        let t = self.point_transmittance(rx, source);
+        light.map(|l| l * t)
+    }
+
+    /// The transmittance from the point to the cluster `source`: [`weighted_rays`] to points
+    /// below it (area-weighted), with `d` to its centre, as the links' own.
+    fn point_transmittance(&self, rx: &Receiver, source: NodeId) -> f64 {
+        let d2 = rx.x.distance_squared(self.inputs.tree.node(source).centre);
+        let seed = rx.x.to_array().iter().fold(source as u64, |h, c| h.rotate_left(21) ^ c.to_bits());
+        let mut rng = SplitMix(seed ^ 0x2545_F491_4F6C_DD1D);
+        let corner: (u32, DVec3, DVec3) = (rx.face, rx.x, rx.n);
+        let rays = weighted_rays(self.inputs.occluders, d2, || {
+            (corner, sample_point(self.inputs.tree, source, &mut rng))
+        });
+        if self.inputs.occluders.is_some() {
+            Counters::add(&self.counters.rays, rays.facing as u64);
+        }
+        rays.weighted
+    }
+}

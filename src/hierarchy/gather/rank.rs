@@ -1,0 +1,174 @@
+//! Which of a point's sources get rays from the point, and how many ([`super::Mode::Fast`]).
+//!
+//! Every source is first valued without rays: the light it would bring to the point unoccluded
+//! (a near surface by its exact polygon form factor shared out by its Gauss nodes, a far one by
+//! the Gauss rule, a cluster by its intensity lobes), ranked by its form factor times its mean
+//! radiosity (a cluster by that light). Then from the brightest down:
+//! - while what the rest could bring unoccluded is more than [`ESTIMATED_SHARE`] of the point's
+//!   light (theirs plus the lights' direct), and always for a source the point touches, each
+//!   source is cast from the point in full: a near one by [`super::near`], feet and all, a far
+//!   one as the exhaustive gather takes it whole ([`super::far`]);
+//! - past that, a surface takes one Gauss sum with a ray per node through the BVH, without
+//!   splitting (a near one's scaled to its exact polygon form factor); once what is left brings
+//!   no light at all, a surface takes one ray to its centre, for its form factor; a cluster takes
+//!   what its link carries ([`Gather::link_estimate`]).
+//!
+//! The rays go where the light is: on a mesh most of a corner's hundreds of sources are dim
+//! neighbours, and each of them was a shaft query and up to twelve levels of splitting in the
+//! exhaustive gather.
+
+use super::polygon;
+use super::sources::Linked;
+use super::surface::{Rays, Source};
+use super::{Counters, Gather, Received, Receiver};
+use crate::basis::MAX_LEN as MAX_NB;
+use crate::gather::behind_plane;
+use crate::geometry::Rect;
+use crate::hierarchy::tree::NodeId;
+use crate::solids::Solids;
+
+/// The share of a point's light (its sources' unoccluded, ranked as [`Ranked::weight`], and the
+/// lights' direct) that the sources taken coarsely may bring at most.
+const ESTIMATED_SHARE: f64 = 0.1;
+
+/// A source of a point valued without rays.
+pub(super) struct Ranked {
+    linked: Linked,
+    /// A surface near the point ([`super::NEAR_RATIO`]): cast by [`super::near`].
+    near: bool,
+    /// A near surface the point touches: always cast (with its foot).
+    touched: bool,
+    /// The ranking: the form factor times the mean radiosity, summed over the channels (a
+    /// cluster's unoccluded light).
+    weight: f64,
+    /// What the source would bring unoccluded: `H` and the form factor.
+    unoccluded: ([f64; 3], f64),
+}
+
+impl Gather<'_> {
+    /// The source `linked` of the point valued, `None` when it can bring nothing.
+    pub(super) fn rank(&self, rx: &Receiver, linked: Linked, feet: bool) -> Option<Ranked> {
+        let tree = self.inputs.tree;
+        let node = tree.node(linked.source);
+        let (mut near, mut touched) = (false, false);
+        let (unoccluded, form_factor) = match node.surface() {
+            Some(s) => {
+                if behind_plane(rx.x, rx.n, &s.patch, node.radius) {
+                    return None;
+                }
+                near = self.is_near(rx, linked.source);
+                // A source the point touches takes its part next to the point from the foot,
+                // however dark its own polynomial (a sliver the solve barely lights).
+                touched = near && feet && self.touch(rx, node.radius, s).is_some();
+                let nb = tree.basis.len();
+                let mut m = [0.0; MAX_NB];
+                let src = Source { face: s.face, patch: &s.patch };
+                let rule = if near { &self.rule } else { &self.far_rule };
+                let sum = self.gauss(rx, src, &Rect::UNIT, rule, Rays::Among(&[]), &mut m[..nb]);
+                if near {
+                    // Next to the point the Gauss nodes miss most of the kernel: its exact
+                    // integral instead, shared out as they share it.
+                    let f = polygon::form_factor(rx.x, rx.n, &s.patch.corners, s.normal);
+                    scale_to(&mut m[..nb], sum, f);
+                }
+                (self.light(linked.source, &m[..nb]), m[0])
+            }
+            None => (self.cluster_light(rx, linked.source), 0.0),
+        };
+        // The ranking by the form factor times the mean radiosity: the moments' light can come
+        // out negative where the nodes share a near source's form factor out badly.
+        let weight = match node.surface() {
+            Some(_) => form_factor * self.inputs.state.mean[linked.source as usize].iter().sum::<f64>(),
+            None => unoccluded.iter().sum(),
+        };
+        (weight > 0.0 || form_factor > 0.0 || touched).then_some(Ranked {
+            linked,
+            near,
+            touched,
+            weight,
+            unoccluded: (unoccluded, form_factor),
+        })
+    }
+
+    /// Adds the surface source `source`'s light at the point to `got` by one Gauss sum with rays
+    /// through the BVH, scaled to the exact form factor when `near`.
+    fn coarse_cast(&self, rx: &Receiver, source: NodeId, near: bool, got: &mut Received) {
+        let tree = self.inputs.tree;
+        let s = tree.node(source).surface().expect("a surface");
+        let nb = tree.basis.len();
+        let mut m = [0.0; MAX_NB];
+        let src = Source { face: s.face, patch: &s.patch };
+        let rule = if near { &self.rule } else { &self.far_rule };
+        let sum = self.gauss(rx, src, &Rect::UNIT, rule, Rays::Bvh, &mut m[..nb]);
+        if near {
+            let f = polygon::form_factor(rx.x, rx.n, &s.patch.corners, s.normal);
+            scale_to(&mut m[..nb], sum, f);
+        }
+        got.add(self.light(source, &m[..nb]), m[0]);
+    }
+
+    /// Adds the sources' light to `got` (see the module's comment): cast from the point in full
+    /// for the brightest ones until the rest could bring at most [`ESTIMATED_SHARE`] of the
+    /// point's light (theirs unoccluded plus `direct`, summed over the channels), the rest
+    /// coarsely.
+    pub(super) fn settle(
+        &self,
+        rx: &Receiver,
+        ranked: &mut [Ranked],
+        direct: f64,
+        feet: Option<Option<&Solids>>,
+        got: &mut Received,
+    ) {
+        let tree = self.inputs.tree;
+        ranked.sort_unstable_by(|a, b| b.weight.total_cmp(&a.weight));
+        let mut rest: f64 = ranked.iter().map(|r| r.weight).sum();
+        let bar = ESTIMATED_SHARE * (direct + rest);
+        for r in ranked.iter() {
+            let source = r.linked.source;
+            // (Without visibility there are no rays to save: every source is integrated.)
+            if r.touched || rest > bar || self.inputs.occluders.is_none() {
+                if r.near {
+                    Counters::add(&self.counters.near, 1);
+                    self.surface_source(rx, source, feet, got);
+                } else {
+                    Counters::add(&self.counters.far_cast, 1);
+                    self.far_cast(rx, source, got);
+                }
+                if self.stop.stopped() {
+                    return;
+                }
+            } else if tree.node(source).is_cluster() {
+                let (h, form_factor) = self.link_estimate(r.linked, r.unoccluded);
+                got.add(h, form_factor);
+            } else if rest <= 0.0 {
+                // Nothing left brings light: one ray for the form factor (the hemisphere bound).
+                Counters::add(&self.counters.coarse, 1);
+                let s = tree.node(source).surface().expect("a surface");
+                let mut seen = [true];
+                if let Some(o) = self.inputs.occluders {
+                    Counters::add(&self.counters.rays, 1);
+                    o.visible_from(rx.x, (rx.face, s.face), &[s.patch.point(0.5, 0.5)], &mut seen);
+                }
+                if seen[0] {
+                    got.add(r.unoccluded.0, r.unoccluded.1);
+                }
+            } else {
+                Counters::add(&self.counters.coarse, 1);
+                self.coarse_cast(rx, source, r.near, got);
+            }
+            rest -= r.weight;
+        }
+    }
+}
+
+/// Moments `m` of a Gauss sum whose unoccluded `integral g dA` came to `sum`, scaled to the exact
+/// form factor `f`; when no node counted (all behind the point's plane while part of the polygon
+/// is in front), `f` on the constant alone.
+pub(super) fn scale_to(m: &mut [f64], sum: f64, f: f64) {
+    if sum > 0.0 {
+        m.iter_mut().for_each(|m| *m *= f / sum);
+    } else {
+        m.fill(0.0);
+        m[0] = f;
+    }
+}

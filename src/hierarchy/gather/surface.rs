@@ -1,0 +1,178 @@
+//! A surface source integrated from the point: its moments `m^l = integral_S g V Gamma_l dA`
+//! with shadow rays from the point (the recursion is [`super::exhaustive`]'s or [`super::near`]'s,
+//! by the gather's mode), its light `sum_l m^l b_S^l`, and the feet: where the point touches the
+//! source, the part of the source next to it counts with `B` gathered at the foot.
+
+use glam::DVec3;
+
+use super::{Counters, Gather, Mode, Received, Receiver};
+use crate::basis::MAX_LEN as MAX_NB;
+use crate::gather::{FACING, FOOT_BALL, NEAR_FACING};
+use crate::geometry::{Patch, Rect};
+use crate::hierarchy::tree::{NodeId, Surface};
+use crate::kernel::point::point_kernel;
+use crate::quadrature::GaussLegendre;
+use crate::solids::Solids;
+
+/// A surface source being integrated from a point: its face and its patch.
+#[derive(Clone, Copy)]
+pub(super) struct Source<'a> {
+    pub face: u32,
+    pub patch: &'a Patch,
+}
+
+/// Where a point touches a source (a model's corner on the floor it stands on): the foot
+/// point's parameters on the source node and the radius around the point that counts with
+/// `B` gathered at the foot.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Touch {
+    s: f64,
+    t: f64,
+    radius: f64,
+}
+
+/// Which shadow rays a Gauss sum casts.
+#[derive(Clone, Copy)]
+pub(super) enum Rays<'a> {
+    /// Tested against these occluder triangles, the ones that may lie between the point and the
+    /// rectangle (none: no rays).
+    Among(&'a [usize]),
+    /// Any-hit through the BVH (a far source, whose shaft query would cost more than its rays).
+    Bvh,
+}
+
+impl Gather<'_> {
+    /// Adds the surface node `source`'s light at the point and its form factor to `got`.
+    /// With `feet = Some(solids)`, a source the point touches ([`Gather::touch`]) takes its part
+    /// next to the point from `B` at the foot: nearly all of its form factor comes from there,
+    /// in a contact shadow far finer than the source's polynomial ([`crate::gather`]'s feet).
+    pub(super) fn surface_source(
+        &self,
+        rx: &Receiver,
+        source: NodeId,
+        feet: Option<Option<&Solids>>,
+        got: &mut Received,
+    ) {
+        let tree = self.inputs.tree;
+        let node = tree.node(source);
+        let s = node.surface().expect("a surface link's ends are surfaces");
+        let nb = tree.basis.len();
+        let mut m = [0.0; MAX_NB];
+        let touch = feet.and_then(|_| self.touch(rx, node.radius, s));
+        let mut weight = 0.0;
+        let ball = touch.map(|t| (t.radius, &mut weight));
+        let src = Source { face: s.face, patch: &s.patch };
+        match self.mode {
+            Mode::Exhaustive => self.exhaustive_moments(rx, src, &mut m[..nb], ball),
+            Mode::Fast => self.near_moments(rx, src, &mut m[..nb], ball),
+        }
+        let b = self.inputs.state.coefficients(source);
+        let mut h = [0.0; 3];
+        for l in 0..nb {
+            for c in 0..3 {
+                h[c] += m[l] * b[l][c];
+            }
+        }
+        // Gamma_0 = 1: the l = 0 moment is the form factor.
+        got.add(h, m[0] + weight);
+        if let (Some(t), Some(solids), true) = (touch, feet, weight > 0.0) {
+            Counters::add(&self.counters.feet, 1);
+            let (fs, ft) = s.domain.map(t.s, t.t);
+            let [foot, _] = self.point((s.face as usize, fs, ft), None, solids, false);
+            got.add(foot.map(|b| weight * b), 0.0);
+        }
+    }
+
+    /// Whether the point touches the surface node `s` (bounding radius `radius`): it lies just
+    /// in front of `s`'s plane and its foot falls on `s` (as [`crate::gather`] decides it for an
+    /// element). Facing `s` from closer than [`NEAR_FACING`] of its radius, the foot is the
+    /// point's projection and the ball [`FOOT_BALL`] times the distance; at an angle, the foot is
+    /// as far along the point's normal as the point is above `s` (at least a hundredth of its
+    /// face's radius), projected, and the ball three times that.
+    pub(super) fn touch(&self, rx: &Receiver, radius: f64, s: &Surface) -> Option<Touch> {
+        let (normal, centre) = (s.normal, s.patch.point(0.5, 0.5));
+        let d = normal.dot(rx.x - centre);
+        let on = |foot: DVec3, radius: f64| {
+            let (u, v) = s.patch.locate(foot);
+            ((0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v)).then_some(Touch { s: u, t: v, radius })
+        };
+        if rx.n.dot(normal) < -FACING {
+            return (d > 0.0 && d < NEAR_FACING * radius).then(|| on(rx.x - d * normal, FOOT_BALL * d))?;
+        }
+        let touching = d > 0.0 && d < 1e-2 * rx.radius;
+        let near = d > 0.0 && d < NEAR_FACING * radius;
+        if !(touching || near) || rx.n.dot(normal).abs() > 0.9 {
+            return None;
+        }
+        let offset = if touching { 1e-2 * rx.radius } else { d };
+        let foot = rx.x + offset * rx.n;
+        on(foot - normal.dot(foot - centre) * normal, 3.0 * offset)
+    }
+
+    /// The Gauss sum over `rect` of the source into `out`, with one shadow ray per node that
+    /// the point faces, cast as `rays` says; returns the sum's `integral g dA` without
+    /// visibility (for [`super::near`]'s scaling to the exact form factor).
+    pub(super) fn gauss(
+        &self,
+        rx: &Receiver,
+        src: Source,
+        rect: &Rect,
+        rule: &GaussLegendre,
+        rays: Rays,
+        out: &mut [f64],
+    ) -> f64 {
+        let patch = src.patch;
+        const N: usize = super::GAUSS_POINTS * super::GAUSS_POINTS;
+        let nb = out.len();
+        let measure = rect.measure();
+        let mut lit = [(DVec3::ZERO, 0.0f64, 0.0f64, 0.0f64); N];
+        let mut count = 0;
+        let mut unoccluded = 0.0;
+        for (u, wu) in rule.iter() {
+            for (v, wv) in rule.iter() {
+                let (s, t) = rect.map(u, v);
+                let av = patch.area_vector(s, t);
+                let a = av.length();
+                if a <= 0.0 {
+                    continue;
+                }
+                let y = patch.point(s, t);
+                let g = point_kernel(rx.x, rx.n, y, av / a);
+                if g != 0.0 {
+                    let w = g * wu * wv * measure * a;
+                    lit[count] = (y, w, s, t);
+                    unoccluded += w;
+                    count += 1;
+                }
+            }
+        }
+        if count == 0 {
+            return 0.0;
+        }
+        let mut visible = [true; N];
+        if let Some(o) = self.inputs.occluders {
+            let targets: [DVec3; N] = std::array::from_fn(|k| lit[k.min(count - 1)].0);
+            let (targets, visible) = (&targets[..count], &mut visible[..count]);
+            match rays {
+                Rays::Among([]) => {}
+                Rays::Among(candidates) => {
+                    Counters::add(&self.counters.rays, count as u64);
+                    o.visibility_among(candidates, rx.x, (rx.face, src.face), targets, visible);
+                }
+                Rays::Bvh => {
+                    Counters::add(&self.counters.rays, count as u64);
+                    o.visible_from(rx.x, (rx.face, src.face), targets, visible);
+                }
+            }
+        }
+        let basis = self.inputs.tree.basis;
+        let mut g = [0.0; MAX_NB];
+        for (&(_, w, s, t), _) in lit[..count].iter().zip(&visible).filter(|(_, v)| **v) {
+            basis.eval_into(s, t, &mut g[..nb]);
+            for l in 0..nb {
+                out[l] += w * g[l];
+            }
+        }
+        unoccluded
+    }
+}
