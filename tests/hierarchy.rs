@@ -12,6 +12,9 @@ use galerkin_radiosity::system::{System, no_progress};
 #[path = "hierarchy/update.rs"]
 mod update;
 
+#[path = "hierarchy/gather_modes.rs"]
+mod gather_modes;
+
 /// A closed box that emits `E = 1` everywhere with `rho = 0.5` has `B = E / (1 - rho) = 2`
 /// on every face, whatever the links: clusters must neither lose nor make light.
 #[test]
