@@ -16,7 +16,7 @@ use super::surface::{Rays, Source};
 use super::{Counters, FAR_RATIO, Gather, Received, Receiver};
 use crate::basis::MAX_LEN as MAX_NB;
 use crate::geometry::Rect;
-use crate::hierarchy::coupling::{Coupling, SplitMix, sample_point, weighted_rays};
+use crate::hierarchy::coupling::{Coupling, SplitMix, kernel_weighted_rays, sample_point};
 use crate::hierarchy::tree::NodeId;
 
 impl Gather<'_> {
@@ -99,14 +99,15 @@ impl Gather<'_> {
         light.map(|l| l * t)
     }
 
-    /// The transmittance from the point to the cluster `source`: [`weighted_rays`] to points
-    /// below it (area-weighted), with `d` to its centre, as the links' own.
+    /// The transmittance from the point to the cluster `source`: [`kernel_weighted_rays`] to
+    /// points below it (area-weighted), the ratio of the sampled kernel to the model
+    /// [`Self::cluster_light`] evaluates at the centre, as the links' own.
     fn point_transmittance(&self, rx: &Receiver, source: NodeId) -> f64 {
-        let d2 = rx.x.distance_squared(self.inputs.tree.node(source).centre);
+        let centre = self.inputs.tree.node(source).centre;
         let seed = rx.x.to_array().iter().fold(source as u64, |h, c| h.rotate_left(21) ^ c.to_bits());
         let mut rng = SplitMix(seed ^ 0x2545_F491_4F6C_DD1D);
         let corner: (u32, DVec3, DVec3) = (rx.face, rx.x, rx.n);
-        let rays = weighted_rays(self.inputs.occluders, d2, || {
+        let rays = kernel_weighted_rays(self.inputs.occluders, rx.x, centre, || {
             (corner, sample_point(self.inputs.tree, source, &mut rng))
         });
         if self.inputs.occluders.is_some() {
