@@ -216,8 +216,8 @@ fn light_surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize
     Computed { coupling: Some(Coupling::Constants { ab, ba }), partial: arrived < tested, blocked: false }
 }
 
-/// The transmittance of the pair `a`, `b`: [`weighted_rays`] between points of the two, with
-/// `d` the centres' distance (eq. 1 integrated over both ends).
+/// The transmittance of the pair `a`, `b`: [`kernel_weighted_rays`] between points of the two
+/// (eq. 1 integrated over both ends against the centres' model).
 fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Rays {
     let (ca, cb) = (tree.node(a).centre, tree.node(b).centre);
     let mut rng = SplitMix(((a as u64) << 32) ^ b as u64 ^ 0x5851_F42D_4C95_7F2D);
@@ -236,8 +236,8 @@ const MAX_KERNEL_RATIO: f64 = 4.0;
 /// cos_x(w)+ cos_y(-w)+ / d^2` on the same drawn pairs (`w` the centres' direction, each drawn
 /// face's own cosine in it: the lobes are sums of those), as [`Rays::weighted`]: the solve's
 /// cluster transfer is the model times it. Drawn pairs that do not face each other count in the
-/// model's sum only. Falls back to [`weighted_rays`]' `d^2/r^2` weight where no drawn pair
-/// faces along `w`.
+/// model's sum only. Falls back to the mean `V d^2 / r^2` over the facing pairs (the factor that
+/// turns the centres' `1/d^2` into the pairs' mean `1/r^2`) where no drawn pair faces along `w`.
 pub(crate) fn kernel_weighted_rays(
     occluders: Option<&Occluders>,
     ca: DVec3,
@@ -280,44 +280,13 @@ pub(crate) fn kernel_weighted_rays(
 /// An end of a sampled segment: face, position, normal.
 pub(crate) type End = (u32, DVec3, DVec3);
 
-/// Up to [`CLUSTER_RAYS`] segments from `draw` (of at most four times as many drawn) whose ends
-/// face each other, and of those the ones that arrive unobstructed, each weighted by `d2 / r^2`
-/// (`r` the segment's length): the factor that turns a centres' `1/d^2` into the mean `1/r^2`
-/// over the segments, which near clusters need. Far apart without visibility the weight is 1;
-/// with no segment facing, 0.
-pub(crate) fn weighted_rays(
-    occluders: Option<&Occluders>,
-    d2: f64,
-    mut draw: impl FnMut() -> (End, End),
-) -> Rays {
-    let mut rays = Rays { facing: 0, arrived: 0, weighted: 0.0 };
-    for _ in 0..4 * CLUSTER_RAYS {
-        let ((fx, x, nx), (fy, y, ny)) = draw();
-        let d = y - x;
-        if nx.dot(d) <= 0.0 || ny.dot(-d) <= 0.0 {
-            continue;
-        }
-        rays.facing += 1;
-        if occluders.is_none_or(|occ| occ.segment_visible(x, y, fx, fy)) {
-            rays.arrived += 1;
-            rays.weighted += d2 / d.length_squared();
-        }
-        if rays.facing == CLUSTER_RAYS {
-            break;
-        }
-    }
-    if rays.facing > 0 {
-        rays.weighted /= rays.facing as f64;
-    }
-    rays
-}
-
-/// What [`weighted_rays`] found.
+/// What [`kernel_weighted_rays`] found.
 pub(crate) struct Rays {
     /// Sampled segments whose ends face each other, and those of them that arrive.
     pub facing: usize,
     pub arrived: usize,
-    /// The arriving ones' `d^2 / r^2`, summed and divided by `facing`.
+    /// The transmittance: the kernel's ratio to the centres' model (or the arriving ones'
+    /// `d^2 / r^2` over `facing` where the model's cosines vanish on every drawn pair).
     pub weighted: f64,
 }
 
