@@ -12,6 +12,7 @@ pub mod anderson;
 pub mod coupling;
 pub mod gather;
 pub mod lobes;
+pub mod pair_tree;
 pub mod refine;
 pub mod solve;
 pub mod tree;
@@ -70,6 +71,10 @@ pub struct HierarchySettings {
     pub light_links: bool,
     /// Corners gathered through the links ([`gather`]); else read from the leaf polynomials.
     pub corner_gather: bool,
+    /// Keep the refinement's pair tree ([`pair_tree`], about 20 bytes per link) so that the
+    /// next frame's update can coarsen where a move no longer needs fine links; off, updates
+    /// only refine. [`crate::session::Session`] keeps it for scenes of more than one frame.
+    pub keep_pair_tree: bool,
 }
 
 impl HierarchySettings {
@@ -93,8 +98,14 @@ impl Default for HierarchySettings {
             near: coupling::NearRule::Coarse,
             light_links: true,
             corner_gather: false,
+            keep_pair_tree: false,
         }
     }
+}
+
+/// A record of the pair tree's splits if `hs` keeps one.
+fn splits_for(hs: &HierarchySettings) -> pair_tree::Splits {
+    if hs.keep_pair_tree { pair_tree::Splits::kept() } else { pair_tree::Splits::off() }
 }
 
 /// Counts and timings of one hierarchical frame.
@@ -122,6 +133,12 @@ pub struct HierarchyStats {
     pub moved_faces: usize,
     pub touched_pairs: usize,
     pub kept_links: usize,
+    /// Of an update with the pair tree kept: the pairs its touched ones were refined again from
+    /// (fewer than `touched_pairs` where whole subtrees were touched and could coarsen).
+    pub refined_from: usize,
+    /// Inner pairs of the pair tree kept, and their bytes.
+    pub pair_tree: usize,
+    pub pair_tree_bytes: usize,
 }
 
 /// One frame solved on the hierarchy.
@@ -161,7 +178,7 @@ pub fn solve_frame(
     state.add_sources(&tree, &lit.emission, lit.lights.as_ref());
     state.start_from_sources(&tree);
     let oracle = Oracle::of(hs, state.source_power(&tree), total_area);
-    let mut hierarchy = Hierarchy::new(tree, oracle);
+    let mut hierarchy = Hierarchy::new(tree, oracle, splits_for(hs));
     let mut stats = HierarchyStats { faces: hierarchy.tree.faces.len(), ..Default::default() };
     let rule = GaussLegendre::new(scene.settings.quadrature_order);
     let ctx = link_context(scene, hs, &rule, lit.occluders.as_ref());
@@ -320,6 +337,8 @@ fn finish(
                 }
         })
         .sum();
+    stats.pair_tree = hierarchy.splits.len();
+    stats.pair_tree_bytes = hierarchy.splits.bytes();
     let corners = if hs.corner_gather {
         let t = Instant::now();
         let inputs = gather::Inputs {

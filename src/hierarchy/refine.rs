@@ -20,6 +20,7 @@ use crate::error::Result;
 /// What [`budget`]'s errors name.
 const LINKS: &str = "the hierarchy's links";
 const NODES: &str = "the hierarchy's nodes";
+use super::pair_tree::Splits;
 use super::tree::{Kind, NodeId, Tree};
 
 /// What the oracle needs to know.
@@ -203,7 +204,7 @@ impl Oracle {
         // A cluster link needs its spheres apart for its centres' transfer to hold. (Letting
         // negligible links join clusters closer than that, with the transfer bounded by
         // `1/max(d, r_p + r_q)^2`, made the decimated monastery 20x faster and 32% too dark:
-        // many small links, each underestimated. With the sampled `d^2/r^2` of
+        // many small links, each underestimated. With the sampled kernel ratio of
         // `coupling::transmittance` the mean holds at 1.5 radii-sums, but not the closed box's
         // balance: docs/method.md, "How near a cluster may link".)
         if small && (separated || !clustered) {
@@ -241,6 +242,9 @@ pub struct Hierarchy {
     /// partition every pair of leaves of different faces.
     pub idle: Vec<(NodeId, NodeId)>,
     pub oracle: Oracle,
+    /// The inner pairs of the refinement and where each was split, when kept for an animation's
+    /// coarsening ([`super::pair_tree`]).
+    pub splits: Splits,
 }
 
 /// Counts of one refinement.
@@ -252,8 +256,8 @@ pub struct RefineStats {
 }
 
 impl Hierarchy {
-    pub fn new(tree: Tree, oracle: Oracle) -> Self {
-        Self { tree, links: Vec::new(), blocked: Vec::new(), idle: Vec::new(), oracle }
+    pub fn new(tree: Tree, oracle: Oracle, splits: Splits) -> Self {
+        Self { tree, links: Vec::new(), blocked: Vec::new(), idle: Vec::new(), oracle, splits }
     }
 
     /// Refines the node pairs of `work` into links, as [`Hierarchy::link_all`] refines the
@@ -385,8 +389,12 @@ impl Hierarchy {
                     .collect();
                 for (&(a, b), verdict) in top.iter().zip(verdicts).rev() {
                     let Some((verdict, weight)) = verdict else {
-                        // A cluster's light among its own parts; a surface does not light itself.
+                        // A cluster's light among its own parts; a surface does not light itself
+                        // (its parts are one face: nothing to record).
                         let children = self.tree.children(a).to_vec();
+                        if self.tree.node(a).is_cluster() {
+                            self.splits.record(a, a, a)?;
+                        }
                         for (i, &x) in children.iter().enumerate() {
                             for &y in &children[i..] {
                                 work.push((x, y));
@@ -403,9 +411,7 @@ impl Hierarchy {
                             }
                         }
                         Verdict::Link => accepted.push((a, b, weight)),
-                        Verdict::Split(s) => {
-                            self.split_pair(s, if s == a { b } else { a }, radiosity, &mut work)?
-                        }
+                        Verdict::Split(s) => self.split_pair((a, b), s, radiosity, &mut work)?,
                     }
                 }
             }
@@ -461,7 +467,7 @@ impl Hierarchy {
         if refine_shadow {
             stats.split_for_shadows += 1;
             let s = self.larger_splittable(a, b);
-            self.split_pair(s, if s == a { b } else { a }, radiosity, work)?;
+            self.split_pair((a, b), s, radiosity, work)?;
             Ok(false)
         } else {
             self.links.push(Link { a, b, coupling });
@@ -469,15 +475,18 @@ impl Hierarchy {
         }
     }
 
-    /// Pairs each child of `s` (split now if it is a surface leaf) with `other`, onto `work`; new
-    /// nodes start from their parent's radiosity estimate.
+    /// Replaces the pair `(a, b)` by each child of its end `s` (split now if it is a surface
+    /// leaf) paired with the other end, onto `work` ([`super::pair_tree::children`]'s order); new nodes
+    /// start from their parent's radiosity estimate.
     fn split_pair(
         &mut self,
+        (a, b): (NodeId, NodeId),
         s: NodeId,
-        other: NodeId,
         radiosity: &mut Vec<f64>,
         work: &mut Vec<(NodeId, NodeId)>,
     ) -> Result<()> {
+        let other = if s == a { b } else { a };
+        self.splits.record(a, b, s)?;
         let children = match self.tree.node(s).kind {
             Kind::Cluster { children } => children.to_vec(),
             Kind::Surface(_) => {

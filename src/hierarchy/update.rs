@@ -87,12 +87,20 @@ pub fn update_frame(
         blocked: std::mem::take(&mut previous.hierarchy.blocked),
         idle: std::mem::take(&mut previous.hierarchy.idle),
         oracle,
+        splits: std::mem::take(&mut previous.hierarchy.splits),
     };
-    let work = take_touched(&mut hierarchy, &moves);
+    // Kept or not, the record follows the settings from here on.
+    if hs.keep_pair_tree != hierarchy.splits.is_kept() {
+        hierarchy.splits = super::splits_for(hs);
+    }
+    let touched = take_touched(&mut hierarchy, &moves);
+    let touched_pairs = touched.len();
+    let work = coarsest(&mut hierarchy, touched);
     let mut stats = HierarchyStats {
         faces: hierarchy.tree.faces.len(),
         moved_faces: moves.faces.iter().filter(|&&m| m).count(),
-        touched_pairs: work.len(),
+        touched_pairs,
+        refined_from: work.len(),
         kept_links: hierarchy.links.len(),
         updated: true,
         ..Default::default()
@@ -111,6 +119,22 @@ pub fn update_frame(
         progress,
     )?;
     super::finish(hierarchy, state, stats, &lit, scene, frame, hs, progress)
+}
+
+/// Where to refine the `touched` pairs again from: with the pair tree kept, the tops of the
+/// largest subtrees touched everywhere ([`super::pair_tree::Splits::coarsest_touched`]), where
+/// the oracle may now link coarser; else the touched pairs themselves.
+fn coarsest(hierarchy: &mut Hierarchy, touched: Vec<(u32, u32)>) -> Vec<(u32, u32)> {
+    if !hierarchy.splits.is_kept() || touched.is_empty() {
+        return touched;
+    }
+    let set: super::pair_tree::PairSet = touched.iter().map(|&(a, b)| super::pair_tree::key(a, b)).collect();
+    let tree = &hierarchy.tree;
+    let neutral = |a: u32, b: u32| {
+        a == b
+            || matches!((tree.node(a).surface(), tree.node(b).surface()), (Some(x), Some(y)) if x.face == y.face)
+    };
+    hierarchy.splits.coarsest_touched(tree, &set, neutral).unwrap_or(touched)
 }
 
 /// Per object with moved faces, the box around their old and new patches.
