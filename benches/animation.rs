@@ -10,7 +10,9 @@
 //! The second table is the hierarchy's (issue 21): each frame updated from the one before
 //! ([`galerkin_radiosity::hierarchy::update::update_frame`]) against the same frames solved from
 //! scratch, and how far the updated frames' face means are from the fresh ones.
-//! `-- --hierarchy` prints the second table alone (about 1 min).
+//! `-- --hierarchy` prints the hierarchy's tables alone (about 1 min). The last table measures
+//! how an update finds the pairs a move touched: a scan of every stored pair against the walk
+//! down the pair tree ([`galerkin_radiosity::hierarchy::touch`]).
 
 use galerkin_radiosity::scene::{Scene, Settings};
 use galerkin_radiosity::scenes;
@@ -54,6 +56,9 @@ struct HierRun {
     kept: f64,
     touched: f64,
     links: f64,
+    /// The last frame's links, updated and fresh.
+    last_links: usize,
+    last_fresh_links: usize,
     worst_rms: f64,
 }
 
@@ -71,6 +76,7 @@ fn run_hierarchy(scene: &Scene) -> HierRun {
     let (mut first, mut updated, mut fresh, mut worst) = (0.0, 0.0, 0.0, 0.0f64);
     let (mut kept, mut touched, mut links) = (0.0, 0.0, 0.0);
     let (mut link, mut solve, mut sweeps, mut fresh_sweeps) = (0.0, 0.0, 0.0, 0.0);
+    let (mut last_links, mut last_fresh_links) = (0, 0);
     let frames: Vec<i64> = (scene.frames.0..=scene.frames.1).collect();
     for (k, &f) in frames.iter().enumerate() {
         let stats = session.solve_frame(f as f64, &no_progress).unwrap();
@@ -90,6 +96,7 @@ fn run_hierarchy(scene: &Scene) -> HierRun {
         let from_scratch = solve_frame(scene, f as f64, &hs, &no_progress).unwrap();
         fresh += t.elapsed().as_secs_f64();
         fresh_sweeps += from_scratch.stats.sweeps as f64;
+        (last_links, last_fresh_links) = (stats.pairs, from_scratch.stats.links);
         let want = face_means(&from_scratch.face_results(scene, f as f64));
         let got = face_means(&session.face_results().unwrap());
         let peak = want.iter().copied().fold(0.0, f64::max);
@@ -109,6 +116,8 @@ fn run_hierarchy(scene: &Scene) -> HierRun {
         kept: kept / n,
         touched: touched / n,
         links: links / n,
+        last_links,
+        last_fresh_links,
         worst_rms: worst,
     }
 }
@@ -124,6 +133,102 @@ fn main() {
     }
     hierarchy_table(&settings, quick);
     mixing_table(&settings, quick);
+    touch_table(quick);
+}
+
+/// How an update finds the stored pairs a move touched: the scan of them all against the walk
+/// down the pair tree, side by side on the same moves (docs/benchmarks.md's "touch-walk" block).
+/// The decimated monastery of tests/data/real (order 1, its hierarchy at the default accuracy)
+/// and a box the size of one of its pieces moved a small step at random places, `moves` times.
+fn touch_table(quick: bool) {
+    use galerkin_radiosity::geometry::Aabb;
+    use galerkin_radiosity::hierarchy::touch::{self, Moves, Touch};
+    use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
+    use std::time::Instant;
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/real/monastery_scene.json");
+    let mut scene = galerkin_radiosity::scene::json::read_scene(std::path::Path::new(path)).unwrap();
+    scene.settings.basis_order = 1;
+    scene.settings.corner_gather = false;
+    let hs = HierarchySettings { keep_pair_tree: true, ..HierarchySettings::of(&scene.settings) };
+    let h = solve_frame(&scene, 0.0, &hs, &no_progress).unwrap();
+    let (hierarchy, tree) = (&h.hierarchy, &h.hierarchy.tree);
+    let stored = hierarchy.links.len() + hierarchy.blocked.len() + hierarchy.idle.len();
+    let moves_per_size = if quick { 20 } else { 200 };
+    println!(
+        "\nFinding the pairs a move touched: the decimated monastery (tests/data/real, {} faces, order 1, {} stored \
+         pairs, {} inner pairs in its pair tree), a box of the given share of the scene's diagonal swept a tenth \
+         of its size at {moves_per_size} random places; milliseconds per move (the scan tests every stored pair, \
+         the walk enters the pair tree only where a shaft meets the box; both find the same pairs):\n",
+        tree.faces.len(),
+        stored,
+        hierarchy.splits.len(),
+    );
+    println!(
+        "| box / diagonal | touched pairs | scan ms | walk ms | x faster | then a lookup per stored pair ms |"
+    );
+    println!("|---|---|---|---|---|---|");
+    let root = tree.bounds(tree.root);
+    let size = root.diagonal();
+    let mut state = 0x2545_F491_4F6C_DD1Du64;
+    let mut next = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for share in [0.01, 0.05, 0.2] {
+        let (mut scan_s, mut walk_s, mut lookup_s, mut touched) = (0.0, 0.0, 0.0, 0usize);
+        for k in 0..moves_per_size {
+            let c = root.min + size * glam::DVec3::new(next(), next(), next());
+            let half = size * (0.5 * share) * glam::DVec3::ONE;
+            let step = size * (0.1 * share) * glam::DVec3::X;
+            let swept = Aabb { min: c - half, max: c + half + step };
+            let moves = Moves { faces: vec![false; tree.faces.len()], swept: vec![swept] };
+            let touch = Touch::new(tree, &moves);
+            // Alternated, so that the machine's load falls on both alike.
+            let (scan, walk) = if k % 2 == 0 {
+                let t = Instant::now();
+                let scan = touch::by_scan(hierarchy, &touch);
+                scan_s += t.elapsed().as_secs_f64();
+                let t = Instant::now();
+                let walk = touch::by_walk(hierarchy, &touch).unwrap();
+                walk_s += t.elapsed().as_secs_f64();
+                (scan, walk)
+            } else {
+                let t = Instant::now();
+                let walk = touch::by_walk(hierarchy, &touch).unwrap();
+                walk_s += t.elapsed().as_secs_f64();
+                let t = Instant::now();
+                let scan = touch::by_scan(hierarchy, &touch);
+                scan_s += t.elapsed().as_secs_f64();
+                (scan, walk)
+            };
+            assert_eq!(scan.len(), walk.len(), "the walk and the scan disagree");
+            touched += scan.len();
+            // What taking the walk's pairs out of the stores costs: a lookup per stored pair
+            // (`touch::take_touched`), counted here without the removal.
+            let t = Instant::now();
+            let set: galerkin_radiosity::hierarchy::pair_tree::PairSet =
+                walk.iter().map(|&(a, b)| galerkin_radiosity::hierarchy::pair_tree::key(a, b)).collect();
+            let key = galerkin_radiosity::hierarchy::pair_tree::key;
+            let found = hierarchy.links.iter().filter(|l| set.contains(&key(l.a, l.b))).count()
+                + hierarchy
+                    .blocked
+                    .iter()
+                    .chain(&hierarchy.idle)
+                    .filter(|&&(a, b)| set.contains(&key(a, b)))
+                    .count();
+            lookup_s += t.elapsed().as_secs_f64();
+            assert_eq!(found, walk.len());
+        }
+        let n = moves_per_size as f64;
+        println!(
+            "| {share} | {:.0} | {:.2} | {:.2} | {:.1}x | {:.2} |",
+            touched as f64 / n,
+            1e3 * scan_s / n,
+            1e3 * walk_s / n,
+            scan_s / walk_s,
+            1e3 * lookup_s / n,
+        );
+    }
 }
 
 /// The hierarchical solve with and without the Anderson mixer over the same frames, each chain
@@ -247,16 +352,17 @@ fn hierarchy_table(settings: &Settings, quick: bool) {
         "\nThe hierarchy (issue 21): the same scenes over {hframes} frames, order 2, corner gather off, each frame \
          updated from the one before, then solved from scratch, means over frames 2..{hframes}; rms is the worst \
          frame's face means against the fresh frame's, of their peak; an updated frame's time split into linking \
-         and the Jacobi solve, with its sweeps against a fresh frame's:\n"
+         and the Jacobi solve, with its sweeps against a fresh frame's; the last frame's links, updated (the \
+         pair tree kept, so updates coarsen) and fresh:\n"
     );
     println!(
-        "| scene | patches | first frame s | updated s/frame | link s | solve s | sweeps (fresh) | from scratch s/frame | x faster | links kept / relinked | worst rms vs fresh |"
+        "| scene | patches | first frame s | updated s/frame | link s | solve s | sweeps (fresh) | from scratch s/frame | x faster | links kept / relinked | last frame's links (fresh) | worst rms vs fresh |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     for (name, scene) in hcases {
         let h = run_hierarchy(&scene);
         println!(
-            "| {name} | {} | {:.2} | {:.3} | {:.3} | {:.3} | {:.1} ({:.1}) | {:.3} | {:.1}x | {:.0} / {:.0} of {:.0} | {:.2}% |",
+            "| {name} | {} | {:.2} | {:.3} | {:.3} | {:.3} | {:.1} ({:.1}) | {:.3} | {:.1}x | {:.0} / {:.0} of {:.0} | {} ({}) | {:.2}% |",
             scene.face_count(),
             h.first,
             h.updated,
@@ -269,6 +375,8 @@ fn hierarchy_table(settings: &Settings, quick: bool) {
             h.kept,
             h.touched,
             h.links,
+            h.last_links,
+            h.last_fresh_links,
             100.0 * h.worst_rms,
         );
     }

@@ -77,6 +77,8 @@ TABLES: dict[str, Table | None] = {
                                  "cargo bench --bench animation -- --quick", "(the same run)"),
     "solve-mixing": Table("cargo bench --bench animation", 2,
                           "cargo bench --bench animation -- --quick", "(the same run)"),
+    "touch-walk": Table("cargo bench --bench animation", 3,
+                        "cargo bench --bench animation -- --quick", "(the same run)"),
     "ab-moving-light": Table(f"{PY} -m tools.ab HEAD --exact HEAD --runs 5 --gather", 0,
                              f"{PY} -m tools.ab WORK --exact WORK --runs 1 --frames 4 --gather",
                              "a build of the revision, then about 3 min"),

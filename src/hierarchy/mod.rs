@@ -15,6 +15,7 @@ pub mod lobes;
 pub mod pair_tree;
 pub mod refine;
 pub mod solve;
+pub mod touch;
 pub mod tree;
 pub mod two_scale;
 pub mod update;

@@ -11,36 +11,31 @@
 //! Every other pair is computed from the very same patches and occluders in the shaft as the
 //! frame before, so its link is what a fresh computation would give, bit for bit (the tests check
 //! every link of an updated frame against [`coupling::compute`] on the new geometry). The touched
-//! pairs are refined again from where they stood, with this frame's brightness: a pair split
-//! before is split again where it still needs to be (the quadtrees keep their nodes), and may end
-//! coarser than its old links did not. Nothing is coarsened yet: links only get finer over an
-//! animation, which keeps them accurate but lets their number grow with the motion's reach.
+//! pairs are found by a walk down the pair tree when it is kept, else by a scan of every stored
+//! pair ([`super::touch`]), and refined again with this frame's brightness: from where they
+//! stood, or, with the pair tree kept, from the top of each largest subtree of pairs all touched
+//! ([`super::pair_tree`]), so that a region a moving object has left can link coarser again.
+//! The quadtrees keep their nodes.
 //!
 //! Emission, reflectance and lights may change every frame: the sources are computed again for
 //! every leaf, the oracle's threshold follows the new source power, and the link-and-solve rounds
 //! run as in [`super::solve_frame`], the first round on the touched pairs only.
 //!
-//! What this does not do yet (issue 21): find the touched pairs by a walk of a shaft hierarchy
-//! (it tests every pair, which is cheap against the links it recomputes), expand moving links in
-//! the seed's series, coarsen, or update the corner gather by what changed.
+//! What this does not do yet (issue 21): take the touched pairs out of the stores without a pass
+//! over them (the walk finds them, a hash lookup per stored pair removes them), coarsen a
+//! subtree only partly touched (its untouched links are kept as they are, so a shadow's fine
+//! links outside the swept shafts stay), expand moving links in the seed's series, remove the
+//! quadtree nodes no link uses, or update the corner gather by what changed.
 
 use crate::basis::Basis;
 use crate::error::{Error, Result};
-use crate::geometry::Aabb;
 use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
 use crate::system::{Progress, build_elements_reusing};
 
 use super::refine::{Hierarchy, Oracle};
+use super::touch::{self, Moves, take_touched};
 use super::{HierarchicalFrame, HierarchySettings, HierarchyStats, Lighting, Start};
-
-/// What a frame changes in the tree it inherits.
-pub struct Moves {
-    /// Per face of the tree: it moved (its patch changed).
-    pub faces: Vec<bool>,
-    /// The bounds of each moving object's moved faces, old and new places together.
-    pub swept: Vec<Aabb>,
-}
 
 /// Solves `scene` at `frame` from `previous`, the solution of another frame of the same scene
 /// (the same objects and faces): what a frame of an animation costs on the hierarchy.
@@ -68,7 +63,7 @@ pub fn update_frame(
         return Err(Error::Cancelled);
     }
     let t = std::time::Instant::now();
-    let swept = swept_bounds(&old.faces, &faces);
+    let swept = Moves::swept_bounds(&old.faces, &faces);
     let reflectance = super::face_reflectance(scene, &faces);
     let lit = Lighting::new(scene, frame, &faces);
     let total_area: f64 = faces.iter().map(|e| e.area).sum();
@@ -130,51 +125,5 @@ fn coarsest(hierarchy: &mut Hierarchy, touched: Vec<(u32, u32)>) -> Vec<(u32, u3
     }
     let set: super::pair_tree::PairSet = touched.iter().map(|&(a, b)| super::pair_tree::key(a, b)).collect();
     let tree = &hierarchy.tree;
-    let neutral = |a: u32, b: u32| {
-        a == b
-            || matches!((tree.node(a).surface(), tree.node(b).surface()), (Some(x), Some(y)) if x.face == y.face)
-    };
-    hierarchy.splits.coarsest_touched(tree, &set, neutral).unwrap_or(touched)
-}
-
-/// Per object with moved faces, the box around their old and new patches.
-fn swept_bounds(old: &[crate::system::Element], new: &[crate::system::Element]) -> Vec<Aabb> {
-    let mut out: Vec<(u32, Aabb)> = Vec::new();
-    for (a, b) in old.iter().zip(new) {
-        if a.patch == b.patch {
-            continue;
-        }
-        let both = a.patch.bounds().union(b.patch.bounds());
-        match out.last_mut() {
-            Some((o, x)) if *o == b.object => *x = x.union(both),
-            _ => out.push((b.object, both)),
-        }
-    }
-    out.into_iter().map(|(_, x)| x).collect()
-}
-
-/// Takes out of `hierarchy` every pair `moves` may have changed ([the module's rule](self)).
-pub fn take_touched(hierarchy: &mut Hierarchy, moves: &Moves) -> Vec<(u32, u32)> {
-    if moves.swept.is_empty() {
-        return Vec::new();
-    }
-    let tree = &hierarchy.tree;
-    let holds = tree.nodes_holding(&moves.faces);
-    let boxes: Vec<Aabb> = (0..tree.nodes.len() as u32).map(|id| tree.bounds(id)).collect();
-    // A margin of rounding, scaled to the scene, so that a box that only touches the shaft is in.
-    let scene_box = moves.swept.iter().fold(boxes[tree.root as usize], |u, x| u.union(*x));
-    let eps = 1e-9 * scene_box.diagonal().length().max(1e-300);
-    let touched = |a: u32, b: u32| {
-        holds[a as usize]
-            || holds[b as usize]
-            || moves.swept.iter().any(|x| {
-                crate::visibility::shaft::Shaft::between_may_contain_box(
-                    &boxes[a as usize],
-                    &boxes[b as usize],
-                    x,
-                    eps,
-                )
-            })
-    };
-    hierarchy.take_touched(touched)
+    hierarchy.splits.coarsest_touched(tree, &set, |a, b| touch::neutral(tree, a, b)).unwrap_or(touched)
 }

@@ -330,3 +330,55 @@ fn a_cancelled_update_keeps_the_last_frame() {
     let stats = session.solve_frame(3.0, &no_progress).unwrap();
     assert!(!stats.full_rebuild, "and the one after updated again");
 }
+
+/// The walk down the pair tree finds exactly the stored pairs a scan of them all finds, for
+/// random moves (random faces moved, random swept boxes in and around the scene) on the
+/// hierarchies of the demo animation and of the seed's room, each after an update.
+#[test]
+fn the_pair_tree_walk_finds_what_the_scan_finds() {
+    use galerkin_radiosity::geometry::Aabb;
+    use galerkin_radiosity::hierarchy::touch::{self, Moves, Touch};
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for scene in [animated(), seed_room(2.0, 60, settings())] {
+        let hs = HierarchySettings { keep_pair_tree: true, ..Default::default() };
+        let mut first = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
+        let h = update_frame(&mut first, &scene, 2.0, &hs, &no_progress).unwrap();
+        let hierarchy = &h.hierarchy;
+        let tree = &hierarchy.tree;
+        let stored = hierarchy.links.len() + hierarchy.blocked.len() + hierarchy.idle.len();
+        let scene_box = tree.bounds(tree.root);
+        let size = scene_box.diagonal();
+        let (mut partial, mut none) = (0, 0);
+        for case in 0..300 {
+            let p = [0.0, 0.0, 0.002, 0.02][case % 4];
+            let faces: Vec<bool> = (0..tree.faces.len()).map(|_| next() < p).collect();
+            let swept: Vec<Aabb> = (0..1 + case % 3)
+                .map(|_| {
+                    let c = scene_box.min + size * glam::DVec3::new(next(), next(), next());
+                    let h = size * (0.002 + 0.2 * next()) * glam::DVec3::new(next(), next(), next());
+                    Aabb { min: c - h, max: c + h }
+                })
+                .collect();
+            let moves = Moves { faces, swept };
+            let touch = Touch::new(tree, &moves);
+            let mut scan = touch::by_scan(hierarchy, &touch);
+            let mut walk = touch::by_walk(hierarchy, &touch).expect("the pair tree is kept");
+            scan.sort_unstable();
+            walk.sort_unstable();
+            assert_eq!(walk, scan, "case {case}: the walk and the scan disagree");
+            match scan.len() {
+                0 => none += 1,
+                n if n < stored => partial += 1,
+                _ => {}
+            }
+        }
+        assert!(
+            partial > 100 && none > 0,
+            "{partial} cases touched part of the pairs, {none} none: too few tested"
+        );
+    }
+}

@@ -1,0 +1,154 @@
+//! Which stored pairs a move may have changed ([`super::update`]'s rule), found by a scan of
+//! every pair or, with the pair tree kept, by a walk down it (Drettakis and Sillion 1997 find a
+//! move's links through their hierarchy of shafts in the same way).
+//!
+//! A pair `(a, b)` is touched when an end holds a moved face, or when a moved object's swept
+//! box meets the shaft between the ends' boxes (their convex hull,
+//! [`Shaft::between_may_contain_box`]). The walk enters the subtree of an inner pair only where
+//! the same test holds on boxes that bound everything below each end ([`Touch::may_below`]): a
+//! shaft between larger boxes holds the shafts between smaller ones inside them, and a node holds
+//! a moved face if a node below it does. So it reaches every touched leaf, and its cost grows
+//! with the pairs near the move rather than with the scene.
+
+use super::pair_tree::{self, PairSet, Splits};
+use super::refine::Hierarchy;
+use super::tree::{NodeId, Tree};
+use crate::geometry::Aabb;
+use crate::system::Element;
+use crate::visibility::shaft::Shaft;
+
+/// What a frame changes in the tree it inherits.
+pub struct Moves {
+    /// Per face of the tree: it moved (its patch changed).
+    pub faces: Vec<bool>,
+    /// The bounds of each moving object's moved faces, old and new places together.
+    pub swept: Vec<Aabb>,
+}
+
+impl Moves {
+    /// Per object with moved faces, the box around their old and new patches.
+    pub fn swept_bounds(old: &[Element], new: &[Element]) -> Vec<Aabb> {
+        let mut out: Vec<(u32, Aabb)> = Vec::new();
+        for (a, b) in old.iter().zip(new) {
+            if a.patch == b.patch {
+                continue;
+            }
+            let both = a.patch.bounds().union(b.patch.bounds());
+            match out.last_mut() {
+                Some((o, x)) if *o == b.object => *x = x.union(both),
+                _ => out.push((b.object, both)),
+            }
+        }
+        out.into_iter().map(|(_, x)| x).collect()
+    }
+}
+
+/// The touch test of one move on one tree.
+pub struct Touch<'a> {
+    moves: &'a Moves,
+    /// Per node: it holds a moved face.
+    holds: Vec<bool>,
+    /// Per node: its own box ([`Tree::bounds`]), and a box around its own and every node's
+    /// below it (a cluster's sphere need not hold its children's).
+    boxes: Vec<Aabb>,
+    below: Vec<Aabb>,
+    /// A margin of rounding, scaled to the scene, so that a box that only touches a shaft is in.
+    eps: f64,
+}
+
+impl<'a> Touch<'a> {
+    pub fn new(tree: &Tree, moves: &'a Moves) -> Self {
+        let holds = tree.nodes_holding(&moves.faces);
+        let boxes: Vec<Aabb> = (0..tree.nodes.len() as NodeId).map(|id| tree.bounds(id)).collect();
+        let mut below = boxes.clone();
+        // Children after their parents in a pre-order, then unions from the leaves up.
+        let mut order = Vec::with_capacity(tree.nodes.len());
+        let mut stack = vec![tree.root];
+        while let Some(id) = stack.pop() {
+            order.push(id);
+            stack.extend_from_slice(tree.children(id));
+        }
+        for &id in order.iter().rev() {
+            for &c in tree.children(id) {
+                below[id as usize] = below[id as usize].union(below[c as usize]);
+            }
+        }
+        let scene_box = moves.swept.iter().fold(below[tree.root as usize], |u, x| u.union(*x));
+        let eps = 1e-9 * scene_box.diagonal().length().max(1e-300);
+        Self { moves, holds, boxes, below, eps }
+    }
+
+    /// The pair `(a, b)` may have changed ([the module's rule](self)).
+    pub fn pair(&self, a: NodeId, b: NodeId) -> bool {
+        self.test(&self.boxes, a, b)
+    }
+
+    /// Some pair below `(a, b)` (itself included) may have changed.
+    pub fn may_below(&self, a: NodeId, b: NodeId) -> bool {
+        self.test(&self.below, a, b)
+    }
+
+    fn test(&self, boxes: &[Aabb], a: NodeId, b: NodeId) -> bool {
+        let (a, b) = (a as usize, b as usize);
+        self.holds[a]
+            || self.holds[b]
+            || self
+                .moves
+                .swept
+                .iter()
+                .any(|x| Shaft::between_may_contain_box(&boxes[a], &boxes[b], x, self.eps))
+    }
+}
+
+/// The stored pairs (links, blocked, idle) `touch` says may have changed, by a scan of them all.
+pub fn by_scan(hierarchy: &Hierarchy, touch: &Touch) -> Vec<(NodeId, NodeId)> {
+    let links = hierarchy.links.iter().map(|l| (l.a, l.b));
+    let others = hierarchy.blocked.iter().chain(&hierarchy.idle).copied();
+    links.chain(others).filter(|&(a, b)| touch.pair(a, b)).collect()
+}
+
+/// The same pairs by a walk down the pair tree, in its order; `None` when it is not kept.
+pub fn by_walk(hierarchy: &Hierarchy, touch: &Touch) -> Option<Vec<(NodeId, NodeId)>> {
+    let splits: &Splits = &hierarchy.splits;
+    if !splits.is_kept() {
+        return None;
+    }
+    let tree = &hierarchy.tree;
+    let (mut out, mut stack) = (Vec::new(), vec![(tree.root, tree.root)]);
+    while let Some((a, b)) = stack.pop() {
+        if !touch.may_below(a, b) {
+            continue;
+        }
+        match splits.split_of(a, b) {
+            Some(s) => stack.extend(pair_tree::children(tree, a, b, s)),
+            None if !neutral(tree, a, b) && touch.pair(a, b) => out.push((a, b)),
+            None => {}
+        }
+    }
+    Some(out)
+}
+
+/// A pair that exchanges nothing by construction and is never stored: a node with itself, two
+/// parts of one face.
+pub fn neutral(tree: &Tree, a: NodeId, b: NodeId) -> bool {
+    a == b
+        || matches!((tree.node(a).surface(), tree.node(b).surface()), (Some(x), Some(y)) if x.face == y.face)
+}
+
+/// Takes out of `hierarchy` every stored pair `moves` may have changed and returns them: found
+/// by the walk when the pair tree is kept, else by the scan.
+pub fn take_touched(hierarchy: &mut Hierarchy, moves: &Moves) -> Vec<(NodeId, NodeId)> {
+    if moves.swept.is_empty() {
+        return Vec::new();
+    }
+    let touch = Touch::new(&hierarchy.tree, moves);
+    match by_walk(hierarchy, &touch) {
+        Some(found) => {
+            let set: PairSet = found.iter().map(|&(a, b)| pair_tree::key(a, b)).collect();
+            // Still a pass over the stored pairs, but a lookup each, not a shaft test; and the
+            // pairs come back in the scan's order, so both ways refine the same work.
+            hierarchy.take_touched(|a, b| set.contains(&pair_tree::key(a, b)))
+        }
+        None => hierarchy.take_touched(|a, b| touch.pair(a, b)),
+    }
+}
