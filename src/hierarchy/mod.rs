@@ -72,7 +72,7 @@ pub struct HierarchySettings {
     pub light_links: bool,
     /// Corners gathered through the links ([`gather`]); else read from the leaf polynomials.
     pub corner_gather: bool,
-    /// Keep the refinement's pair tree ([`pair_tree`], about 20 bytes per link) so that the
+    /// Keep the refinement's pair tree ([`pair_tree`], about 14 bytes per stored pair) so that the
     /// next frame's update can coarsen where a move no longer needs fine links; off, updates
     /// only refine. [`crate::session::Session`] keeps it for scenes of more than one frame.
     pub keep_pair_tree: bool,

@@ -110,6 +110,13 @@ enum Verdict {
 }
 
 impl Oracle {
+    /// The oracle would link the pair `(a, b)` as it stands with `radiosity` per node: what an
+    /// update asks of a pair above links a move touched before it refines it again coarser
+    /// ([`super::pair_tree::Splits::coarsest_touched`]).
+    pub fn links_whole(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId) -> bool {
+        a != b && matches!(self.decide(tree, radiosity, a, b, self.threshold), Verdict::Link)
+    }
+
     fn splittable(&self, tree: &Tree, id: NodeId) -> bool {
         match &tree.node(id).kind {
             Kind::Cluster { .. } => true,

@@ -90,7 +90,7 @@ pub fn update_frame(
     }
     let touched = take_touched(&mut hierarchy, &moves);
     let touched_pairs = touched.len();
-    let work = coarsest(&mut hierarchy, touched);
+    let work = coarsest(&mut hierarchy, touched, &state.radiosity_estimate());
     let mut stats = HierarchyStats {
         faces: hierarchy.tree.faces.len(),
         moved_faces: moves.faces.iter().filter(|&&m| m).count(),
@@ -117,13 +117,27 @@ pub fn update_frame(
 }
 
 /// Where to refine the `touched` pairs again from: with the pair tree kept, the tops of the
-/// largest subtrees touched everywhere ([`super::pair_tree::Splits::coarsest_touched`]), where
-/// the oracle may now link coarser; else the touched pairs themselves.
-fn coarsest(hierarchy: &mut Hierarchy, touched: Vec<(u32, u32)>) -> Vec<(u32, u32)> {
+/// subtrees [`super::pair_tree::Splits::coarsest_touched`] redoes, whose untouched stored pairs
+/// it takes out too (the oracle judging with `radiosity`), where the oracle may now link
+/// coarser; else the touched pairs themselves.
+fn coarsest(hierarchy: &mut Hierarchy, touched: Vec<(u32, u32)>, radiosity: &[f64]) -> Vec<(u32, u32)> {
+    use super::pair_tree::{PairSet, key};
     if !hierarchy.splits.is_kept() || touched.is_empty() {
         return touched;
     }
-    let set: super::pair_tree::PairSet = touched.iter().map(|&(a, b)| super::pair_tree::key(a, b)).collect();
-    let tree = &hierarchy.tree;
-    hierarchy.splits.coarsest_touched(tree, &set, |a, b| touch::neutral(tree, a, b)).unwrap_or(touched)
+    let set: PairSet = touched.iter().map(|&(a, b)| key(a, b)).collect();
+    let (tree, oracle) = (&hierarchy.tree, &hierarchy.oracle);
+    let redo = hierarchy.splits.coarsest_touched(
+        tree,
+        &set,
+        |a, b| touch::neutral(tree, a, b),
+        |a, b| oracle.links_whole(tree, radiosity, a, b),
+    );
+    let Some(redo) = redo else { return touched };
+    if !redo.untouched.is_empty() {
+        let more: PairSet = redo.untouched.iter().map(|&(a, b)| key(a, b)).collect();
+        let taken = hierarchy.take_touched(|a, b| more.contains(&key(a, b)));
+        debug_assert_eq!(taken.len(), redo.untouched.len());
+    }
+    redo.tops
 }

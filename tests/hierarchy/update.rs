@@ -177,9 +177,10 @@ fn check_pair_tree(h: &HierarchicalFrame) {
 
 /// Refined again from where they stood, touched pairs only get finer, and the links of wherever
 /// the moving block and light passed pile up. With the pair tree kept, an update refines a
-/// subtree touched everywhere from its top and may link it coarser. Measured on the demo
-/// animation over 32 frames (order 1): 3,382 links at the first frame; at the last, 5,562
-/// without the pair tree, 4,285 with it, 3,583 in a fresh build of that frame.
+/// subtree touched everywhere, or touched and now linked whole by the oracle, from its top and
+/// may link it coarser. Measured on the demo animation over 32 frames (order 1): 3,382 links at
+/// the first frame; at the last, 5,562 without the pair tree, 3,999 with it (4,285 redoing only
+/// subtrees touched everywhere), 3,583 in a fresh build of that frame.
 #[test]
 fn updates_coarsen_where_a_move_has_passed() {
     let scene = cornell_box_animated(2, 32, settings());
@@ -204,7 +205,7 @@ fn updates_coarsen_where_a_move_has_passed() {
     );
     assert!(refined_from > 0, "no update refined a pair");
     assert!(b < a, "coarsening kept {b} links against {a} without it");
-    assert!((b as f64) < 1.3 * f as f64, "coarsening kept {b} links, a fresh build has {f}");
+    assert!((b as f64) < 1.2 * f as f64, "coarsening kept {b} links, a fresh build has {f}");
     check_pair_tree(&coarsened);
     check_partition(&coarsened);
     let err = relative_rms(&face_means(&coarsened), &face_means(&fresh));
