@@ -124,6 +124,9 @@ pub struct HierarchyStats {
     pub link_bytes: usize,
     pub sweeps: usize,
     pub link_seconds: f64,
+    /// Of `link_seconds`, computing the couplings of accepted pairs
+    /// ([`refine::RefineStats::compute_seconds`]).
+    pub compute_seconds: f64,
     pub solve_seconds: f64,
     /// Distinct corner points gathered, and the gather's time (0 without it).
     pub gather_points: usize,
@@ -283,13 +286,16 @@ fn link_and_solve(
         let linked = |f: f64| progress((round as f64 + f) / rounds, "links");
         match start.take() {
             Some(Start::Root) => {
-                hierarchy.link_all(ctx, &mut radiosity, &linked)?;
+                stats.compute_seconds += hierarchy.link_all(ctx, &mut radiosity, &linked)?.compute_seconds;
             }
             Some(Start::Pairs(work)) => {
-                hierarchy.link_pairs(ctx, &mut radiosity, work, &linked)?;
+                stats.compute_seconds +=
+                    hierarchy.link_pairs(ctx, &mut radiosity, work, &linked)?.compute_seconds;
             }
             None => {
-                if hierarchy.relink(ctx, &mut radiosity, &linked)?.relinked == 0 {
+                let relinked = hierarchy.relink(ctx, &mut radiosity, &linked)?;
+                stats.compute_seconds += relinked.compute_seconds;
+                if relinked.relinked == 0 {
                     break;
                 }
             }

@@ -153,18 +153,21 @@ impl Splits {
     /// linked coarse again), or whose children are all redone. Pairs that exchange nothing by
     /// construction (`neutral`: a node with itself, two parts of one face) count as touched.
     /// Also returns the stored leaves below the tops that are not in `touched`, which the update
-    /// must take out of the stores too. `None` when nothing is kept.
+    /// must take out of the stores too. The walk skips the subtrees where `may_touch` says no
+    /// leaf is touched ([`super::touch::Touch::may_below`]), so that its cost follows the move.
+    /// `None` when nothing is kept.
     pub fn coarsest_touched(
         &mut self,
         tree: &Tree,
         touched: &PairSet,
+        may_touch: impl Fn(NodeId, NodeId) -> bool,
         neutral: impl Fn(NodeId, NodeId) -> bool,
         links_whole: impl Fn(NodeId, NodeId) -> bool,
     ) -> Option<Redo> {
         let map = self.map.as_mut()?;
         let mut redo = Redo::default();
         let root = tree.root;
-        let rules = Rules { touched, neutral: &neutral, links_whole: &links_whole };
+        let rules = Rules { touched, may_touch: &may_touch, neutral: &neutral, links_whole: &links_whole };
         let top = visit(map, tree, &rules, (root, root), &mut redo.tops);
         if top.all && top.any {
             redo.tops.clear();
@@ -187,8 +190,9 @@ pub struct Redo {
 }
 
 /// The tests [`visit`] applies.
-struct Rules<'a, N, W> {
+struct Rules<'a, M, N, W> {
     touched: &'a PairSet,
+    may_touch: &'a M,
     neutral: &'a N,
     links_whole: &'a W,
 }
@@ -217,17 +221,23 @@ impl Splits {
 
 /// The pair `p`'s subtree: whether it is redone whole (`all`) and holds a touched leaf (`any`).
 /// The tops inside a pair not redone whole go to `tops`.
-fn visit<N, W>(
+fn visit<M, N, W>(
     map: &PairMap<NodeId>,
     tree: &Tree,
-    rules: &Rules<N, W>,
+    rules: &Rules<M, N, W>,
     (a, b): (NodeId, NodeId),
     tops: &mut Vec<(NodeId, NodeId)>,
 ) -> Touch
 where
+    M: Fn(NodeId, NodeId) -> bool,
     N: Fn(NodeId, NodeId) -> bool,
     W: Fn(NodeId, NodeId) -> bool,
 {
+    // No touched leaf below: as a subtree with an untouched one (it may hold none, but its
+    // parent then only redoes less).
+    if !(rules.may_touch)(a, b) {
+        return Touch { all: false, any: false };
+    }
     let Some(&s) = map.get(&key(a, b)) else {
         return if rules.touched.contains(&key(a, b)) {
             Touch { all: true, any: true }
@@ -257,12 +267,12 @@ where
 
 /// Forgets the records of `(a, b)` and of every inner pair below it; its stored leaves that are
 /// not touched go to `untouched`.
-fn forget_below<N, W>(
+fn forget_below<M, N, W>(
     map: &mut PairMap<NodeId>,
     tree: &Tree,
     a: NodeId,
     b: NodeId,
-    rules: &Rules<N, W>,
+    rules: &Rules<M, N, W>,
     untouched: &mut Vec<(NodeId, NodeId)>,
 ) where
     N: Fn(NodeId, NodeId) -> bool,

@@ -260,6 +260,9 @@ pub struct RefineStats {
     pub links: usize,
     pub split_for_shadows: usize,
     pub relinked: usize,
+    /// Wall seconds spent computing the accepted pairs' couplings (quadrature and visibility),
+    /// apart from deciding and filing them: what the seed's series could replace at most.
+    pub compute_seconds: f64,
 }
 
 impl Hierarchy {
@@ -429,10 +432,12 @@ impl Hierarchy {
                     return Err(crate::Error::Cancelled);
                 }
                 let tree = &self.tree;
+                let t = std::time::Instant::now();
                 chunk
                     .par_iter()
                     .map(|&(a, b, weight)| coupling::compute_as(ctx, tree, a, b, weight))
                     .collect_into_vec(&mut part);
+                stats.compute_seconds += t.elapsed().as_secs_f64();
                 // Reserved first: the allocator's refusal of the large vectors is an error (a
                 // full link's own blocks are small allocations).
                 budget::try_reserve(&mut self.links, part.len(), LINKS)?;

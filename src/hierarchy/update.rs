@@ -90,7 +90,7 @@ pub fn update_frame(
     }
     let touched = take_touched(&mut hierarchy, &moves);
     let touched_pairs = touched.len();
-    let work = coarsest(&mut hierarchy, touched, &state.radiosity_estimate());
+    let work = coarsest(&mut hierarchy, &moves, touched, &state.radiosity_estimate());
     let mut stats = HierarchyStats {
         faces: hierarchy.tree.faces.len(),
         moved_faces: moves.faces.iter().filter(|&&m| m).count(),
@@ -120,16 +120,23 @@ pub fn update_frame(
 /// subtrees [`super::pair_tree::Splits::coarsest_touched`] redoes, whose untouched stored pairs
 /// it takes out too (the oracle judging with `radiosity`), where the oracle may now link
 /// coarser; else the touched pairs themselves.
-fn coarsest(hierarchy: &mut Hierarchy, touched: Vec<(u32, u32)>, radiosity: &[f64]) -> Vec<(u32, u32)> {
+fn coarsest(
+    hierarchy: &mut Hierarchy,
+    moves: &Moves,
+    touched: Vec<(u32, u32)>,
+    radiosity: &[f64],
+) -> Vec<(u32, u32)> {
     use super::pair_tree::{PairSet, key};
     if !hierarchy.splits.is_kept() || touched.is_empty() {
         return touched;
     }
     let set: PairSet = touched.iter().map(|&(a, b)| key(a, b)).collect();
     let (tree, oracle) = (&hierarchy.tree, &hierarchy.oracle);
+    let test = touch::Touch::new(tree, moves);
     let redo = hierarchy.splits.coarsest_touched(
         tree,
         &set,
+        |a, b| test.may_below(a, b),
         |a, b| touch::neutral(tree, a, b),
         |a, b| oracle.links_whole(tree, radiosity, a, b),
     );
