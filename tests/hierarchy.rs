@@ -9,6 +9,9 @@ use galerkin_radiosity::scenes::{closed_box, cornell_box};
 use galerkin_radiosity::session::{Method, Session};
 use galerkin_radiosity::system::{System, no_progress};
 
+#[path = "common/hierarchy_checks.rs"]
+mod hierarchy_checks;
+
 #[path = "hierarchy/update.rs"]
 mod update;
 
