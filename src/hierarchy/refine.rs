@@ -342,12 +342,21 @@ impl Hierarchy {
         let mut work = Vec::new();
         let tree = &self.tree;
         let oracle = &self.oracle;
+        // The same test that made each link, with the new brightness (in parallel: the tree and
+        // the estimates are only read); a light link that may now carry more than a light link
+        // may is computed again in full.
+        let keep: Vec<bool> = self
+            .links
+            .par_iter()
+            .map(|l| {
+                let light = matches!(l.coupling, coupling::Coupling::Constants { .. });
+                matches!(oracle.decide(tree, radiosity, l.a, l.b, bar), Verdict::Link)
+                    && !(light && oracle.weight(tree, radiosity, l.a, l.b) == Weight::Full)
+            })
+            .collect();
+        let mut verdicts = keep.iter();
         self.links.retain(|l| {
-            // The same test that made the link, with the new brightness; a light link that may
-            // now carry more than a light link may is computed again in full.
-            let light = matches!(l.coupling, coupling::Coupling::Constants { .. });
-            let keep = matches!(oracle.decide(tree, radiosity, l.a, l.b, bar), Verdict::Link)
-                && !(light && oracle.weight(tree, radiosity, l.a, l.b) == Weight::Full);
+            let keep = *verdicts.next().expect("a verdict per link");
             if !keep {
                 work.push((l.a, l.b));
             }
