@@ -10,8 +10,8 @@
 //! exhaustive gather (every source from the point with its own rays) on the same solution, with
 //! the difference between the two. Each case runs in a child process of this binary
 //! (`common/child.rs`), so that its peak RSS is its own. `--hierarchy` prints the second table
-//! only. `GALERKIN_GATHER_DUMP=file` with `--hierarchy-case path fast` writes the fast gather's
-//! corners, and `--diff a b` compares two such files (a change's corners against the old ones').
+//! only. `GALERKIN_GATHER_DUMP=file` with `--hierarchy-case path fast|exhaustive` writes the fast
+//! gather's corners (and the exhaustive one's to `file.exhaustive`), and `--diff a b` compares two such files (a change's corners against the old ones').
 
 use std::time::Instant;
 
@@ -94,6 +94,9 @@ fn run_hierarchy_case(path: &str, exhaustive: bool) {
         format!("{} {} {solved} {} {fast_s} {} {}", h.stats.faces, h.stats.links, c.points, c.rays, c.shafts);
     if exhaustive {
         let (slow_s, slow) = run(Mode::Exhaustive);
+        if let Ok(dump) = std::env::var("GALERKIN_GATHER_DUMP") {
+            write_corners(&format!("{dump}.exhaustive"), &slow.radiosity);
+        }
         let (rms, max) = difference(&fast.radiosity, &slow.radiosity);
         line += &format!(" {slow_s} {} {rms} {max}", slow.counts.rays);
     } else {
