@@ -10,7 +10,8 @@
 //! exhaustive gather (every source from the point with its own rays) on the same solution, with
 //! the difference between the two. Each case runs in a child process of this binary
 //! (`common/child.rs`), so that its peak RSS is its own. `--hierarchy` prints the second table
-//! only.
+//! only. `GALERKIN_GATHER_DUMP=file` with `--hierarchy-case path fast|exhaustive` writes the fast
+//! gather's corners (and the exhaustive one's to `file.exhaustive`), and `--diff a b` compares two such files (a change's corners against the old ones').
 
 use std::time::Instant;
 
@@ -85,11 +86,17 @@ fn run_hierarchy_case(path: &str, exhaustive: bool) {
         (t.elapsed().as_secs_f64(), g)
     };
     let (fast_s, fast) = run(Mode::Fast);
+    if let Ok(dump) = std::env::var("GALERKIN_GATHER_DUMP") {
+        write_corners(&dump, &fast.radiosity);
+    }
     let c = &fast.counts;
     let mut line =
         format!("{} {} {solved} {} {fast_s} {} {}", h.stats.faces, h.stats.links, c.points, c.rays, c.shafts);
     if exhaustive {
         let (slow_s, slow) = run(Mode::Exhaustive);
+        if let Ok(dump) = std::env::var("GALERKIN_GATHER_DUMP") {
+            write_corners(&format!("{dump}.exhaustive"), &slow.radiosity);
+        }
         let (rms, max) = difference(&fast.radiosity, &slow.radiosity);
         line += &format!(" {slow_s} {} {rms} {max}", slow.counts.rays);
     } else {
@@ -98,6 +105,20 @@ fn run_hierarchy_case(path: &str, exhaustive: bool) {
     println!("{line}");
     eprintln!("link s {:.1}, solve s {:.1}, {c:?}", h.stats.link_seconds, h.stats.solve_seconds);
     eprintln!("peak {}", peak_rss_mib());
+}
+
+/// The corners' `B` to `path` (little-endian `f64`s, object by object, corner by corner, `r g b`),
+/// for `--diff` between two builds (`GALERKIN_GATHER_DUMP`).
+fn write_corners(path: &str, values: &CornerValues) {
+    let bytes: Vec<u8> = values.iter().flatten().flatten().flat_map(|x| x.to_le_bytes()).collect();
+    std::fs::write(path, bytes).unwrap_or_else(|e| panic!("{path}: {e}"));
+}
+
+/// [`write_corners`]' file read back, as one object.
+fn read_corners(path: &str) -> CornerValues {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    let x: Vec<f64> = bytes.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap())).collect();
+    vec![x.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()]
 }
 
 /// `got` against `want` per corner (the mean of the channels): the RMS difference over the mean
@@ -120,6 +141,12 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     if let Some(i) = args.iter().position(|a| a == "--case") {
         run_case(&args[i + 1]);
+        return;
+    }
+    if let Some(i) = args.iter().position(|a| a == "--diff") {
+        // `--diff got want`: two dumps of the same scene's fast corners (GALERKIN_GATHER_DUMP).
+        let (rms, max) = difference(&read_corners(&args[i + 1]), &read_corners(&args[i + 2]));
+        println!("difference: {:.3}% RMS, {:.3}% of the peak at worst", 100.0 * rms, 100.0 * max);
         return;
     }
     if let Some(i) = args.iter().position(|a| a == "--hierarchy-case") {

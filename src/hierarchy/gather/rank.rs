@@ -16,6 +16,15 @@
 //! The rays go where the light is: on a mesh most of a corner's hundreds of sources are dim
 //! neighbours, and each of them was a shaft query and up to twelve levels of splitting in the
 //! exhaustive gather.
+//!
+//! The tail keeps a ray per Gauss node: its share is of the sources' unoccluded light, and where
+//! most of that is hidden (a corner inside a room) the tail's visibility is much of what the
+//! corner receives. Measured on the decimated monastery (fast against exhaustive 0.95% RMS): the
+//! tail unoccluded 13.9%, from its links as the solve took it (the receiving node's `H`
+//! polynomial of each link read at the corner, no rays) 9.1%, one ray to each source's centre
+//! 1.60%, one ray for the last 1% of the ranked light 1.40%. On a 10k-face crop of the monastery its sources take under two rays each,
+//! and one a source saved 5.5% of the rays (docs/benchmarks.md, "The hierarchy's corner gather
+//! at scale").
 
 use super::polygon;
 use super::sources::Linked;
