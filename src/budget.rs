@@ -158,6 +158,11 @@ const HIERARCHY_KEPT_PAIRS_PER_LINK: u64 = 7;
 /// (the Cornell box: about 3,000; the full monastery: 5,049 with blocks).
 const HIERARCHY_FULL_LINKS: f64 = 20_000.0;
 
+/// Bytes of the pair tree an animation keeps (`hierarchy::pair_tree`), per link: 15.6 MB for the
+/// decimated monastery's 137k links (629k inner pairs for 910k links, blocked and idle pairs, in
+/// a table of 17-byte slots at most 7/8 full).
+const HIERARCHY_PAIR_TREE_PER_LINK: u64 = 130;
+
 /// What a hierarchical bake ([`crate::session::Method::Hierarchical`]) will need. Its links grow
 /// about linearly with the faces, not with their pairs, and how many there are is known only
 /// once the oracle has decided them: the links are `faces x` [`HIERARCHY_LINKS_PER_FACE`] scaled
@@ -168,7 +173,9 @@ const HIERARCHY_FULL_LINKS: f64 = 20_000.0;
 /// and the solve's packed copy. Nodes are two per face (the face and its share of the clusters)
 /// and one per full link (the quadrants split where the light asks for them: 2,785 leaves for
 /// 3,279 links on the modelled Cornell box), each its record, moments, the solve's three
-/// coefficient vectors and its mixer's columns. Elements and results as [`estimate`]. Against the measured peaks: the full monastery at
+/// coefficient vectors and its mixer's columns. An animation (a scene of more than one frame)
+/// also keeps the pair tree ([`HIERARCHY_PAIR_TREE_PER_LINK`]), and an update holds the last
+/// frame's nodes and solution beside the new ones. Elements and results as [`estimate`]. Against the measured peaks: the full monastery at
 /// order 1, 2.2 GB (4.3 GB estimated without the gather); a 9,912-face crop of it, 104 MB
 /// (0.33 GB).
 pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
@@ -186,14 +193,19 @@ pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
         + 2 * 8
         + 2 * 8 * HIERARCHY_KEPT_PAIRS_PER_LINK;
     let per_full_link = 2 * nb * nb * 4 + 16 + 2 * nb * nb * 4;
-    let links = link_count.saturating_mul(per_link).saturating_add(full_count.saturating_mul(per_full_link));
+    let animated = scene.frames.0 != scene.frames.1;
+    let pair_tree = if animated { HIERARCHY_PAIR_TREE_PER_LINK } else { 0 };
+    let links = link_count
+        .saturating_mul(per_link + pair_tree)
+        .saturating_add(full_count.saturating_mul(per_full_link));
     let nodes = faces.saturating_mul(2).saturating_add(full_count);
     // The solve's Anderson mixer holds `2 depth + 4` copies of the leaves' coefficients
     // (`hierarchy::solve::Accelerated`); most nodes are leaves.
     let mixer = (2 * crate::hierarchy::solve::ANDERSON_DEPTH as u64 + 4) * nb * 3 * 8;
     let per_node =
         size_of::<crate::hierarchy::tree::Node>() as u64 + 16 + nb * 8 + 3 * nb * 3 * 8 + mixer + 64;
-    let elements = flat.elements.saturating_add(nodes.saturating_mul(per_node));
+    let copies = if animated { 2 } else { 1 };
+    let elements = flat.elements.saturating_add(nodes.saturating_mul(per_node).saturating_mul(copies));
     // The hierarchy's corner gather keeps nothing per corner between points but its values,
     // which the results count.
     Estimate { links, gather: 0, elements, results: flat.results }
@@ -284,6 +296,27 @@ mod tests {
             (scene.face_count() as f64, scenes::cornell_box(8, Settings::default()).face_count() as f64);
         let ratio = big.links as f64 / e.links as f64;
         assert!((ratio - m * (m - 1.0) / (n * (n - 1.0))).abs() < 1e-9 * ratio, "{ratio}");
+    }
+
+    #[test]
+    fn the_hierarchical_estimate_counts_the_pair_tree_of_an_animation() {
+        let scene = scenes::cornell_box_animated(2, 8, Settings::default());
+        let mut still = scene.clone();
+        still.frames = (scene.frames.0, scene.frames.0);
+        let (animated, one) = (hierarchical_estimate(&scene, 1), hierarchical_estimate(&still, 1));
+        let hs = crate::hierarchy::HierarchySettings {
+            keep_pair_tree: true,
+            ..crate::hierarchy::HierarchySettings::of(&scene.settings)
+        };
+        let frame = crate::hierarchy::solve_frame(&scene, 1.0, &hs, &crate::system::no_progress).unwrap();
+        let kept = frame.stats.pair_tree_bytes as u64;
+        assert!(frame.stats.pair_tree > 0, "no pair tree kept");
+        assert!(
+            kept <= animated.links - one.links,
+            "pair tree {kept} B, estimated {}",
+            animated.links - one.links
+        );
+        assert!(animated.elements > one.elements, "an update's two frames of nodes are not counted");
     }
 
     #[test]

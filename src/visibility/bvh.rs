@@ -155,15 +155,23 @@ impl Bvh {
         if self.nodes.is_empty() {
             return false;
         }
-        let hits = |t: &Triangle| {
-            t.element != skip_a && t.element != skip_b && segment_hits(t, origin, dir, t_min, t_max)
+        let inv = dir.recip();
+        // A hit is one the traversal would find: the segment's slabs meet the triangle's box
+        // (so they meet every box above it: the slab test is monotone in the box, rounding
+        // included) and it crosses the triangle. Tested so everywhere, a triangle tried first
+        // from the cache gives the traversal's verdict, whichever thread asks.
+        let hits = |k: usize| {
+            let t = &self.triangles[k];
+            t.element != skip_a
+                && t.element != skip_b
+                && slab_hit(&self.bounds[k], origin, inv, t_min, t_max)
+                && segment_hits(t, origin, dir, t_min, t_max)
         };
-        if BLOCKERS
-            .with_borrow(|b| b.recent.iter().any(|&k| self.triangles.get(k as usize).is_some_and(hits)))
-        {
+        if BLOCKERS.with_borrow(|b| {
+            b.recent.iter().any(|&k| (k as usize) < self.triangles.len() && hits(k as usize))
+        }) {
             return true;
         }
-        let inv = dir.recip();
         let mut stack = [0u32; 64];
         let mut sp = 1;
         while sp > 0 {
@@ -174,7 +182,7 @@ impl Bvh {
             }
             if node.count > 0 {
                 for k in node.start..node.start + node.count {
-                    if hits(&self.triangles[k as usize]) {
+                    if hits(k as usize) {
                         BLOCKERS.with_borrow_mut(|b| b.remember(k));
                         return true;
                     }
@@ -236,13 +244,23 @@ impl Bvh {
         if self.nodes.is_empty() || blocked.iter().all(|&b| b) {
             return;
         }
-        // The triangles that blocked this thread's last segments first: neighbouring links,
-        // which follow each other here, are mostly blocked by the same few.
-        let test = |t: &Triangle, blocked: &mut [bool]| {
+        let mut inv = [DVec3::ZERO; PACKET];
+        for k in 0..n {
+            inv[k] = dirs[k].recip();
+        }
+        // Each segment's own hit as [`Bvh::occluded`] tests it (its slabs meet the triangle's
+        // box, and it crosses the triangle), so that a triangle reached for another segment of
+        // the packet, or tried first from the cache, gives every segment the verdict of its
+        // own traversal.
+        let test = |i: usize, blocked: &mut [bool]| {
+            let t = &self.triangles[i];
             let mut any = false;
             if t.element != skip_a && t.element != skip_b {
                 for k in 0..n {
-                    if !blocked[k] && segment_hits(t, origins[k], dirs[k], t_min, t_max) {
+                    if !blocked[k]
+                        && slab_hit(&self.bounds[i], origins[k], inv[k], t_min, t_max)
+                        && segment_hits(t, origins[k], dirs[k], t_min, t_max)
+                    {
                         blocked[k] = true;
                         any = true;
                     }
@@ -250,24 +268,26 @@ impl Bvh {
             }
             any
         };
+        // The triangles that blocked this thread's last segments first: neighbouring links,
+        // which follow each other here, are mostly blocked by the same few.
         let recent = BLOCKERS.with_borrow(|b| b.recent);
         for k in recent {
-            if let Some(t) = self.triangles.get(k as usize) {
-                test(t, blocked);
+            if (k as usize) < self.triangles.len() {
+                test(k as usize, blocked);
             }
         }
         if blocked.iter().all(|&b| b) {
             return;
         }
-        let mut inv = [DVec3::ZERO; PACKET];
-        for k in 0..n {
-            inv[k] = dirs[k].recip();
-        }
         // The box of the segments' swept parts: a node outside it holds no hit for any of them.
+        // Grown by a margin far above the rounding of the points, so that it never drops a node
+        // whose slabs a segment meets.
         let mut reach = Aabb::EMPTY;
         for k in 0..n {
             reach = reach.grow(origins[k] + dirs[k] * t_min).grow(origins[k] + dirs[k] * t_max);
         }
+        let margin = 1e-9 * (reach.diagonal().length() + reach.min.abs().max(reach.max.abs()).max_element());
+        reach = Aabb { min: reach.min - DVec3::splat(margin), max: reach.max + DVec3::splat(margin) };
         let mut stack = [0u32; 64];
         let mut sp = 1;
         while sp > 0 {
@@ -282,7 +302,7 @@ impl Bvh {
             }
             if node.count > 0 {
                 for k in node.start..node.start + node.count {
-                    if test(&self.triangles[k as usize], blocked) {
+                    if test(k as usize, blocked) {
                         BLOCKERS.with_borrow_mut(|b| b.remember(k));
                     }
                 }
@@ -381,9 +401,16 @@ fn centroid(t: &Triangle) -> DVec3 {
 pub(crate) fn slab_hit(b: &Aabb, o: DVec3, inv: DVec3, t_min: f64, t_max: f64) -> bool {
     let t0 = (b.min - o) * inv;
     let t1 = (b.max - o) * inv;
-    // NaN (0 * inf on a slab boundary) is ignored by min/max, which keeps the test conservative.
-    let near = t0.min(t1).max_element().max(t_min);
-    let far = t0.max(t1).min_element().min(t_max);
+    // A segment that runs in a slab's boundary plane (no motion along that axis, the origin on
+    // the plane) gives 0 * inf = NaN there, and it lies in the slab whatever `t`: that axis sets
+    // no bound. (`min`/`max` alone keep the other operand, an infinity, which rejected such a
+    // segment: segments along a face's plane passed through the boxes of what stands on it,
+    // and the test was not monotone in the box.)
+    let free = t0.is_nan_mask() | t1.is_nan_mask();
+    let lo = DVec3::select(free, DVec3::NEG_INFINITY, t0.min(t1));
+    let hi = DVec3::select(free, DVec3::INFINITY, t0.max(t1));
+    let near = lo.max_element().max(t_min);
+    let far = hi.min_element().min(t_max);
     near <= far
 }
 
@@ -414,6 +441,74 @@ pub fn segment_hits(t: &Triangle, o: DVec3, d: DVec3, t_min: f64, t_max: f64) ->
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Whatever this thread's cache of recent blockers holds, a segment's verdict is its
+    /// traversal's: segments from random points on the planes of an axis-aligned box room (walls
+    /// split into triangles, a block standing on the floor against one, as scenes touch) to
+    /// others, each asked with an empty cache and then with each triangle cached alone.
+    #[test]
+    fn a_cached_blocker_gives_the_traversals_verdict() {
+        let quad = |p: [DVec3; 4], element: u32| {
+            [Triangle { v: [p[0], p[1], p[2]], element }, Triangle { v: [p[0], p[2], p[3]], element }]
+        };
+        let mut tris = Vec::new();
+        let boxes = [(DVec3::ZERO, DVec3::ONE), (DVec3::new(0.6, 0.0, 0.2), DVec3::new(1.0, 0.3, 0.5))];
+        for (b, (lo, hi)) in boxes.iter().enumerate() {
+            for axis in 0..3 {
+                for side in [lo[axis], hi[axis]] {
+                    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+                    let corner = |a: f64, b: f64| {
+                        let mut p = DVec3::ZERO;
+                        p[axis] = side;
+                        p[u] = a;
+                        p[v] = b;
+                        p
+                    };
+                    let p = [
+                        corner(lo[u], lo[v]),
+                        corner(hi[u], lo[v]),
+                        corner(hi[u], hi[v]),
+                        corner(lo[u], hi[v]),
+                    ];
+                    tris.extend(quad(p, (b * 6 + axis * 2 + usize::from(side == hi[axis])) as u32));
+                }
+            }
+        }
+        let bvh = Bvh::build(tris.clone());
+        let reset = || BLOCKERS.with_borrow_mut(|b| *b = Blockers { recent: [u32::MAX; 8], next: 0 });
+        let mut state = 0x853C_49E6_748F_EA9Bu64;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        // A point on a plane of one of the boxes' faces, on a coarse grid (so that segments run
+        // along faces and through edges), or anywhere.
+        let mut point = || {
+            let (lo, hi) = boxes[(next() * 2.0) as usize];
+            let mut p = DVec3::new(next(), next(), next());
+            if next() < 0.7 {
+                p = (p * 10.0).round() / 10.0;
+            }
+            let axis = (next() * 3.0) as usize;
+            p[axis] = if next() < 0.5 { lo[axis] } else { hi[axis] };
+            p
+        };
+        let (mut cases, mut blocked) = (0, 0);
+        for _ in 0..4000 {
+            let (a, b) = (point(), point());
+            reset();
+            let fresh = bvh.occluded(a, b - a, 1e-9, 1.0 - 1e-9, u32::MAX, u32::MAX);
+            blocked += usize::from(fresh);
+            for k in 0..bvh.triangles.len() as u32 {
+                reset();
+                BLOCKERS.with_borrow_mut(|c| c.remember(k));
+                let cached = bvh.occluded(a, b - a, 1e-9, 1.0 - 1e-9, u32::MAX, u32::MAX);
+                assert_eq!(cached, fresh, "segment {a} -> {b}: triangle {k} cached");
+                cases += 1;
+            }
+        }
+        assert!(blocked > 100 && cases > 10_000, "{blocked} blocked segments, {cases} cases");
+    }
 
     fn grid(n: usize) -> Vec<Triangle> {
         let mut tris = Vec::new();
