@@ -310,6 +310,23 @@ fn mixing_table(settings: &Settings, quick: bool) {
     }
 }
 
+/// The decimated monastery of tests/data/real (1,065 faces) at order 1, corner gather off, its
+/// light quad moving 40 units (two thirds of its width) along x over `frames` frames: the
+/// hierarchy's table's real-mesh row (issue 21's "monastery with a light moving along it").
+fn monastery_moving_light(frames: i64) -> Scene {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/real/monastery_scene.json");
+    let mut scene = galerkin_radiosity::scene::json::read_scene(std::path::Path::new(path)).unwrap();
+    scene.settings.basis_order = 1;
+    scene.settings.corner_gather = false;
+    scene.frames = (0, frames - 1);
+    let light = scene.objects.iter_mut().find(|o| o.name == "Light").expect("the scene's light");
+    light.animation = scenes::translation_keys(&[
+        (0.0, glam::DVec3::new(-20.0, 0.0, 0.0)),
+        ((frames - 1) as f64, glam::DVec3::new(20.0, 0.0, 0.0)),
+    ]);
+    scene
+}
+
 /// The three scenes every table of this bench runs, over `frames` frames: the seed's room and
 /// billiard (its Fig. 5) and the Cornell box with a moving light, smaller with `quick`.
 fn bench_scenes(settings: &Settings, quick: bool, frames: i64) -> Vec<(&'static str, Scene)> {
@@ -361,7 +378,8 @@ fn flat_table(settings: &Settings, quick: bool) {
 /// The hierarchy's frames: docs/benchmarks.md's "animation-hierarchy" block.
 fn hierarchy_table(settings: &Settings, quick: bool) {
     let hframes = if quick { 4 } else { 16 };
-    let hcases = bench_scenes(settings, quick, hframes);
+    let mut hcases = bench_scenes(settings, quick, hframes);
+    hcases.push(("monastery decimated, moving light (order 1)", monastery_moving_light(hframes)));
     println!(
         "\nThe hierarchy (issue 21): the same scenes over {hframes} frames, order 2, corner gather off, each frame \
          updated from the one before, then solved from scratch, means over frames 2..{hframes}; rms is the worst \
