@@ -71,15 +71,7 @@ fn run_hierarchy_case(path: &str, exhaustive: bool) {
     let h = solve_frame(&scene, 0.0, &HierarchySettings::of(&scene.settings), &no_progress).unwrap();
     let solved = t.elapsed().as_secs_f64();
     let lit = Lighting::new(&scene, 0.0, &h.hierarchy.tree.faces);
-    let inputs = gather::Inputs {
-        tree: &h.hierarchy.tree,
-        links: &h.hierarchy.links,
-        blocked: &h.hierarchy.blocked,
-        state: &h.state,
-        emission: &lit.emission,
-        occluders: lit.occluders.as_ref(),
-        lights: lit.lights.as_ref(),
-    };
+    let inputs = gather::Inputs::new(&h.hierarchy, &h.state, &lit);
     let run = |mode| {
         let t = Instant::now();
         let g = gather::corners_with(&inputs, &scene, 0.0, &no_progress, mode).unwrap();

@@ -193,7 +193,7 @@ pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
         + 2 * 8
         + 2 * 8 * HIERARCHY_KEPT_PAIRS_PER_LINK;
     let per_full_link = 2 * nb * nb * 4 + 16 + 2 * nb * nb * 4;
-    let animated = scene.frames.0 != scene.frames.1;
+    let animated = scene.is_animation();
     let pair_tree = if animated { HIERARCHY_PAIR_TREE_PER_LINK } else { 0 };
     let links = link_count
         .saturating_mul(per_link + pair_tree)

@@ -549,7 +549,7 @@ impl Session {
         // A preview reads the leaves, as the flat path's preview skips its gather.
         settings.corner_gather &= !preview;
         // An animation's updates coarsen where a move has passed (`hierarchy::pair_tree`).
-        settings.keep_pair_tree = placed.frames.0 != placed.frames.1;
+        settings.keep_pair_tree = placed.is_animation();
         // A later frame starts from the last one's hierarchy and solution, unless an update
         // failed on its way (it took the links) or the surfaces were replaced since.
         let previous = self.hierarchical.as_mut().filter(|_| !self.stale);

@@ -348,15 +348,7 @@ fn finish(
     stats.pair_tree_bytes = hierarchy.splits.bytes();
     let corners = if hs.corner_gather {
         let t = Instant::now();
-        let inputs = gather::Inputs {
-            tree: &hierarchy.tree,
-            links: &hierarchy.links,
-            blocked: &hierarchy.blocked,
-            state: &state,
-            emission: &lit.emission,
-            occluders: lit.occluders.as_ref(),
-            lights: lit.lights.as_ref(),
-        };
+        let inputs = gather::Inputs::new(&hierarchy, &state, lit);
         let (radiosity, irradiance, points) = gather::corners(&inputs, scene, frame, progress)?;
         stats.gather_points = points;
         stats.gather_seconds = t.elapsed().as_secs_f64();

@@ -92,7 +92,7 @@ pub fn children(tree: &Tree, a: NodeId, b: NodeId, s: NodeId) -> Vec<(NodeId, No
 
 /// What a subtree's stored leaves are: all touched (or exchanging nothing), and any touched.
 #[derive(Clone, Copy)]
-struct Touch {
+struct Subtree {
     all: bool,
     any: bool,
 }
@@ -227,7 +227,7 @@ fn visit<M, N, W>(
     rules: &Rules<M, N, W>,
     (a, b): (NodeId, NodeId),
     tops: &mut Vec<(NodeId, NodeId)>,
-) -> Touch
+) -> Subtree
 where
     M: Fn(NodeId, NodeId) -> bool,
     N: Fn(NodeId, NodeId) -> bool,
@@ -236,33 +236,33 @@ where
     // No touched leaf below: as a subtree with an untouched one (it may hold none, but its
     // parent then only redoes less).
     if !(rules.may_touch)(a, b) {
-        return Touch { all: false, any: false };
+        return Subtree { all: false, any: false };
     }
     let Some(&s) = map.get(&key(a, b)) else {
         return if rules.touched.contains(&key(a, b)) {
-            Touch { all: true, any: true }
+            Subtree { all: true, any: true }
         } else if (rules.neutral)(a, b) {
-            Touch { all: true, any: false }
+            Subtree { all: true, any: false }
         } else {
-            Touch { all: false, any: false }
+            Subtree { all: false, any: false }
         };
     };
     let kids = children(tree, a, b, s);
     let first_top = tops.len();
-    let below: Vec<Touch> = kids.iter().map(|&p| visit(map, tree, rules, p, tops)).collect();
+    let below: Vec<Subtree> = kids.iter().map(|&p| visit(map, tree, rules, p, tops)).collect();
     let all = below.iter().all(|t| t.all);
     let any = below.iter().any(|t| t.any);
     if any && (all || (rules.links_whole)(a, b)) {
         // Redone whole from here or from above: the tops found below are inside.
         tops.truncate(first_top);
-        return Touch { all: true, any: true };
+        return Subtree { all: true, any: true };
     }
     for (&(x, y), t) in kids.iter().zip(&below) {
         if t.all && t.any {
             tops.push((x, y));
         }
     }
-    Touch { all, any }
+    Subtree { all, any }
 }
 
 /// Forgets the records of `(a, b)` and of every inner pair below it; its stored leaves that are

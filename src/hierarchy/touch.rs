@@ -135,14 +135,10 @@ pub fn neutral(tree: &Tree, a: NodeId, b: NodeId) -> bool {
         || matches!((tree.node(a).surface(), tree.node(b).surface()), (Some(x), Some(y)) if x.face == y.face)
 }
 
-/// Takes out of `hierarchy` every stored pair `moves` may have changed and returns them: found
-/// by the walk when the pair tree is kept, else by the scan.
-pub fn take_touched(hierarchy: &mut Hierarchy, moves: &Moves) -> Vec<(NodeId, NodeId)> {
-    if moves.swept.is_empty() {
-        return Vec::new();
-    }
-    let touch = Touch::new(&hierarchy.tree, moves);
-    match by_walk(hierarchy, &touch) {
+/// Takes out of `hierarchy` every stored pair `touch` says a move may have changed and returns
+/// them: found by the walk when the pair tree is kept, else by the scan.
+pub fn take_touched(hierarchy: &mut Hierarchy, touch: &Touch) -> Vec<(NodeId, NodeId)> {
+    match by_walk(hierarchy, touch) {
         Some(found) => {
             let set: PairSet = found.iter().map(|&(a, b)| pair_tree::key(a, b)).collect();
             // Still a pass over the stored pairs, but a lookup each, not a shaft test; and the

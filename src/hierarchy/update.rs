@@ -34,7 +34,7 @@ use crate::scene::Scene;
 use crate::system::{Progress, build_elements_reusing};
 
 use super::refine::{Hierarchy, Oracle};
-use super::touch::{self, Moves, take_touched};
+use super::touch::{Moves, Touch, neutral, take_touched};
 use super::{HierarchicalFrame, HierarchySettings, HierarchyStats, Lighting, Start};
 
 /// Solves `scene` at `frame` from `previous`, the solution of another frame of the same scene
@@ -88,13 +88,18 @@ pub fn update_frame(
     if hs.keep_pair_tree != hierarchy.splits.is_kept() {
         hierarchy.splits = super::splits_for(hs);
     }
-    let touched = take_touched(&mut hierarchy, &moves);
-    let touched_pairs = touched.len();
-    let work = coarsest(&mut hierarchy, &moves, touched, &state.radiosity_estimate());
+    // Nothing moved (an emission change alone): no pair is touched.
+    let (touched, work) = if moves.swept.is_empty() {
+        (0, Vec::new())
+    } else {
+        let touch = Touch::new(&hierarchy.tree, &moves);
+        let touched = take_touched(&mut hierarchy, &touch);
+        (touched.len(), coarsest(&mut hierarchy, &touch, touched, &state.radiosity_estimate()))
+    };
     let mut stats = HierarchyStats {
         faces: hierarchy.tree.faces.len(),
         moved_faces: moves.faces.iter().filter(|&&m| m).count(),
-        touched_pairs,
+        touched_pairs: touched,
         refined_from: work.len(),
         kept_links: hierarchy.links.len(),
         updated: true,
@@ -122,7 +127,7 @@ pub fn update_frame(
 /// coarser; else the touched pairs themselves.
 fn coarsest(
     hierarchy: &mut Hierarchy,
-    moves: &Moves,
+    touch: &Touch,
     touched: Vec<(u32, u32)>,
     radiosity: &[f64],
 ) -> Vec<(u32, u32)> {
@@ -132,12 +137,11 @@ fn coarsest(
     }
     let set: PairSet = touched.iter().map(|&(a, b)| key(a, b)).collect();
     let (tree, oracle) = (&hierarchy.tree, &hierarchy.oracle);
-    let test = touch::Touch::new(tree, moves);
     let redo = hierarchy.splits.coarsest_touched(
         tree,
         &set,
-        |a, b| test.may_below(a, b),
-        |a, b| touch::neutral(tree, a, b),
+        |a, b| touch.may_below(a, b),
+        |a, b| neutral(tree, a, b),
         |a, b| oracle.links_whole(tree, radiosity, a, b),
     );
     let Some(redo) = redo else { return touched };

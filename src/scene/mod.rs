@@ -142,6 +142,12 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// More than one frame: an animation (the hierarchy keeps its pair tree for the updates,
+    /// and the memory estimate counts it).
+    pub fn is_animation(&self) -> bool {
+        self.frames.0 != self.frames.1
+    }
+
     /// Validates everything and records zero-area faces (which are skipped, with a warning).
     #[allow(clippy::too_many_arguments)]
     pub fn new(

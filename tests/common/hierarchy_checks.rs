@@ -4,6 +4,7 @@
 //! tree's leaves are they.
 
 use galerkin_radiosity::hierarchy::coupling::{self, Coupling, Weight};
+use galerkin_radiosity::hierarchy::touch;
 use galerkin_radiosity::hierarchy::tree::NodeId;
 use galerkin_radiosity::hierarchy::{HierarchicalFrame, HierarchySettings, Lighting, link_context};
 use galerkin_radiosity::quadrature::GaussLegendre;
@@ -110,11 +111,7 @@ pub fn check_partition(h: &HierarchicalFrame) {
 /// the record an update coarsens by is the refinement that made the pairs.
 pub fn check_pair_tree(h: &HierarchicalFrame) {
     let tree = &h.hierarchy.tree;
-    let neutral = |a: NodeId, b: NodeId| {
-        a == b
-            || matches!((tree.node(a).surface(), tree.node(b).surface()), (Some(x), Some(y)) if x.face == y.face)
-    };
-    let Some(mut leaves) = h.hierarchy.splits.leaves(tree, neutral) else { return };
+    let Some(mut leaves) = h.hierarchy.splits.leaves(tree, |a, b| touch::neutral(tree, a, b)) else { return };
     let mut stored: Vec<(NodeId, NodeId)> = h.hierarchy.links.iter().map(|l| (l.a, l.b)).collect();
     stored.extend(&h.hierarchy.blocked);
     stored.extend(&h.hierarchy.idle);

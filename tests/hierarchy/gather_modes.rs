@@ -18,15 +18,7 @@ fn the_fast_gather_agrees_with_the_exhaustive_one_on_the_bunny() {
     scene.settings.corner_gather = false;
     let h = solve_frame(&scene, 0.0, &HierarchySettings::of(&scene.settings), &no_progress).unwrap();
     let lit = Lighting::new(&scene, 0.0, &h.hierarchy.tree.faces);
-    let inputs = gather::Inputs {
-        tree: &h.hierarchy.tree,
-        links: &h.hierarchy.links,
-        blocked: &h.hierarchy.blocked,
-        state: &h.state,
-        emission: &lit.emission,
-        occluders: lit.occluders.as_ref(),
-        lights: lit.lights.as_ref(),
-    };
+    let inputs = gather::Inputs::new(&h.hierarchy, &h.state, &lit);
     let fast = gather::corners_with(&inputs, &scene, 0.0, &no_progress, Mode::Fast).unwrap();
     let slow = gather::corners_with(&inputs, &scene, 0.0, &no_progress, Mode::Exhaustive).unwrap();
     assert!(fast.counts.coarse > 0, "the fast gather took no source coarsely: nothing tested");

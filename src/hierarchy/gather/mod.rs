@@ -63,7 +63,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use glam::DVec3;
 use rayon::prelude::*;
 
+use super::Lighting;
 use super::coupling::Link;
+use super::refine::Hierarchy;
 use super::solve::State;
 use super::tree::{NodeId, Tree};
 use crate::error::Result;
@@ -107,6 +109,21 @@ pub struct Inputs<'a> {
     pub emission: &'a [[f64; 3]],
     pub occluders: Option<&'a Occluders>,
     pub lights: Option<&'a DirectLight>,
+}
+
+impl<'a> Inputs<'a> {
+    /// The gather's inputs for the frame `hierarchy` and `state` solved under `lit`.
+    pub fn new(hierarchy: &'a Hierarchy, state: &'a State, lit: &'a Lighting) -> Self {
+        Self {
+            tree: &hierarchy.tree,
+            links: &hierarchy.links,
+            blocked: &hierarchy.blocked,
+            state,
+            emission: &lit.emission,
+            occluders: lit.occluders.as_ref(),
+            lights: lit.lights.as_ref(),
+        }
+    }
 }
 
 /// How the gather takes its sources.
