@@ -118,7 +118,10 @@ fn solve_and_report(scene: &Scene) {
     let s = &h.stats;
     println!("{} {} {} {} NaN", t.elapsed().as_secs_f64(), s.faces, s.leaves, s.links);
     // Where the time went, for a run by hand (the table reads stdout only).
-    eprintln!("link s {:.1}, solve s {:.1}, sweeps {}", s.link_seconds, s.solve_seconds, s.sweeps);
+    eprintln!(
+        "link s {:.1} (couplings {:.1}), solve s {:.1}, sweeps {}",
+        s.link_seconds, s.compute_seconds, s.solve_seconds, s.sweeps
+    );
 }
 
 /// How near a cluster may link (`HierarchySettings::cluster_separation = sep`): prints `seconds

@@ -14,6 +14,7 @@ use crate::geometry::Patch;
 use crate::kernel::PairContext;
 use crate::kernel::assemble::may_face;
 use crate::kernel::pair::{SEPARATION, integrate_near_coarse, integrate_pair};
+use crate::kernel::point::point_to_polygon;
 use crate::kernel::samples::Samples;
 use crate::quadrature::GaussLegendre;
 use crate::visibility::{Occluders, Visibility};
@@ -189,31 +190,98 @@ fn light_surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize
     if arrived == 0 {
         return Computed { blocked: true, ..none };
     }
-    let p = PairContext {
-        basis: crate::basis::Basis::new(0),
-        rule: &ctx.light_rule,
-        vis_axis: ctx.pair.vis_axis,
-        adaptive: ctx.pair.adaptive,
-    };
+    let (xa, xb) = (LightPoints::new(pa, &ctx.light_rule), LightPoints::new(pb, &ctx.light_rule));
     let ((ca, ra), (cb, rb)) = (pa.bounding_sphere(), pb.bounding_sphere());
-    let ratio = ca.distance(cb) / (ra + rb);
-    let c = if ratio > SEPARATION {
-        let rule = &ctx.rules[p.points_for(ratio).min(LIGHT_POINTS) - 1];
-        let make =
-            |patch: &Patch| Samples::new(patch, &crate::geometry::Rect::UNIT, rule, p.basis, p.vis_axis);
-        let (x, y) = (make(pa), make(pb));
-        integrate_pair(&p, pa, pb, |second, _| if second { &y } else { &x }, &Visibility::Full)
+    let (g_ab, g_ba) = if ca.distance(cb) / (ra + rb) > SEPARATION {
+        xa.gauss(&xb)
     } else {
-        let mut c = crate::kernel::pair::PairCoefficients::zeros(1);
-        integrate_near_coarse(&p, pa, pb, &Visibility::Full, &mut c.ij, &mut c.ji);
-        c
+        (xa.to_polygon(pb), xb.to_polygon(pa))
     };
     let share = arrived as f64 / tested as f64;
-    let (ab, ba) = ((c.ij[0] * share) as f32, (c.ji[0] * share) as f32);
+    let (ab, ba) = ((g_ab * share) as f32, (g_ba * share) as f32);
     if ab == 0.0 && ba == 0.0 {
         return none;
     }
     Computed { coupling: Some(Coupling::Constants { ab, ba }), partial: arrived < tested, blocked: false }
+}
+
+/// The [`LIGHT_POINTS`] x [`LIGHT_POINTS`] Gauss points of a whole patch, on the stack: a light
+/// link's `G^00` needs nothing else (a light link is one of the refinement's most frequent
+/// computations, and `Samples` allocates ten vectors each).
+struct LightPoints {
+    position: [DVec3; LIGHT_POINTS * LIGHT_POINTS],
+    normal: [DVec3; LIGHT_POINTS * LIGHT_POINTS],
+    /// Weight in the parameter measure, and times the area element `A(s,t)`.
+    weight: [f64; LIGHT_POINTS * LIGHT_POINTS],
+    area_weight: [f64; LIGHT_POINTS * LIGHT_POINTS],
+}
+
+impl LightPoints {
+    /// The points as `Samples::new` makes them over the whole domain (`Gamma_0 = 1`).
+    fn new(patch: &Patch, rule: &GaussLegendre) -> Self {
+        debug_assert_eq!(rule.len(), LIGHT_POINTS);
+        let n = LIGHT_POINTS * LIGHT_POINTS;
+        let mut p = Self {
+            position: [DVec3::ZERO; 4],
+            normal: [DVec3::ZERO; 4],
+            weight: [0.0; 4],
+            area_weight: [0.0; 4],
+        };
+        for (k, ((u, wu), (v, wv))) in
+            rule.iter().flat_map(|a| rule.iter().map(move |b| (a, b))).enumerate().take(n)
+        {
+            let av = patch.area_vector(u, v);
+            let a = av.length();
+            p.position[k] = patch.point(u, v);
+            p.normal[k] = if a > 0.0 { av / a } else { DVec3::ZERO };
+            p.weight[k] = wu * wv;
+            p.area_weight[k] = wu * wv * a;
+        }
+        p
+    }
+
+    /// `G^00` both ways between two separated patches by the tensor Gauss rule (eq. 6 with the
+    /// point kernel `cos cos / (pi r^2)`, unoccluded): `self` receiving from `other`, then
+    /// `other` from `self`.
+    fn gauss(&self, other: &Self) -> (f64, f64) {
+        let mut m = [[0.0; 4]; 4];
+        for (a, row) in m.iter_mut().enumerate() {
+            for (b, g) in row.iter_mut().enumerate() {
+                *g = point_kernel(self.position[a], self.normal[a], other.position[b], other.normal[b]);
+            }
+        }
+        let (mut ab, mut ba) = (0.0, 0.0);
+        for a in 0..4 {
+            let t: f64 = (0..4).map(|b| m[a][b] * other.area_weight[b]).sum();
+            ab += self.weight[a] * t;
+        }
+        for b in 0..4 {
+            let t: f64 = (0..4).map(|a| m[a][b] * self.area_weight[a]).sum();
+            ba += other.weight[b] * t;
+        }
+        (ab, ba)
+    }
+
+    /// `G^00` of `self` receiving from the whole `source` of a near pair: the exact form factor
+    /// from each point to the source's polygon (Lambert's contour formula, as
+    /// [`integrate_near_coarse`] does it).
+    fn to_polygon(&self, source: &Patch) -> f64 {
+        let normal = source.centre_normal();
+        let mut corners = source.corners.to_vec();
+        corners.dedup();
+        (0..4)
+            .map(|a| self.weight[a] * point_to_polygon(self.position[a], self.normal[a], &corners, normal))
+            .sum()
+    }
+}
+
+/// The point kernel `cos_x cos_y / (pi r^2)` between facing points, 0 otherwise (as the pair
+/// integrator's kernel matrix forms it).
+fn point_kernel(x: DVec3, nx: DVec3, y: DVec3, ny: DVec3) -> f64 {
+    let d = y - x;
+    let (cx, cy) = (nx.dot(d), -ny.dot(d));
+    let r2 = d.length_squared();
+    if cx <= 0.0 || cy <= 0.0 { 0.0 } else { cx * cy / (std::f64::consts::PI * r2 * r2) }
 }
 
 /// The transmittance of the pair `a`, `b`: [`kernel_weighted_rays`] between points of the two
