@@ -307,40 +307,43 @@ fn slab_mask(b: &Aabb, lanes: &Lanes, (t_min, t_max): (f64, f64)) -> u32 {
     (0..PACKET).fold(0, |m, k| m | ((near[k] <= far[k]) as u32) << k)
 }
 
+/// Tests triangle `i` against the lanes of `open` of [`walk_packet`]'s packet, and takes the
+/// lanes it blocks out of `open`; `true` if it blocked any. Each segment's own hit as
+/// [`Bvh::occluded`] tests it (its slabs meet the triangle's box, and it crosses the triangle), so
+/// that a triangle reached for another segment of the packet, or tried first from the cache, gives
+/// every segment the verdict of its own traversal. One box test rules a triangle out for the whole
+/// packet (most of the triangles tried are the leaves' neighbours of the segments' ends, and the
+/// cached blockers).
+#[inline(always)]
+fn test_triangle(bvh: &Bvh, p: &Packet, i: usize, open: &mut u32) -> bool {
+    let t = &bvh.triangles[i];
+    if t.element == p.skip.0 || t.element == p.skip.1 || !bvh.bounds[i].overlaps(&p.reach) {
+        return false;
+    }
+    let mut lanes = slab_mask(&bvh.bounds[i], p.lanes, p.span) & *open;
+    let mut any = false;
+    while lanes != 0 {
+        let k = lanes.trailing_zeros() as usize;
+        lanes &= lanes - 1;
+        if segment_hits(t, p.origins[k], p.dirs[k], p.span.0, p.span.1) {
+            *open &= !(1 << k);
+            any = true;
+        }
+    }
+    any
+}
+
 crate::simd::multiversion! {
     /// The traversal of [`Bvh::occluded_packet`]: the lanes of `open` still unblocked when it
     /// ends.
     fn walk_packet(bvh: &Bvh, p: &Packet, open: u32) -> u32 {
         let mut open = open;
-        // Each segment's own hit as [`Bvh::occluded`] tests it (its slabs meet the triangle's
-        // box, and it crosses the triangle), so that a triangle reached for another segment of
-        // the packet, or tried first from the cache, gives every segment the verdict of its
-        // own traversal. One box test rules a triangle out for the whole packet (most of the
-        // triangles tried are the leaves' neighbours of the segments' ends, and the cached
-        // blockers).
-        let test = |i: usize, open: &mut u32| {
-            let t = &bvh.triangles[i];
-            if t.element == p.skip.0 || t.element == p.skip.1 || !bvh.bounds[i].overlaps(&p.reach) {
-                return false;
-            }
-            let mut lanes = slab_mask(&bvh.bounds[i], p.lanes, p.span) & *open;
-            let mut any = false;
-            while lanes != 0 {
-                let k = lanes.trailing_zeros() as usize;
-                lanes &= lanes - 1;
-                if segment_hits(t, p.origins[k], p.dirs[k], p.span.0, p.span.1) {
-                    *open &= !(1 << k);
-                    any = true;
-                }
-            }
-            any
-        };
         // The triangles that blocked this thread's last segments first: neighbouring links,
         // which follow each other here, are mostly blocked by the same few.
         let recent = BLOCKERS.with_borrow(|b| b.recent);
         for k in recent {
             if (k as usize) < bvh.triangles.len() {
-                test(k as usize, &mut open);
+                test_triangle(bvh, p, k as usize, &mut open);
             }
         }
         let mut stack = [0u32; 64];
@@ -353,7 +356,7 @@ crate::simd::multiversion! {
             }
             if node.count > 0 {
                 for k in node.start..node.start + node.count {
-                    if test(k as usize, &mut open) {
+                    if test_triangle(bvh, p, k as usize, &mut open) {
                         BLOCKERS.with_borrow_mut(|b| b.remember(k));
                     }
                 }
@@ -464,6 +467,7 @@ pub(crate) fn slab_hit(b: &Aabb, o: DVec3, inv: DVec3, t_min: f64, t_max: f64) -
 }
 
 /// Moeller-Trumbore, both faces: a triangle blocks light from either side.
+#[inline]
 pub fn segment_hits(t: &Triangle, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> bool {
     let e1 = t.v[1] - t.v[0];
     let e2 = t.v[2] - t.v[0];
