@@ -45,6 +45,12 @@ def parse(argv):
 
 def build(rev):
     """The kernel_update bench built at `rev` ('WORK': the working tree); its executable."""
+    return build_target(rev, ["--bench", "kernel_update"], "kernel_update")
+
+
+def build_target(rev, cargo_args, name):
+    """`cargo build --release CARGO_ARGS` at `rev` ('WORK': the working tree, else a worktree and
+    target directory of its own under out/ab/); the executable of the target `name`."""
     if rev == "WORK":
         tree, target = REPO, REPO / "target"
     else:
@@ -56,7 +62,7 @@ def build(rev):
             add = ["git", "-C", str(REPO), "worktree", "add", "--detach", str(tree), commit]
             subprocess.run(add, check=True)
     out = subprocess.run(
-        ["cargo", "build", "--release", "--bench", "kernel_update", "--message-format=json"],
+        ["cargo", "build", "--release", *cargo_args, "--message-format=json"],
         cwd=tree,
         env={**os.environ, "CARGO_TARGET_DIR": str(target)},
         check=True,
@@ -65,10 +71,10 @@ def build(rev):
     ).stdout
     for line in out.splitlines():
         msg = json.loads(line)
-        if msg.get("reason") == "compiler-artifact" and msg["target"]["name"] == "kernel_update":
+        if msg.get("reason") == "compiler-artifact" and msg["target"]["name"] == name:
             if msg.get("executable"):
                 return msg["executable"]
-    sys.exit(f"no kernel_update executable built at {rev}")
+    sys.exit(f"no {name} executable built at {rev}")
 
 
 def columns(args):

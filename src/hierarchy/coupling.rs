@@ -19,8 +19,8 @@ use crate::kernel::samples::Samples;
 use crate::quadrature::GaussLegendre;
 use crate::visibility::{Occluders, Visibility};
 
-/// Rays per cluster link (pairs of points that face each other).
-pub(crate) const CLUSTER_RAYS: usize = 8;
+/// Rays per cluster link (pairs of points that face each other): one packet.
+pub(crate) const CLUSTER_RAYS: usize = crate::visibility::bvh::PACKET;
 
 /// A surface link that may carry at most this share of the oracle's bar is made light
 /// ([`Coupling::Constants`]): below [`super::refine`]'s share for shadow refinement, so that a
@@ -315,7 +315,11 @@ pub(crate) fn kernel_weighted_rays(
     let d2 = ca.distance_squared(cb);
     let w = (cb - ca).normalize_or_zero();
     let mut rays = Rays { facing: 0, arrived: 0, weighted: 0.0 };
-    let (mut exact, mut model, mut distance_only) = (0.0, 0.0, 0.0);
+    let mut model = 0.0;
+    // The facing pairs first, then their visibility as one packet (the verdicts of one segment
+    // at a time, in one traversal: about 5% of the 20k-face monastery crop's link phase).
+    let (mut ends, mut faces) = ([(DVec3::ZERO, DVec3::ZERO); CLUSTER_RAYS], [(0, 0); CLUSTER_RAYS]);
+    let mut cosines = [(0.0, 0.0); CLUSTER_RAYS];
     for _ in 0..4 * CLUSTER_RAYS {
         let ((fx, x, nx), (fy, y, ny)) = draw();
         model += nx.dot(w).max(0.0) * ny.dot(-w).max(0.0);
@@ -324,16 +328,23 @@ pub(crate) fn kernel_weighted_rays(
         if cx <= 0.0 || cy <= 0.0 {
             continue;
         }
+        (ends[rays.facing], faces[rays.facing], cosines[rays.facing]) = ((x, y), (fx, fy), (cx, cy));
         rays.facing += 1;
-        if occluders.is_none_or(|occ| occ.segment_visible(x, y, fx, fy)) {
-            rays.arrived += 1;
-            let r2 = d.length_squared();
-            exact += cx * cy / (r2 * r2) * d2;
-            distance_only += d2 / r2;
-        }
         if rays.facing == CLUSTER_RAYS {
             break;
         }
+    }
+    let mut visible = [true; CLUSTER_RAYS];
+    if let Some(occ) = occluders {
+        occ.segments_visible(&ends[..rays.facing], &faces[..rays.facing], &mut visible[..rays.facing]);
+    }
+    let (mut exact, mut distance_only) = (0.0, 0.0);
+    for k in (0..rays.facing).filter(|&k| visible[k]) {
+        rays.arrived += 1;
+        let ((x, y), (cx, cy)) = (ends[k], cosines[k]);
+        let r2 = (y - x).length_squared();
+        exact += cx * cy / (r2 * r2) * d2;
+        distance_only += d2 / r2;
     }
     if rays.facing > 0 {
         rays.weighted = if model > 0.0 {

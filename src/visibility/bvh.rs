@@ -239,6 +239,28 @@ impl Bvh {
         skip_b: u32,
         blocked: &mut [bool],
     ) {
+        self.packet(origins, dirs, (t_min, t_max), Skip::Shared(skip_a, skip_b), blocked);
+    }
+
+    /// [`Bvh::occluded_packet`] for segments that each skip their own two elements, `skips[k]`
+    /// (segments between points drawn on two clusters' faces).
+    pub fn occluded_each(
+        &self,
+        origins: &[DVec3],
+        dirs: &[DVec3],
+        (t_min, t_max): (f64, f64),
+        skips: &[(u32, u32)],
+        blocked: &mut [bool],
+    ) {
+        assert_eq!(skips.len(), origins.len(), "a skip pair per segment");
+        let mut lanes = [[u32::MAX; PACKET]; 2];
+        for (k, &(a, b)) in skips.iter().enumerate().take(PACKET) {
+            (lanes[0][k], lanes[1][k]) = (a, b);
+        }
+        self.packet(origins, dirs, (t_min, t_max), Skip::PerLane(lanes), blocked);
+    }
+
+    fn packet(&self, origins: &[DVec3], dirs: &[DVec3], span: (f64, f64), skip: Skip, blocked: &mut [bool]) {
         let n = origins.len();
         assert!(n <= PACKET && dirs.len() == n && blocked.len() == n, "a packet of at most {PACKET}");
         let open = (0..n).filter(|&k| !blocked[k]).fold(0u32, |m, k| m | 1 << k);
@@ -257,17 +279,25 @@ impl Bvh {
         // drops a box whose slabs a segment meets.
         let mut reach = Aabb::EMPTY;
         for k in 0..n {
-            reach = reach.grow(origins[k] + dirs[k] * t_min).grow(origins[k] + dirs[k] * t_max);
+            reach = reach.grow(origins[k] + dirs[k] * span.0).grow(origins[k] + dirs[k] * span.1);
         }
         let margin = 1e-9 * (reach.diagonal().length() + reach.min.abs().max(reach.max.abs()).max_element());
         reach = Aabb { min: reach.min - DVec3::splat(margin), max: reach.max + DVec3::splat(margin) };
-        let packet =
-            Packet { lanes: &lanes, origins, dirs, span: (t_min, t_max), skip: (skip_a, skip_b), reach };
+        let packet = Packet { lanes: &lanes, origins, dirs, span, skip, reach };
         let open = walk_packet(self, &packet, open);
         for (k, b) in blocked.iter_mut().enumerate() {
             *b = open & 1 << k == 0;
         }
     }
+}
+
+/// The elements a packet's segments pass through without being blocked (their own ends').
+#[derive(Clone, Copy)]
+enum Skip {
+    /// The same two for every segment (a link's).
+    Shared(u32, u32),
+    /// Two per lane (`[end][lane]`).
+    PerLane([[u32; PACKET]; 2]),
 }
 
 /// A packet's segments by coordinate (`[axis][lane]`), so that a box's slab test runs over the
@@ -283,7 +313,7 @@ struct Packet<'a> {
     origins: &'a [DVec3],
     dirs: &'a [DVec3],
     span: (f64, f64),
-    skip: (u32, u32),
+    skip: Skip,
     reach: Aabb,
 }
 
@@ -317,10 +347,20 @@ fn slab_mask(b: &Aabb, lanes: &Lanes, (t_min, t_max): (f64, f64)) -> u32 {
 #[inline(always)]
 fn test_triangle(bvh: &Bvh, p: &Packet, i: usize, open: &mut u32) -> bool {
     let t = &bvh.triangles[i];
-    if t.element == p.skip.0 || t.element == p.skip.1 || !bvh.bounds[i].overlaps(&p.reach) {
+    let open_here = match p.skip {
+        Skip::Shared(a, b) if t.element == a || t.element == b => return false,
+        Skip::Shared(..) => *open,
+        Skip::PerLane(ends) => {
+            let own = (0..PACKET).fold(0u32, |m, k| {
+                m | ((ends[0][k] == t.element) as u32 | (ends[1][k] == t.element) as u32) << k
+            });
+            *open & !own
+        }
+    };
+    if open_here == 0 || !bvh.bounds[i].overlaps(&p.reach) {
         return false;
     }
-    let mut lanes = slab_mask(&bvh.bounds[i], p.lanes, p.span) & *open;
+    let mut lanes = slab_mask(&bvh.bounds[i], p.lanes, p.span) & open_here;
     let mut any = false;
     while lanes != 0 {
         let k = lanes.trailing_zeros() as usize;
@@ -575,7 +615,8 @@ mod tests {
         tris
     }
 
-    /// A packet's verdicts are each segment's own any-hit, whatever else is in the packet.
+    /// A packet's verdicts are each segment's own any-hit, whatever else is in the packet, with
+    /// the packet's two skipped elements or each segment's own.
     #[test]
     fn packets_agree_with_single_segments() {
         let mut tris = grid(12);
@@ -613,6 +654,16 @@ mod tests {
                 let want = bvh.occluded(origins[k], dirs[k], 1e-9, 1.0 - 1e-9, skip_a, skip_b);
                 assert_eq!(blocked[k], want, "round {round} segment {k}");
                 if want { hits += 1 } else { misses += 1 }
+            }
+            // Each segment skipping its own two elements.
+            let skips: Vec<(u32, u32)> = (0..n)
+                .map(|k| (((round + 7 * k) % 144) as u32, 1000 + ((round + k) % 50) as u32 * 3))
+                .collect();
+            let mut each = vec![false; n];
+            bvh.occluded_each(&origins, &dirs, (1e-9, 1.0 - 1e-9), &skips, &mut each);
+            for k in 0..n {
+                let want = bvh.occluded(origins[k], dirs[k], 1e-9, 1.0 - 1e-9, skips[k].0, skips[k].1);
+                assert_eq!(each[k], want, "round {round} segment {k}, its own skips");
             }
         }
         assert!(hits > 100 && misses > 100, "{hits} hits, {misses} misses: a weak test");

@@ -180,6 +180,22 @@ impl Occluders {
         !self.bvh.occluded(a, b - a, 1e-9, 1.0 - 1e-9, i, j)
     }
 
+    /// [`Occluders::segment_visible`] for up to [`bvh::PACKET`] segments at once, traced together:
+    /// `visible[k]` for the segment `ends[k]`, from a point on element `elements[k].0` to one on
+    /// `elements[k].1`.
+    pub fn segments_visible(&self, ends: &[(DVec3, DVec3)], elements: &[(u32, u32)], visible: &mut [bool]) {
+        let n = ends.len();
+        let (mut origins, mut dirs) = ([DVec3::ZERO; bvh::PACKET], [DVec3::ZERO; bvh::PACKET]);
+        for (k, &(a, b)) in ends.iter().enumerate() {
+            (origins[k], dirs[k]) = (a, b - a);
+        }
+        let mut blocked = [false; bvh::PACKET];
+        self.bvh.occluded_each(&origins[..n], &dirs[..n], (1e-9, 1.0 - 1e-9), elements, &mut blocked[..n]);
+        for (v, b) in visible.iter_mut().zip(&blocked[..n]) {
+            *v = !b;
+        }
+    }
+
     /// Which segments from the point `x` (on element `i`, front normal `n`) to `targets` (points
     /// of element `j`, inside `bounds`, in front of `x`'s tangent plane and, when `j` is planar,
     /// with `x` in front of `j`'s plane) are unobstructed, written to `out` (as long as
