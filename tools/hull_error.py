@@ -162,8 +162,8 @@ def report(title, classes, columns, mean):
         share = float(np.sum((ours[m] - cyc[m]) ** 2)) / total
         cells = []
         for _, x in columns[1:]:
-            ratio = x[m].mean() / cyc[m].mean() if cyc[m].mean() > 0 else float("nan")
-            cells.append(f"{100 * rel_rmse(x[m], cyc[m], mean):.1f}%, {ratio:.3f}")
+            ratio = f"{x[m].mean() / cyc[m].mean():.3f}" if cyc[m].mean() > 0 else "-"
+            cells.append(f"{100 * rel_rmse(x[m], cyc[m], mean):.1f}%, {ratio}")
         print(f"| {name} | {int(m.sum())} | {100 * share:.0f}% | " + " | ".join(cells) + " |")
 
 
