@@ -2,7 +2,7 @@
 //! find where the gather (or the solution it reads) goes wrong on real meshes (issue 19).
 //!
 //!     cargo run --release --example corner_truth -- SCENE.json OUT.csv [--rays N] [--stride K]
-//!         [--near D --second N2] [--light-cells M]
+//!         [--near D --second N2] [--light-cells M] [--object NAME] [--inset I]
 //!
 //! Per corner (every `K`-th face corner; the point and normal the gather uses), in grey (the
 //! mean of the three channels):
@@ -41,13 +41,28 @@ struct Args {
     near: f64,
     second: usize,
     light_cells: usize,
+    /// Only this object's corners (all objects when empty).
+    object: String,
+    /// The brute force's points this far inside their face (in its parameter domain; the
+    /// gather's `INSET` unless told): `h_ours` stays the gather's own.
+    inset: f64,
 }
 
 fn args() -> Args {
     let mut a = std::env::args().skip(1);
     let scene = a.next().expect("SCENE.json");
     let out = a.next().expect("OUT.csv");
-    let mut r = Args { scene, out, rays: 1024, stride: 1, near: 0.0, second: 64, light_cells: 32 };
+    let mut r = Args {
+        scene,
+        out,
+        rays: 1024,
+        stride: 1,
+        near: 0.0,
+        second: 64,
+        light_cells: 32,
+        object: String::new(),
+        inset: INSET,
+    };
     while let Some(k) = a.next() {
         let v = a.next().expect("a value");
         match k.as_str() {
@@ -56,6 +71,8 @@ fn args() -> Args {
             "--near" => r.near = v.parse().unwrap(),
             "--second" => r.second = v.parse().unwrap(),
             "--light-cells" => r.light_cells = v.parse().unwrap(),
+            "--object" => r.object = v,
+            "--inset" => r.inset = v.parse().unwrap(),
             _ => panic!("unknown option {k}"),
         }
     }
@@ -327,8 +344,9 @@ fn main() {
         for (f, face) in obj.faces.iter().enumerate() {
             for (k, (s, t)) in corner_params(face.len()).into_iter().enumerate() {
                 let s = if face.len() == 3 && t == 1.0 { 0.5 } else { s };
-                let (si, ti) = (s.clamp(INSET, 1.0 - INSET), t.clamp(INSET, 1.0 - INSET));
+                let (si, ti) = (s.clamp(args.inset, 1.0 - args.inset), t.clamp(args.inset, 1.0 - args.inset));
                 if index.is_multiple_of(args.stride)
+                    && (args.object.is_empty() || args.object == obj.name)
                     && let Some(at) = sys.element_of_face(o, f, si, ti)
                 {
                     corners.push((o, f, k, within, at));
@@ -354,7 +372,7 @@ fn main() {
                 eprintln!("{finished} / {}", corners.len());
             }
             format!(
-                "{o},{f},{k},{c},{e},{:.6},{:.6},{:.6},{:.5},{:.5},{:.5},{:.7},{:.7},{:.7},{:.7},{:.7},{:.7},{:.5},{:.5},{:.4},{}",
+                "{o},{f},{k},{c},{e},{:.9},{:.9},{:.9},{:.7},{:.7},{:.7},{:.7},{:.7},{:.7},{:.7},{:.7},{:.7},{:.5},{:.5},{:.4},{}",
                 x.x,
                 x.y,
                 x.z,

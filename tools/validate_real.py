@@ -56,6 +56,11 @@ def parse(argv):
     p.add_argument("--reference", help="write the scene file and Cycles corners for tests to this folder")
     p.add_argument("--no-pictures", action="store_true")
     p.add_argument("--skip-ours", action="store_true", help="only the Cycles bake (to fill the cache)")
+    p.add_argument(
+        "--shift",
+        help="X,Y,Z: move every object by this (metres) after building; the same scene elsewhere, to see "
+        "how Cycles' float32 ray offsets (which grow with the coordinates) move its corners",
+    )
     return p.parse_args(argv)
 
 
@@ -255,6 +260,12 @@ def run(args):
 
     bake.drop_held()  # a session held from the previous scene of `--scene all`
     built = real_scenes.build(bpy, args.scene, args.meshes)
+    if args.shift:
+        shift = [float(x) for x in args.shift.split(",")]
+        for ob in bpy.context.scene.objects:
+            ob.location = [a + b for a, b in zip(ob.location, shift, strict=True)]
+        bpy.context.view_layer.update()
+        built.notes.append(f"every object moved by {shift} m")
     for line in built.notes:
         print(line)
     settings = default_settings(args.order)
