@@ -345,8 +345,12 @@ impl<'a> Gather<'a> {
         let emission = self.inputs.emission[f];
         if let Some(solids) = solids {
             let (centre, radius) = face.patch.bounding_sphere();
-            let nf = face.patch.area_vector(s, t).normalize_or_zero();
-            if solids.buries(crate::solids::test_point(face.patch.point(s, t), nf, centre, radius)) {
+            let (p, nf) = (face.patch.point(s, t), face.patch.area_vector(s, t).normalize_or_zero());
+            // Both points inside, as the flat gather's `buried_points` decides (a step towards the
+            // face's centre alone crossed into a solid the corner itself is outside of).
+            if solids.buries(crate::solids::test_point(p, nf, centre, radius))
+                && solids.buries(crate::solids::test_point(p, nf, p, radius))
+            {
                 return [emission, [0.0; 3]];
             }
         }
