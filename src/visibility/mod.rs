@@ -338,9 +338,10 @@ impl Occluders {
     /// `2 x 2` cells, crossed first (cell `k` to cell `3 - k`, so that they span both parts), and
     /// only those whose ends face each other count: the kernel is zero along the others, and a
     /// facing segment lies in front of both planes, so plain any-hit rays give what the culled
-    /// masks of [`Occluders::part_visibility`] give. When no pair of cell centres faces, the
-    /// share of [`Occluders::part_visibility`]'s mask.
-    pub fn share_visible(&self, i: usize, pi: &Patch, j: usize, pj: &Patch) -> (usize, usize) {
+    /// masks of [`Occluders::part_visibility`] give. `None` when no pair of cell centres faces
+    /// (parts that see each other obliquely, or only in part): [`Occluders::masked_share`] then
+    /// decides, at several times the cost.
+    pub fn share_visible(&self, i: usize, pi: &Patch, j: usize, pj: &Patch) -> Option<(usize, usize)> {
         let (xi, xj) = (sample_points(pi, 2), sample_points(pj, 2));
         let (ni, nj) = (pi.centre_normal(), pj.centre_normal());
         let (mut origins, mut dirs) = ([DVec3::ZERO; SHARE_SEGMENTS], [DVec3::ZERO; SHARE_SEGMENTS]);
@@ -360,14 +361,19 @@ impl Occluders {
             }
         }
         SEGMENTS_TESTED.fetch_add(tested as u64, std::sync::atomic::Ordering::Relaxed);
-        if tested > 0 {
-            let mut blocked = [false; SHARE_SEGMENTS];
-            let (o, d, b) = (&origins[..tested], &dirs[..tested], &mut blocked[..tested]);
-            self.bvh.occluded_packet(o, d, 1e-9, 1.0 - 1e-9, i as u32, j as u32, b);
-            return (b.iter().filter(|&&x| !x).count(), tested);
+        if tested == 0 {
+            return None;
         }
-        // No two cell centres face each other (parts that see each other obliquely, or only in
-        // part): the culled masks over all cell pairs decide.
+        let mut blocked = [false; SHARE_SEGMENTS];
+        let (o, d, b) = (&origins[..tested], &dirs[..tested], &mut blocked[..tested]);
+        self.bvh.occluded_packet(o, d, 1e-9, 1.0 - 1e-9, i as u32, j as u32, b);
+        Some((b.iter().filter(|&&x| !x).count(), tested))
+    }
+
+    /// The share of the cell pairs of [`Occluders::part_visibility`]'s mask that arrive, as
+    /// `(arrived, of)`: a light link's visibility where [`Occluders::share_visible`] has no
+    /// facing segment to test.
+    pub fn masked_share(&self, i: usize, pi: &Patch, j: usize, pj: &Patch) -> (usize, usize) {
         let cells = self.samples_per_axis * self.samples_per_axis;
         match self.part_visibility(i, pi, j, pj) {
             Visibility::Full => (1, 1),
