@@ -199,7 +199,8 @@ fn light_surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize
     // tested here are blocked whole); where no segment faces, the kernel first, and the masks'
     // dearer share only for pairs that exchange something (about a seventh of the light links
     // of a monastery crop have no facing segment, and most of those none of the kernel either).
-    let ((arrived, tested), (g_ab, g_ba)) = match ctx.occluders.map(|o| (o, o.share_visible(fa, pa, fb, pb))) {
+    let ((arrived, tested), (g_ab, g_ba)) = match ctx.occluders.map(|o| (o, o.share_visible(fa, pa, fb, pb)))
+    {
         None => ((1, 1), g()),
         Some((_, Some(share))) => {
             if share.0 == 0 {

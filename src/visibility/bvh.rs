@@ -239,7 +239,7 @@ impl Bvh {
         skip_b: u32,
         blocked: &mut [bool],
     ) {
-        self.packet(origins, dirs, (t_min, t_max), Skip::Shared(skip_a, skip_b), blocked);
+        self.packet(origins, dirs, (t_min, t_max), Ends::Shared(skip_a, skip_b), blocked);
     }
 
     /// [`Bvh::occluded_packet`] for segments that each skip their own two elements, `skips[k]`
@@ -253,27 +253,83 @@ impl Bvh {
         blocked: &mut [bool],
     ) {
         assert_eq!(skips.len(), origins.len(), "a skip pair per segment");
-        let mut lanes = [[u32::MAX; PACKET]; 2];
-        for (k, &(a, b)) in skips.iter().enumerate().take(PACKET) {
-            (lanes[0][k], lanes[1][k]) = (a, b);
-        }
-        self.packet(origins, dirs, (t_min, t_max), Skip::PerLane(lanes), blocked);
+        self.packet(origins, dirs, (t_min, t_max), Ends::Each(skips), blocked);
     }
 
-    fn packet(&self, origins: &[DVec3], dirs: &[DVec3], span: (f64, f64), skip: Skip, blocked: &mut [bool]) {
+    /// Traces a packet in lanes of 4 when it has no more segments (a light link's), else of
+    /// [`PACKET`].
+    fn packet(&self, origins: &[DVec3], dirs: &[DVec3], span: (f64, f64), ends: Ends, blocked: &mut [bool]) {
         let n = origins.len();
         assert!(n <= PACKET && dirs.len() == n && blocked.len() == n, "a packet of at most {PACKET}");
         let open = (0..n).filter(|&k| !blocked[k]).fold(0u32, |m, k| m | 1 << k);
         if self.nodes.is_empty() || open == 0 {
             return;
         }
-        let mut lanes = Lanes { origin: [[0.0; PACKET]; 3], inv: [[0.0; PACKET]; 3] };
+        let open = if n <= 4 {
+            walk_packet4(self, &Packet::<4>::new(origins, dirs, span, ends), open)
+        } else {
+            walk_packet8(self, &Packet::<PACKET>::new(origins, dirs, span, ends), open)
+        };
+        for (k, b) in blocked.iter_mut().enumerate() {
+            *b = open & 1 << k == 0;
+        }
+    }
+}
+
+/// The elements each segment of a packet passes through without being blocked (its own ends').
+#[derive(Clone, Copy)]
+enum Ends<'a> {
+    /// The same two for every segment (a link's).
+    Shared(u32, u32),
+    /// A pair per segment.
+    Each(&'a [(u32, u32)]),
+}
+
+/// The elements a packet's segments pass through without being blocked, by lane.
+#[derive(Clone, Copy)]
+enum Skip<const N: usize> {
+    Shared(u32, u32),
+    /// Two per lane (`[end][lane]`).
+    PerLane([[u32; N]; 2]),
+}
+
+/// A packet's segments by coordinate (`[axis][lane]`), so that a box's slab test runs over the
+/// lanes at once; lanes past the packet's segments are never read.
+struct Lanes<const N: usize> {
+    origin: [[f64; N]; 3],
+    inv: [[f64; N]; 3],
+}
+
+/// What [`walk_packet4`] and [`walk_packet8`] trace: `N` lanes.
+struct Packet<'a, const N: usize> {
+    lanes: Lanes<N>,
+    origins: &'a [DVec3],
+    dirs: &'a [DVec3],
+    span: (f64, f64),
+    skip: Skip<N>,
+    reach: Aabb,
+}
+
+impl<'a, const N: usize> Packet<'a, N> {
+    fn new(origins: &'a [DVec3], dirs: &'a [DVec3], span: (f64, f64), ends: Ends) -> Self {
+        let n = origins.len();
+        let mut lanes = Lanes { origin: [[0.0; N]; 3], inv: [[0.0; N]; 3] };
         for k in 0..n {
             let inv = dirs[k].recip();
             for a in 0..3 {
                 (lanes.origin[a][k], lanes.inv[a][k]) = (origins[k][a], inv[a]);
             }
         }
+        let skip = match ends {
+            Ends::Shared(a, b) => Skip::Shared(a, b),
+            Ends::Each(pairs) => {
+                let mut lanes = [[u32::MAX; N]; 2];
+                for (k, &(a, b)) in pairs.iter().enumerate() {
+                    (lanes[0][k], lanes[1][k]) = (a, b);
+                }
+                Skip::PerLane(lanes)
+            }
+        };
         // The box of the segments' swept parts: a node or a triangle outside it holds no hit for
         // any of them. Grown by a margin far above the rounding of the points, so that it never
         // drops a box whose slabs a segment meets.
@@ -283,48 +339,18 @@ impl Bvh {
         }
         let margin = 1e-9 * (reach.diagonal().length() + reach.min.abs().max(reach.max.abs()).max_element());
         reach = Aabb { min: reach.min - DVec3::splat(margin), max: reach.max + DVec3::splat(margin) };
-        let packet = Packet { lanes: &lanes, origins, dirs, span, skip, reach };
-        let open = walk_packet(self, &packet, open);
-        for (k, b) in blocked.iter_mut().enumerate() {
-            *b = open & 1 << k == 0;
-        }
+        Self { lanes, origins, dirs, span, skip, reach }
     }
-}
-
-/// The elements a packet's segments pass through without being blocked (their own ends').
-#[derive(Clone, Copy)]
-enum Skip {
-    /// The same two for every segment (a link's).
-    Shared(u32, u32),
-    /// Two per lane (`[end][lane]`).
-    PerLane([[u32; PACKET]; 2]),
-}
-
-/// A packet's segments by coordinate (`[axis][lane]`), so that a box's slab test runs over the
-/// lanes at once; lanes past the packet's segments are never read.
-struct Lanes {
-    origin: [[f64; PACKET]; 3],
-    inv: [[f64; PACKET]; 3],
-}
-
-/// What [`walk_packet`] traces.
-struct Packet<'a> {
-    lanes: &'a Lanes,
-    origins: &'a [DVec3],
-    dirs: &'a [DVec3],
-    span: (f64, f64),
-    skip: Skip,
-    reach: Aabb,
 }
 
 /// Bit `k` set where lane `k`'s segment meets the slabs of `b` within `span`: [`slab_hit`] lane
 /// by lane with the same operations (a free axis, NaN, sets no bound), so the same verdicts.
 #[inline(always)]
-fn slab_mask(b: &Aabb, lanes: &Lanes, (t_min, t_max): (f64, f64)) -> u32 {
-    let (mut near, mut far) = ([t_min; PACKET], [t_max; PACKET]);
+fn slab_mask<const N: usize>(b: &Aabb, lanes: &Lanes<N>, (t_min, t_max): (f64, f64)) -> u32 {
+    let (mut near, mut far) = ([t_min; N], [t_max; N]);
     for a in 0..3 {
         let (lo_b, hi_b) = (b.min[a], b.max[a]);
-        for k in 0..PACKET {
+        for k in 0..N {
             let t0 = (lo_b - lanes.origin[a][k]) * lanes.inv[a][k];
             let t1 = (hi_b - lanes.origin[a][k]) * lanes.inv[a][k];
             let free = t0.is_nan() | t1.is_nan();
@@ -334,10 +360,10 @@ fn slab_mask(b: &Aabb, lanes: &Lanes, (t_min, t_max): (f64, f64)) -> u32 {
             far[k] = if hi < far[k] { hi } else { far[k] };
         }
     }
-    (0..PACKET).fold(0, |m, k| m | ((near[k] <= far[k]) as u32) << k)
+    (0..N).fold(0, |m, k| m | ((near[k] <= far[k]) as u32) << k)
 }
 
-/// Tests triangle `i` against the lanes of `open` of [`walk_packet`]'s packet, and takes the
+/// Tests triangle `i` against the lanes of `open` of [`walk`]'s packet, and takes the
 /// lanes it blocks out of `open`; `true` if it blocked any. Each segment's own hit as
 /// [`Bvh::occluded`] tests it (its slabs meet the triangle's box, and it crosses the triangle), so
 /// that a triangle reached for another segment of the packet, or tried first from the cache, gives
@@ -345,13 +371,13 @@ fn slab_mask(b: &Aabb, lanes: &Lanes, (t_min, t_max): (f64, f64)) -> u32 {
 /// packet (most of the triangles tried are the leaves' neighbours of the segments' ends, and the
 /// cached blockers).
 #[inline(always)]
-fn test_triangle(bvh: &Bvh, p: &Packet, i: usize, open: &mut u32) -> bool {
+fn test_triangle<const N: usize>(bvh: &Bvh, p: &Packet<N>, i: usize, open: &mut u32) -> bool {
     let t = &bvh.triangles[i];
     let open_here = match p.skip {
         Skip::Shared(a, b) if t.element == a || t.element == b => return false,
         Skip::Shared(..) => *open,
         Skip::PerLane(ends) => {
-            let own = (0..PACKET).fold(0u32, |m, k| {
+            let own = (0..N).fold(0u32, |m, k| {
                 m | ((ends[0][k] == t.element) as u32 | (ends[1][k] == t.element) as u32) << k
             });
             *open & !own
@@ -360,7 +386,7 @@ fn test_triangle(bvh: &Bvh, p: &Packet, i: usize, open: &mut u32) -> bool {
     if open_here == 0 || !bvh.bounds[i].overlaps(&p.reach) {
         return false;
     }
-    let mut lanes = slab_mask(&bvh.bounds[i], p.lanes, p.span) & open_here;
+    let mut lanes = slab_mask(&bvh.bounds[i], &p.lanes, p.span) & open_here;
     let mut any = false;
     while lanes != 0 {
         let k = lanes.trailing_zeros() as usize;
@@ -373,40 +399,52 @@ fn test_triangle(bvh: &Bvh, p: &Packet, i: usize, open: &mut u32) -> bool {
     any
 }
 
-crate::simd::multiversion! {
-    /// The traversal of [`Bvh::occluded_packet`]: the lanes of `open` still unblocked when it
-    /// ends.
-    fn walk_packet(bvh: &Bvh, p: &Packet, open: u32) -> u32 {
-        let mut open = open;
-        // The triangles that blocked this thread's last segments first: neighbouring links,
-        // which follow each other here, are mostly blocked by the same few.
-        let recent = BLOCKERS.with_borrow(|b| b.recent);
-        for k in recent {
-            if (k as usize) < bvh.triangles.len() {
-                test_triangle(bvh, p, k as usize, &mut open);
-            }
+/// The traversal of [`Bvh::occluded_packet`]: the lanes of `open` still unblocked when it ends.
+#[inline(always)]
+fn walk<const N: usize>(bvh: &Bvh, p: &Packet<N>, open: u32) -> u32 {
+    let mut open = open;
+    // The triangles that blocked this thread's last segments first: neighbouring links,
+    // which follow each other here, are mostly blocked by the same few.
+    let recent = BLOCKERS.with_borrow(|b| b.recent);
+    for k in recent {
+        if (k as usize) < bvh.triangles.len() {
+            test_triangle(bvh, p, k as usize, &mut open);
         }
-        let mut stack = [0u32; 64];
-        let mut sp = 1;
-        while sp > 0 && open != 0 {
-            sp -= 1;
-            let node = &bvh.nodes[stack[sp] as usize];
-            if !node.bounds.overlaps(&p.reach) || slab_mask(&node.bounds, p.lanes, p.span) & open == 0 {
-                continue;
-            }
-            if node.count > 0 {
-                for k in node.start..node.start + node.count {
-                    if test_triangle(bvh, p, k as usize, &mut open) {
-                        BLOCKERS.with_borrow_mut(|b| b.remember(k));
-                    }
+    }
+    let mut stack = [0u32; 64];
+    let mut sp = 1;
+    while sp > 0 && open != 0 {
+        sp -= 1;
+        let node = &bvh.nodes[stack[sp] as usize];
+        if !node.bounds.overlaps(&p.reach) || slab_mask(&node.bounds, &p.lanes, p.span) & open == 0 {
+            continue;
+        }
+        if node.count > 0 {
+            for k in node.start..node.start + node.count {
+                if test_triangle(bvh, p, k as usize, &mut open) {
+                    BLOCKERS.with_borrow_mut(|b| b.remember(k));
                 }
-            } else {
-                stack[sp] = node.start;
-                stack[sp + 1] = node.start + 1;
-                sp += 2;
             }
+        } else {
+            stack[sp] = node.start;
+            stack[sp + 1] = node.start + 1;
+            sp += 2;
         }
-        open
+    }
+    open
+}
+
+crate::simd::multiversion! {
+    /// [`walk`] in lanes of 4.
+    fn walk_packet4(bvh: &Bvh, p: &Packet<4>, open: u32) -> u32 {
+        walk(bvh, p, open)
+    }
+}
+
+crate::simd::multiversion! {
+    /// [`walk`] in lanes of [`PACKET`].
+    fn walk_packet8(bvh: &Bvh, p: &Packet<PACKET>, open: u32) -> u32 {
+        walk(bvh, p, open)
     }
 }
 
