@@ -294,7 +294,7 @@ enum Skip<const N: usize> {
 }
 
 /// A packet's segments by coordinate (`[axis][lane]`), so that a box's slab test runs over the
-/// lanes at once; lanes past the packet's segments are never read.
+/// lanes at once; lanes past the packet's segments hold zeros, and their verdicts are masked out.
 struct Lanes<const N: usize> {
     origin: [[f64; N]; 3],
     inv: [[f64; N]; 3],
