@@ -7,10 +7,10 @@ import numpy as np
 from .blender_scene import corner_values
 
 
-def cycles_bake(bpy, objects, samples, attr="Cycles", seed=0):
-    """Bakes reflected radiance (DIFFUSE: direct + indirect + colour) into a FLOAT_COLOR corner
-    attribute of every object, unbiased: 64 diffuse bounces, no clamping, no denoising, no
-    adaptive sampling. Returns the seconds taken."""
+def cycles_bake(bpy, objects, samples, attr="Cycles", seed=0, direct_only=False):
+    """Bakes reflected radiance (DIFFUSE: direct + indirect + colour; `direct_only`: direct +
+    colour) into a FLOAT_COLOR corner attribute of every object, unbiased: 64 diffuse bounces, no
+    clamping, no denoising, no adaptive sampling. Returns the seconds taken."""
     sc = bpy.context.scene
     sc.render.engine = "CYCLES"
     c = sc.cycles
@@ -40,7 +40,7 @@ def cycles_bake(bpy, objects, samples, attr="Cycles", seed=0):
     start = time.perf_counter()
     bpy.ops.object.bake(
         type="DIFFUSE",
-        pass_filter={"DIRECT", "INDIRECT", "COLOR"},
+        pass_filter={"DIRECT", "COLOR"} if direct_only else {"DIRECT", "INDIRECT", "COLOR"},
         target="VERTEX_COLORS",
         use_clear=True,
         margin=0,

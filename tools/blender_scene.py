@@ -33,6 +33,27 @@ def _diffuse(bpy, name, color):
     return mat
 
 
+def one_sided(bpy, mat):
+    """A copy of the material `mat` (its Surface shader) that is black diffuse on back faces:
+    a Mix Shader of the original and a black Diffuse BSDF by Geometry's Backfacing."""
+    new = mat.copy()
+    new.name = f"{mat.name} (one-sided)"
+    nt = new.node_tree
+    out = next(n for n in nt.nodes if n.type == "OUTPUT_MATERIAL")
+    link = out.inputs["Surface"].links[0]
+    shader = link.from_socket
+    nt.links.remove(link)
+    black = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    black.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    geo = nt.nodes.new("ShaderNodeNewGeometry")
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    nt.links.new(geo.outputs["Backfacing"], mix.inputs["Fac"])
+    nt.links.new(shader, mix.inputs[1])
+    nt.links.new(black.outputs["BSDF"], mix.inputs[2])
+    nt.links.new(mix.outputs["Shader"], out.inputs["Surface"])
+    return new
+
+
 def _emission(bpy, name, exitance, one_sided):
     """Emission of radiance exitance / pi; `one_sided`: back faces are black diffuse."""
     radiance = [e / math.pi for e in exitance]

@@ -57,6 +57,18 @@ def parse(argv):
     p.add_argument("--no-pictures", action="store_true")
     p.add_argument("--skip-ours", action="store_true", help="only the Cycles bake (to fill the cache)")
     p.add_argument(
+        "--one-sided",
+        action="store_true",
+        help="Cycles with the receivers' back faces black (a Diffuse BSDF mixed to black on Backfacing), "
+        "as the library treats them; cached apart. Cycles' Diffuse BSDF is two-sided: the back of an "
+        "open surface (a roof seen from below) reflects light there and is black here",
+    )
+    p.add_argument(
+        "--direct-only",
+        action="store_true",
+        help="Cycles' direct light alone (the DIFFUSE bake's DIRECT and COLOR passes); cached apart",
+    )
+    p.add_argument(
         "--shift",
         help="X,Y,Z: move every object by this (metres) after building; the same scene elsewhere, to see "
         "how Cycles' float32 ray offsets (which grow with the coordinates) move its corners",
@@ -113,13 +125,16 @@ def scene_digest(data: dict) -> str:
     return hashlib.sha1(body.encode()).hexdigest()[:16]
 
 
-def cycles_values(bpy, built, samples, seed, cache, digest, bake=True) -> tuple[dict | None, dict | None]:
+def cycles_values(bpy, built, samples, seed, cache, digest, bake=True, one_sided=False,
+                  direct_only=False) -> tuple[dict | None, dict | None]:
     """Per receiver, Cycles' per-loop radiance (C, 3) float32, from the cache or baked now (with
     `bake`; else (None, None) when not cached); and the bake's metadata (samples, seed, seconds,
-    Blender version, digest)."""
+    Blender version, digest). `one_sided`: the receivers' back faces black; `direct_only`: the
+    direct light alone (each cached apart)."""
     from . import bakes, blender_scene
 
-    path = Path(cache) / f"{built.name}_{samples}spp_seed{seed}_{digest}" if cache else None
+    tag = ("_onesided" if one_sided else "") + ("_direct" if direct_only else "")
+    path = Path(cache) / f"{built.name}{tag}_{samples}spp_seed{seed}_{digest}" if cache else None
     if path is not None and path.with_suffix(".npz").exists():
         meta = json.loads(path.with_suffix(".json").read_text())
         with np.load(path.with_suffix(".npz")) as z:
@@ -131,14 +146,18 @@ def cycles_values(bpy, built, samples, seed, cache, digest, bake=True) -> tuple[
     if not bake:
         return None, None
     receivers = built.receivers
-    blender_scene.use_materials(built.objects, built.emitters)
+    swap = dict(built.emitters)
+    if one_sided:
+        receiving = {s.material.name for ob in receivers for s in ob.material_slots if s.material is not None}
+        swap.update({name: blender_scene.one_sided(bpy, bpy.data.materials[name]) for name in receiving})
+    blender_scene.use_materials(built.objects, swap)
     print(f"Cycles: baking {built.name} at {samples} spp (seed {seed}) ...", flush=True)
-    seconds = bakes.cycles_bake(bpy, receivers, samples, attr=CYCLES_ATTR, seed=seed)
-    ours_materials = {v.name: bpy.data.materials[k] for k, v in built.emitters.items()}
+    seconds = bakes.cycles_bake(bpy, receivers, samples, attr=CYCLES_ATTR, seed=seed, direct_only=direct_only)
+    ours_materials = {v.name: bpy.data.materials[k] for k, v in swap.items()}
     blender_scene.use_materials(built.objects, ours_materials)
     values = {ob.name: blender_scene.corner_values(ob, CYCLES_ATTR) for ob in receivers}
     meta = {"scene": built.name, "samples": samples, "seed": seed, "seconds": seconds, "digest": digest,
-            "blender": bpy.app.version_string}
+            "blender": bpy.app.version_string, "one_sided": one_sided, "direct_only": direct_only}
     print(f"Cycles: {seconds:.1f} s", flush=True)
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -278,11 +297,12 @@ def run(args):
         Path(args.export_json).write_text(json.dumps(data))
         print(f"scene file: {args.export_json} (bake it: target/release/galerkin-radiosity bake "
               f"{args.export_json} -o result.json)")
-    cyc, meta = cycles_values(bpy, built, args.samples, args.seed, args.cycles_cache, digest)
+    cyc, meta = cycles_values(bpy, built, args.samples, args.seed, args.cycles_cache, digest,
+                              one_sided=args.one_sided, direct_only=args.direct_only)
     noise_ = None
     # The second seed: baked with --noise, else read from the cache if an earlier run baked it.
     second, _ = cycles_values(bpy, built, args.samples, args.seed + 1, args.cycles_cache, digest,
-                              bake=args.noise)
+                              bake=args.noise, one_sided=args.one_sided, direct_only=args.direct_only)
     if second is not None:
         noise_ = noise(cyc, second)
         print("Cycles noise per corner: " + ", ".join(f"{k} {100 * v:.2f}%" for k, v in noise_.items()))

@@ -160,6 +160,11 @@ const GAUSS_RATIO: f64 = 3.0;
 /// factor times the basis at its centre.
 const MAX_DEPTH: u32 = 12;
 
+/// Splits (counted from the whole source) of an emitter's rectangle in a penumbra, at most: one
+/// whose Gauss nodes disagree on visibility, or whose corners disagree with its nodes, is split
+/// in four, down to a 16th of the light per axis (tests/penumbra.rs).
+const PENUMBRA_DEPTH: u32 = 4;
+
 /// A foot's ball ([`Foot`]) is told from the rest of its source to this fraction of its radius:
 /// past it the part of a rectangle the ball holds counts with the side its centre is on. (To
 /// [`MAX_DEPTH`], the ball's edge was most of a real mesh's gather: 53M rectangles at the last
@@ -1290,7 +1295,10 @@ impl Gather<'_> {
         // touched by it: one ray to each of the source's Gauss nodes.
         let Some(moved) = self.moved_occluders else { return false };
         let (centre, radius) = self.patches[j].sub_patch(&Rect::UNIT).bounding_sphere();
-        let whole = rx.x.distance(centre) >= GAUSS_RATIO * radius;
+        // An emitter's moment also casts rays to its rectangle's corners and to the parts of its
+        // penumbra (PENUMBRA_DEPTH), which the Gauss nodes' rays alone do not tell: it is
+        // recomputed (thirteen rays, where it has no penumbra).
+        let whole = rx.x.distance(centre) >= GAUSS_RATIO * radius && !self.is_emitter[j];
         whole
             && self.touch(rx, rx.element as usize, j).is_none()
             && moved.meet_alike(rx.x, &bounds, &self.nodes[j].position, self.eps)
@@ -1344,11 +1352,41 @@ impl Gather<'_> {
             }
         }
         if distance >= GAUSS_RATIO * radius {
-            if depth == 0 {
-                self.gauss(rx, j, &self.nodes[j], &sub.bounds(), mode, out);
+            // An emitter's rectangle in the penumbra (its rays disagree) is split further: its
+            // direct light is the sharpest term of the corner's `B`, and 3 x 3 rays per
+            // rectangle put a corner beside a building up to 10% off (the monastery's ground,
+            // docs/validation-real.md; tests/penumbra.rs).
+            let refine = self.is_emitter[j] && mode == Mode::Rays && depth < PENUMBRA_DEPTH;
+            let mut m = [0.0; crate::basis::MAX_LEN];
+            let m = &mut m[..out.len()];
+            let (seen, count) = if depth == 0 {
+                self.gauss(rx, j, &self.nodes[j], &sub.bounds(), mode, m)
             } else {
                 let nodes = GaussNodes::new(patch, rect, self.rule, self.sys.basis, self.cells_per_axis);
-                self.gauss(rx, j, &nodes, &sub.bounds(), mode, out);
+                self.gauss(rx, j, &nodes, &sub.bounds(), mode, m)
+            };
+            // The nodes lie inside the rectangle (a ninth of it from its edges): a shadow edge
+            // that crosses only that margin is seen by a ray to one of its corners instead.
+            let mixed = refine
+                && count > 0
+                && ((seen > 0 && seen < count) || {
+                    let lit = seen == count;
+                    let corner = |(u, v): (f64, f64)| {
+                        let (s, t) = rect.map(u, v);
+                        let y = patch.point(s, t);
+                        rx.n.dot(y - rx.x) > 0.0
+                            && self.visible(rx, j, y, cell_of(s, t, self.cells_per_axis), mode) != lit
+                    };
+                    [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)].into_iter().any(corner)
+                });
+            if mixed {
+                for q in rect.quadrants() {
+                    self.moments(rx, j, &q, mode, depth + 1, out, None);
+                }
+            } else {
+                for (o, x) in out.iter_mut().zip(m.iter()) {
+                    *o += x;
+                }
             }
             return;
         }
@@ -1404,8 +1442,17 @@ impl Gather<'_> {
         foot_on(&self.patches[j], rx.x - d * plane.normal, FOOT_BALL * d)
     }
 
-    /// The Gauss sum over `nodes` of source `j` (inside `bounds`) into `out`.
-    fn gauss(&self, rx: &Receiver, j: usize, nodes: &GaussNodes, bounds: &Aabb, mode: Mode, out: &mut [f64]) {
+    /// The Gauss sum over `nodes` of source `j` (inside `bounds`) into `out`; how many of the
+    /// nodes in front of the corner it sees, of how many.
+    fn gauss(
+        &self,
+        rx: &Receiver,
+        j: usize,
+        nodes: &GaussNodes,
+        bounds: &Aabb,
+        mode: Mode,
+        out: &mut [f64],
+    ) -> (usize, usize) {
         // GAUSS_POINTS^2 nodes: fixed arrays, no allocation per moment.
         let mut lit = [(0usize, 0.0f64); N];
         let mut count = 0;
@@ -1443,6 +1490,7 @@ impl Gather<'_> {
                 out[l] += g * nodes.weighted_basis[k * nb + l];
             }
         }
+        (visible[..count].iter().filter(|v| **v).count(), count)
     }
 
     /// Whether `y` (in visibility cell `cell` of source `j`) is seen from the corner.

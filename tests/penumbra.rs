@@ -1,0 +1,143 @@
+//! The corner gather's direct light in a penumbra, against brute force (issue 19, the
+//! monastery's ground).
+//!
+//! The gather integrates an emitter with shadow rays to its Gauss nodes: 3 x 3 per rectangle, a
+//! rectangle split in four while the corner is closer than three of its radii. In a penumbra a
+//! corner sees some nodes and not others, so its direct light moves in steps of a ninth of a
+//! rectangle's light: the monastery's ground, under a 62 m light 79 m up, was 6.3% (RMS, of its
+//! mean) from the brute force of the same scene, up to 10% at single corners beside a building
+//! (docs/validation-real.md, "The monastery"). An emitter's rectangle whose nodes disagree, or
+//! whose corners disagree with its nodes, is now split further (`gather::PENUMBRA_DEPTH` levels).
+//!
+//! Here: a grey 2 x 2 m ground of 16 x 16 quads under a 1 m light quad 1 m up, and a black
+//! 0.5 x 0.5 x 0.1 m box floating 0.4 m above the ground, off the light's axis, so that its
+//! penumbra on the ground is wide. Nothing but the light lights the ground (the box is black,
+//! the ground flat), so a ground corner's exact `B` is `rho E_d`, `E_d` by brute force (the light
+//! cut into 64 x 64 pieces, each piece's exact point-to-polygon form factor times one shadow ray
+//! to its centre through the box's triangles). Nothing touches the ground, so no foot or contact
+//! split enters. Over the 775 ground corners in the penumbra (some of the light's pieces seen,
+//! some hidden): before, 5.59% relative RMS error (of their mean `B`), the worst corner 20.9%;
+//! splitting only rectangles whose nodes disagree, 1.72% and 10.7% (a shadow edge crossing a
+//! rectangle between its nodes and its edge went unseen); with the corners' rays too, 0.20% and
+//! 0.55%.
+
+use galerkin_radiosity::geometry::{Patch, Rect};
+use galerkin_radiosity::kernel::point::point_to_polygon;
+use galerkin_radiosity::scene::{Material, Scene, Settings};
+use galerkin_radiosity::scenes::{box_mesh, facing, subdivided_quad};
+use galerkin_radiosity::system::{System, no_progress};
+use galerkin_radiosity::visibility::bvh::{Triangle, segment_hits};
+use glam::DVec3;
+
+const RHO: f64 = 0.7;
+const EXITANCE: f64 = 10.0;
+const LIGHT_HALF: f64 = 0.5;
+const LIGHT_HEIGHT: f64 = 1.0;
+const BOX_MIN: DVec3 = DVec3::new(-0.1, -0.35, 0.4);
+const BOX_MAX: DVec3 = DVec3::new(0.4, 0.15, 0.5);
+
+fn light_corners() -> [DVec3; 4] {
+    let p = |x, y| DVec3::new(x, y, LIGHT_HEIGHT);
+    let h = LIGHT_HALF;
+    facing([p(-h, -h), p(h, -h), p(h, h), p(-h, h)], DVec3::ZERO, false)
+}
+
+fn scene() -> Scene {
+    let materials = vec![
+        Material { name: "grey".into(), reflectance: [RHO; 3], emission: [0.0; 3] },
+        Material { name: "black".into(), reflectance: [0.0; 3], emission: [0.0; 3] },
+        Material { name: "light".into(), reflectance: [0.0; 3], emission: [EXITANCE; 3] },
+    ];
+    let p = |x, y| DVec3::new(x, y, 0.0);
+    let ground = subdivided_quad(
+        "ground",
+        facing([p(-1.0, -1.0), p(1.0, -1.0), p(1.0, 1.0), p(-1.0, 1.0)], DVec3::Z, false),
+        16,
+        0,
+    );
+    let occluder = box_mesh("box", BOX_MIN, BOX_MAX, 1, false, 1);
+    let light = subdivided_quad("light", light_corners(), 1, 2);
+    let settings = Settings { basis_order: 2, tolerance: 1e-6, ..Settings::default() };
+    Scene::new(settings, (1, 1), materials, vec![Vec::new(); 3], vec![ground, occluder, light]).unwrap()
+}
+
+/// `E_d` at `y` (normal +z) by brute force, shadowed by `occluders`; and whether some of the
+/// light's pieces are hidden and some seen (a penumbra).
+fn direct(y: DVec3, occluders: &[Triangle]) -> (f64, bool) {
+    let m = 64;
+    let light = Patch::from_corners(&light_corners());
+    let (mut h, mut seen, mut hidden) = (0.0, 0, 0);
+    for i in 0..m {
+        for j in 0..m {
+            let r = Rect {
+                s0: i as f64 / m as f64,
+                s1: (i + 1) as f64 / m as f64,
+                t0: j as f64 / m as f64,
+                t1: (j + 1) as f64 / m as f64,
+            };
+            let piece = light.sub_patch(&r);
+            let f = point_to_polygon(y, DVec3::Z, &piece.corners, piece.centre_normal());
+            let (s, t) = r.map(0.5, 0.5);
+            let d = light.point(s, t) - y;
+            if f <= 0.0 {
+                continue;
+            }
+            if occluders.iter().any(|tri| segment_hits(tri, y, d, 1e-9, 1.0 - 1e-9)) {
+                hidden += 1;
+            } else {
+                h += f;
+                seen += 1;
+            }
+        }
+    }
+    (EXITANCE * h, seen > 0 && hidden > 0)
+}
+
+#[test]
+fn ground_corners_in_a_penumbra_match_brute_force() {
+    let scene = scene();
+    let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
+    sys.solve(scene.settings.tolerance, &|| false).unwrap();
+    sys.gather_corners(&scene, 1.0, &no_progress).unwrap();
+    let results = sys.face_results(&scene, 1.0);
+    let b = box_mesh("box", BOX_MIN, BOX_MAX, 1, false, 1);
+    let occluders: Vec<Triangle> = b
+        .faces
+        .iter()
+        .flat_map(|f| {
+            let v: Vec<DVec3> = f.iter().map(|&k| b.vertices[k as usize]).collect();
+            Patch::from_corners(&v).triangles()
+        })
+        .map(|v| Triangle { v, element: u32::MAX })
+        .collect();
+    let ground = &scene.objects[0];
+    let (mut sq, mut sum, mut worst, mut count) = (0.0, 0.0, 0.0f64, 0);
+    let mut corner = 0;
+    for face in &ground.faces {
+        for &v in face {
+            let p = ground.vertices[v as usize];
+            let value = results[0].corner_radiosity[corner][0] as f64;
+            corner += 1;
+            let (e_d, penumbra) = direct(p + DVec3::Z * 1e-9, &occluders);
+            if !penumbra {
+                continue;
+            }
+            let exact = RHO * e_d;
+            sq += (value - exact).powi(2);
+            sum += exact;
+            worst = worst.max((value - exact).abs());
+            count += 1;
+        }
+    }
+    let mean = sum / count as f64;
+    let rms = (sq / count as f64).sqrt() / mean;
+    let worst = worst / mean;
+    eprintln!(
+        "{count} ground corners in the penumbra: relative RMS error {:.2}%, worst {:.2}% (of their mean B {mean:.4})",
+        100.0 * rms,
+        100.0 * worst
+    );
+    assert!(count > 100, "the penumbra covers a good part of the ground: {count} corners");
+    assert!(rms < 0.01, "relative RMS error {rms} in the penumbra");
+    assert!(worst < 0.04, "worst corner {worst} in the penumbra");
+}
