@@ -50,7 +50,8 @@ FRESH_RUN = " ".join([
     "rm -rf out/fresh-clone && git clone -q --no-checkout . out/fresh-clone",
     "&& git -C out/fresh-clone checkout -q $(git rev-parse HEAD)",
     f"&& (cd out/fresh-clone && CI=true bash .ci/run) > {FRESH_LOG} 2>&1;",
-    '{ echo "# a fresh clone of $(git -C out/fresh-clone rev-parse --short HEAD) running CI=true bash .ci/run,',
+    '{ echo "# a fresh clone of $(git -C out/fresh-clone rev-parse --short HEAD)',
+    'running CI=true bash .ci/run,',
     "$(date -u '+%Y-%m-%d %H:%M') UTC, $(nproc) cores\";",
     f"grep -E '{STAGE_LINES}' {FRESH_LOG}; }} > {STAGE_LOG}; {STAGE_TABLE}",
 ])
