@@ -20,13 +20,15 @@
 //! centre through the block's triangles). Before the rule that both points must be buried, the
 //! corner was black; a corner of the block inside the slab stays black.
 
-use galerkin_radiosity::geometry::{Patch, Rect};
-use galerkin_radiosity::kernel::point::point_to_polygon;
+use galerkin_radiosity::geometry::Patch;
 use galerkin_radiosity::scene::{Material, Scene, Settings};
 use galerkin_radiosity::scenes::{box_mesh, facing, merge, subdivided_quad};
 use galerkin_radiosity::system::{System, no_progress};
-use galerkin_radiosity::visibility::bvh::{Triangle, segment_hits};
+use galerkin_radiosity::visibility::bvh::Triangle;
 use glam::DVec3;
+
+#[path = "common/brute_force.rs"]
+mod brute_force;
 
 const RHO: f64 = 0.7;
 const EXITANCE: f64 = 10.0;
@@ -61,27 +63,8 @@ fn scene() -> Scene {
 
 /// `E_d` at `y` (normal +z) by brute force, shadowed by `occluders`.
 fn direct(y: DVec3, occluders: &[Triangle]) -> f64 {
-    let m = 64;
     let light = Patch::from_corners(&light_corners());
-    let mut h = 0.0;
-    for i in 0..m {
-        for j in 0..m {
-            let r = Rect {
-                s0: i as f64 / m as f64,
-                s1: (i + 1) as f64 / m as f64,
-                t0: j as f64 / m as f64,
-                t1: (j + 1) as f64 / m as f64,
-            };
-            let piece = light.sub_patch(&r);
-            let f = point_to_polygon(y, DVec3::Z, &piece.corners, piece.centre_normal());
-            let (s, t) = r.map(0.5, 0.5);
-            let d = light.point(s, t) - y;
-            if f > 0.0 && !occluders.iter().any(|tri| segment_hits(tri, y, d, 1e-9, 1.0 - 1e-9)) {
-                h += f;
-            }
-        }
-    }
-    EXITANCE * h
+    EXITANCE * brute_force::direct_light(&light, y, DVec3::Z, occluders, 64).form_factor
 }
 
 #[test]
@@ -92,16 +75,7 @@ fn a_corner_beside_a_crossing_piece_is_lit() {
     sys.gather_corners(&scene, 1.0, &no_progress).unwrap();
     let results = sys.face_results(&scene, 1.0);
     let obj = &scene.objects[0];
-    let block: Vec<Triangle> = box_mesh("block", BLOCK_MIN, BLOCK_MAX, 1, false, 1)
-        .faces
-        .iter()
-        .flat_map(|f| {
-            let b = box_mesh("block", BLOCK_MIN, BLOCK_MAX, 1, false, 1);
-            let v: Vec<DVec3> = f.iter().map(|&k| b.vertices[k as usize]).collect();
-            Patch::from_corners(&v).triangles()
-        })
-        .map(|v| Triangle { v, element: u32::MAX })
-        .collect();
+    let block = brute_force::triangles_of(&box_mesh("block", BLOCK_MIN, BLOCK_MAX, 1, false, 1));
     let (mut checked, mut corner) = (0, 0);
     for (f, face) in obj.faces.iter().enumerate() {
         let top = obj.face_materials[f] == 0

@@ -10,15 +10,16 @@
 //! is one quadratic: it cannot follow the box's shadow and contact (it goes negative under the
 //! box), which is what the corner gather then read at the corners of a model standing on it.
 
-use galerkin_radiosity::geometry::{Patch, Rect};
+use galerkin_radiosity::geometry::Patch;
 use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
-use galerkin_radiosity::kernel::point::point_to_polygon;
 use galerkin_radiosity::scene::{Material, Object, Scene, Settings};
 use galerkin_radiosity::scenes::{box_mesh, facing, merge, subdivided_quad};
 use galerkin_radiosity::system::{System, no_progress};
 use galerkin_radiosity::visibility::bvh::Triangle;
-use galerkin_radiosity::visibility::bvh::segment_hits;
 use glam::DVec3;
+
+#[path = "common/brute_force.rs"]
+mod brute_force;
 
 const RHO: f64 = 0.7;
 const EXITANCE: f64 = 10.0;
@@ -69,25 +70,7 @@ fn ground_truth(y: DVec3, occluders: &[Triangle]) -> f64 {
         DVec3::ZERO,
         false,
     ));
-    let mut h = 0.0;
-    for i in 0..m {
-        for j in 0..m {
-            let r = Rect {
-                s0: i as f64 / m as f64,
-                s1: (i + 1) as f64 / m as f64,
-                t0: j as f64 / m as f64,
-                t1: (j + 1) as f64 / m as f64,
-            };
-            let piece = light.sub_patch(&r);
-            let f = point_to_polygon(y, DVec3::Z, &piece.corners, piece.centre_normal());
-            let (s, t) = r.map(0.5, 0.5);
-            let d = light.point(s, t) - y;
-            if f > 0.0 && !occluders.iter().any(|tri| segment_hits(tri, y, d, 1e-9, 1.0 - 1e-9)) {
-                h += f;
-            }
-        }
-    }
-    RHO * EXITANCE * h
+    RHO * EXITANCE * brute_force::direct_light(&light, y, DVec3::Z, occluders, m).form_factor
 }
 
 /// The solved ground's `B` at world point `y` (on the ground plane).
@@ -99,16 +82,7 @@ fn solved_ground(sys: &System, scene: &Scene, ground: usize, y: DVec3) -> f64 {
 
 /// The box's triangles, for the brute force's shadow rays.
 fn box_triangles() -> Vec<Triangle> {
-    black_box()
-        .faces
-        .iter()
-        .flat_map(|f| {
-            let b = black_box();
-            let v: Vec<DVec3> = f.iter().map(|&k| b.vertices[k as usize]).collect();
-            Patch::from_corners(&v).triangles()
-        })
-        .map(|v| Triangle { v, element: u32::MAX })
-        .collect()
+    brute_force::triangles_of(&black_box())
 }
 
 /// Relative RMS error (of the brute-force mean) of `solved` on a 31 x 31 grid of ground points

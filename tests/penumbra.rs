@@ -21,13 +21,15 @@
 //! rectangle between its nodes and its edge went unseen); with the corners' rays too, 0.20% and
 //! 0.55%.
 
-use galerkin_radiosity::geometry::{Patch, Rect};
-use galerkin_radiosity::kernel::point::point_to_polygon;
+use galerkin_radiosity::geometry::Patch;
 use galerkin_radiosity::scene::{Material, Scene, Settings};
 use galerkin_radiosity::scenes::{box_mesh, facing, subdivided_quad};
 use galerkin_radiosity::system::{System, no_progress};
-use galerkin_radiosity::visibility::bvh::{Triangle, segment_hits};
+use galerkin_radiosity::visibility::bvh::Triangle;
 use glam::DVec3;
+
+#[path = "common/brute_force.rs"]
+mod brute_force;
 
 const RHO: f64 = 0.7;
 const EXITANCE: f64 = 10.0;
@@ -64,33 +66,9 @@ fn scene() -> Scene {
 /// `E_d` at `y` (normal +z) by brute force, shadowed by `occluders`; and whether some of the
 /// light's pieces are hidden and some seen (a penumbra).
 fn direct(y: DVec3, occluders: &[Triangle]) -> (f64, bool) {
-    let m = 64;
     let light = Patch::from_corners(&light_corners());
-    let (mut h, mut seen, mut hidden) = (0.0, 0, 0);
-    for i in 0..m {
-        for j in 0..m {
-            let r = Rect {
-                s0: i as f64 / m as f64,
-                s1: (i + 1) as f64 / m as f64,
-                t0: j as f64 / m as f64,
-                t1: (j + 1) as f64 / m as f64,
-            };
-            let piece = light.sub_patch(&r);
-            let f = point_to_polygon(y, DVec3::Z, &piece.corners, piece.centre_normal());
-            let (s, t) = r.map(0.5, 0.5);
-            let d = light.point(s, t) - y;
-            if f <= 0.0 {
-                continue;
-            }
-            if occluders.iter().any(|tri| segment_hits(tri, y, d, 1e-9, 1.0 - 1e-9)) {
-                hidden += 1;
-            } else {
-                h += f;
-                seen += 1;
-            }
-        }
-    }
-    (EXITANCE * h, seen > 0 && hidden > 0)
+    let d = brute_force::direct_light(&light, y, DVec3::Z, occluders, 64);
+    (EXITANCE * d.form_factor, d.seen > 0 && d.hidden > 0)
 }
 
 #[test]
@@ -100,16 +78,7 @@ fn ground_corners_in_a_penumbra_match_brute_force() {
     sys.solve(scene.settings.tolerance, &|| false).unwrap();
     sys.gather_corners(&scene, 1.0, &no_progress).unwrap();
     let results = sys.face_results(&scene, 1.0);
-    let b = box_mesh("box", BOX_MIN, BOX_MAX, 1, false, 1);
-    let occluders: Vec<Triangle> = b
-        .faces
-        .iter()
-        .flat_map(|f| {
-            let v: Vec<DVec3> = f.iter().map(|&k| b.vertices[k as usize]).collect();
-            Patch::from_corners(&v).triangles()
-        })
-        .map(|v| Triangle { v, element: u32::MAX })
-        .collect();
+    let occluders = brute_force::triangles_of(&box_mesh("box", BOX_MIN, BOX_MAX, 1, false, 1));
     let ground = &scene.objects[0];
     let (mut sq, mut sum, mut worst, mut count) = (0.0, 0.0, 0.0f64, 0);
     let mut corner = 0;
