@@ -14,7 +14,7 @@ use crate::geometry::Patch;
 use crate::kernel::PairContext;
 use crate::kernel::assemble::may_face;
 use crate::kernel::pair::{SEPARATION, integrate_near_coarse, integrate_pair};
-use crate::kernel::point::point_to_polygon;
+use crate::kernel::point::{point_kernel, point_to_polygon};
 use crate::kernel::samples::Samples;
 use crate::quadrature::GaussLegendre;
 use crate::visibility::{Occluders, Visibility};
@@ -232,26 +232,28 @@ fn light_surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize
 /// link's `G^00` needs nothing else (a light link is one of the refinement's most frequent
 /// computations, and `Samples` allocates ten vectors each).
 struct LightPoints {
-    position: [DVec3; LIGHT_POINTS * LIGHT_POINTS],
-    normal: [DVec3; LIGHT_POINTS * LIGHT_POINTS],
+    position: [DVec3; LIGHT_SAMPLES],
+    normal: [DVec3; LIGHT_SAMPLES],
     /// Weight in the parameter measure, and times the area element `A(s,t)`.
-    weight: [f64; LIGHT_POINTS * LIGHT_POINTS],
-    area_weight: [f64; LIGHT_POINTS * LIGHT_POINTS],
+    weight: [f64; LIGHT_SAMPLES],
+    area_weight: [f64; LIGHT_SAMPLES],
 }
+
+/// A light link's points per patch.
+const LIGHT_SAMPLES: usize = LIGHT_POINTS * LIGHT_POINTS;
 
 impl LightPoints {
     /// The points as `Samples::new` makes them over the whole domain (`Gamma_0 = 1`).
     fn new(patch: &Patch, rule: &GaussLegendre) -> Self {
         debug_assert_eq!(rule.len(), LIGHT_POINTS);
-        let n = LIGHT_POINTS * LIGHT_POINTS;
         let mut p = Self {
-            position: [DVec3::ZERO; 4],
-            normal: [DVec3::ZERO; 4],
-            weight: [0.0; 4],
-            area_weight: [0.0; 4],
+            position: [DVec3::ZERO; LIGHT_SAMPLES],
+            normal: [DVec3::ZERO; LIGHT_SAMPLES],
+            weight: [0.0; LIGHT_SAMPLES],
+            area_weight: [0.0; LIGHT_SAMPLES],
         };
         for (k, ((u, wu), (v, wv))) in
-            rule.iter().flat_map(|a| rule.iter().map(move |b| (a, b))).enumerate().take(n)
+            rule.iter().flat_map(|a| rule.iter().map(move |b| (a, b))).enumerate().take(LIGHT_SAMPLES)
         {
             let av = patch.area_vector(u, v);
             let a = av.length();
@@ -267,19 +269,19 @@ impl LightPoints {
     /// point kernel `cos cos / (pi r^2)`, unoccluded): `self` receiving from `other`, then
     /// `other` from `self`.
     fn gauss(&self, other: &Self) -> (f64, f64) {
-        let mut m = [[0.0; 4]; 4];
+        let mut m = [[0.0; LIGHT_SAMPLES]; LIGHT_SAMPLES];
         for (a, row) in m.iter_mut().enumerate() {
             for (b, g) in row.iter_mut().enumerate() {
                 *g = point_kernel(self.position[a], self.normal[a], other.position[b], other.normal[b]);
             }
         }
         let (mut ab, mut ba) = (0.0, 0.0);
-        for a in 0..4 {
-            let t: f64 = (0..4).map(|b| m[a][b] * other.area_weight[b]).sum();
+        for a in 0..LIGHT_SAMPLES {
+            let t: f64 = (0..LIGHT_SAMPLES).map(|b| m[a][b] * other.area_weight[b]).sum();
             ab += self.weight[a] * t;
         }
-        for b in 0..4 {
-            let t: f64 = (0..4).map(|a| m[a][b] * self.area_weight[a]).sum();
+        for b in 0..LIGHT_SAMPLES {
+            let t: f64 = (0..LIGHT_SAMPLES).map(|a| m[a][b] * self.area_weight[a]).sum();
             ba += other.weight[b] * t;
         }
         (ab, ba)
@@ -292,19 +294,10 @@ impl LightPoints {
         let normal = source.centre_normal();
         let mut corners = source.corners.to_vec();
         corners.dedup();
-        (0..4)
+        (0..LIGHT_SAMPLES)
             .map(|a| self.weight[a] * point_to_polygon(self.position[a], self.normal[a], &corners, normal))
             .sum()
     }
-}
-
-/// The point kernel `cos_x cos_y / (pi r^2)` between facing points, 0 otherwise (as the pair
-/// integrator's kernel matrix forms it).
-fn point_kernel(x: DVec3, nx: DVec3, y: DVec3, ny: DVec3) -> f64 {
-    let d = y - x;
-    let (cx, cy) = (nx.dot(d), -ny.dot(d));
-    let r2 = d.length_squared();
-    if cx <= 0.0 || cy <= 0.0 { 0.0 } else { cx * cy / (std::f64::consts::PI * r2 * r2) }
 }
 
 /// The transmittance of the pair `a`, `b`: [`kernel_weighted_rays`] between points of the two
