@@ -59,7 +59,18 @@ impl Solids {
         self.components.is_empty()
     }
 
-    /// Whether `p` lies inside some solid. For a point of a surface, see [`test_point`].
+    /// Whether the surface point `x` (front normal `n`) of a face of centre `centre` and bounding
+    /// radius `radius` is buried: both [`test_point`] and the point itself, lifted alike, lie
+    /// inside a solid. The step towards the centre keeps a point lifted off a concave edge out of
+    /// its own solid; alone, it buried points of faces that cross into another solid within that
+    /// thousandth of the point (hulls of one model meeting at nearly coplanar faces: the teddy's
+    /// cut planes, docs/validation-real.md), whose own point is outside and which Cycles bakes lit.
+    pub fn buries_surface_point(&self, x: DVec3, n: DVec3, centre: DVec3, radius: f64) -> bool {
+        self.buries(test_point(x, n, centre, radius)) && self.buries(test_point(x, n, x, radius))
+    }
+
+    /// Whether `p` lies inside some solid. For a point of a surface, see
+    /// [`Solids::buries_surface_point`].
     pub fn buries(&self, p: DVec3) -> bool {
         self.components.iter().any(|c| {
             c.bounds.min.cmple(p).all()

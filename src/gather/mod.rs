@@ -676,16 +676,11 @@ fn foot_on(source: &Patch, foot: DVec3, radius: f64) -> Option<Touch> {
     ((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&t)).then_some(Touch { s, t, radius })
 }
 
-/// Per point, whether it lies inside another closed surface of the scene ([`Solids`]): both
-/// [`crate::solids::test_point`] (a thousandth of the way to its face's centre, then lifted) and
-/// the gathered point itself, lifted alike, must be. The step towards the centre keeps a point
-/// lifted off a concave edge out of its own solid; alone, it buried points of faces that cross
-/// into another solid within that thousandth of the point (hulls of one model meeting at nearly
-/// coplanar faces: the teddy's cut planes, faces up to 23 cm, the crossing 0.1-0.5 mm from the
-/// vertex), whose gathered point is outside, and Cycles' vertex is lit (docs/validation-real.md,
-/// "Teddy"). The solids are made of the faces, not of the elements: a face split into parts
-/// ([`crate::contact_split`]) leaves edges that only its own parts share. (Without parts the
-/// elements are the faces: nothing more is allocated, which a bake near its memory limit needs.)
+/// Per point, whether it lies inside another closed surface of the scene
+/// ([`Solids::buries_surface_point`]). The solids are made of the faces, not of the elements: a
+/// face split into parts ([`crate::contact_split`]) leaves edges that only its own parts share.
+/// (Without parts the elements are the faces: nothing more is allocated, which a bake near its
+/// memory limit needs.)
 fn buried_points(
     sys: &System,
     scene: &Scene,
@@ -705,8 +700,7 @@ fn buried_points(
             p.at.is_some_and(|(e, s, t)| {
                 let (centre, radius) = patches[e].bounding_sphere();
                 let (x, n) = (patches[e].point(s, t), patches[e].area_vector(s, t).normalize_or_zero());
-                solids.buries(crate::solids::test_point(x, n, centre, radius))
-                    && solids.buries(crate::solids::test_point(x, n, x, radius))
+                solids.buries_surface_point(x, n, centre, radius)
             })
         })
         .collect()

@@ -346,11 +346,7 @@ impl<'a> Gather<'a> {
         if let Some(solids) = solids {
             let (centre, radius) = face.patch.bounding_sphere();
             let (p, nf) = (face.patch.point(s, t), face.patch.area_vector(s, t).normalize_or_zero());
-            // Both points inside, as the flat gather's `buried_points` decides (a step towards the
-            // face's centre alone crossed into a solid the corner itself is outside of).
-            if solids.buries(crate::solids::test_point(p, nf, centre, radius))
-                && solids.buries(crate::solids::test_point(p, nf, p, radius))
-            {
+            if solids.buries_surface_point(p, nf, centre, radius) {
                 return [emission, [0.0; 3]];
             }
         }
