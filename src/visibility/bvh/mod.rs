@@ -1,14 +1,18 @@
 //! A bounding volume hierarchy over the scene's triangles, for the two queries visibility needs:
 //! "which triangles overlap this box" (shaft candidates) and "does this segment hit any triangle
-//! other than these" (any-hit, early exit).
+//! other than these" (any-hit, early exit), one segment at a time here and in packets of a
+//! link's segments in [`packet`] (which walks its own `f32` copy of the inner nodes).
 //!
 //! Why our own and not parry3d: parry's trimesh ray cast is closest-hit only and cannot skip the
 //! two patches of a link, and the shaft query needs the triangle ids; both are a few lines here.
-//! Built by median split on the longest centroid axis: O(n log n), 100k triangles in ~20 ms.
+//! Built by a binned surface-area split ([`sah_partition`]): O(n log n).
 
 use glam::DVec3;
 
 use crate::geometry::Aabb;
+
+mod packet;
+pub use packet::PACKET;
 
 /// A triangle tagged with the element whose surface it approximates (to exclude a link's own patches).
 #[derive(Clone, Copy, Debug)]
@@ -46,6 +50,8 @@ pub struct Bvh {
     /// `Aabb::diagonal() * 0.5` form them (for box tests against planes).
     node_centred: Vec<(DVec3, DVec3)>,
     triangle_centred: Vec<(DVec3, DVec3)>,
+    /// The inner nodes as [`Bvh::occluded_packet`] walks them.
+    twins: packet::Twins,
 }
 
 impl Bvh {
@@ -76,7 +82,8 @@ impl Bvh {
         let centred = |b: &Aabb| (b.centre(), b.diagonal() * 0.5);
         let node_centred = nodes.iter().map(|n| centred(&n.bounds)).collect();
         let triangle_centred = bounds.iter().map(centred).collect();
-        Bvh { nodes, triangles, bounds, node_centred, triangle_centred }
+        let twins = packet::Twins::build(&nodes);
+        Bvh { nodes, triangles, bounds, node_centred, triangle_centred, twins }
     }
 
     pub fn triangles(&self) -> &[Triangle] {
@@ -217,235 +224,6 @@ impl Blockers {
 thread_local! {
     static BLOCKERS: std::cell::RefCell<Blockers> =
         const { std::cell::RefCell::new(Blockers { recent: [u32::MAX; 8], next: 0 }) };
-}
-
-/// Up to this many segments traverse [`Bvh::occluded_packet`] together.
-pub const PACKET: usize = 8;
-
-impl Bvh {
-    /// [`Bvh::occluded`] for a few segments at once (at most [`PACKET`]), all skipping the same
-    /// two elements: `blocked[k]` is set when segment `k` (`origins[k] + t dirs[k]`, `t` in
-    /// `(t_min, t_max)`) hits a triangle of another element, and left as it is otherwise (set
-    /// ones are not traced). One traversal for the lot: the segments of a link between two near
-    /// parts run side by side through the same nodes, which a traversal each visited again.
-    #[allow(clippy::too_many_arguments)]
-    pub fn occluded_packet(
-        &self,
-        origins: &[DVec3],
-        dirs: &[DVec3],
-        t_min: f64,
-        t_max: f64,
-        skip_a: u32,
-        skip_b: u32,
-        blocked: &mut [bool],
-    ) {
-        self.packet(origins, dirs, (t_min, t_max), Ends::Shared(skip_a, skip_b), blocked);
-    }
-
-    /// [`Bvh::occluded_packet`] for segments that each skip their own two elements, `skips[k]`
-    /// (segments between points drawn on two clusters' faces).
-    pub fn occluded_each(
-        &self,
-        origins: &[DVec3],
-        dirs: &[DVec3],
-        (t_min, t_max): (f64, f64),
-        skips: &[(u32, u32)],
-        blocked: &mut [bool],
-    ) {
-        assert_eq!(skips.len(), origins.len(), "a skip pair per segment");
-        self.packet(origins, dirs, (t_min, t_max), Ends::Each(skips), blocked);
-    }
-
-    /// Traces a packet in lanes of 4 when it has no more segments (a light link's), else of
-    /// [`PACKET`].
-    fn packet(&self, origins: &[DVec3], dirs: &[DVec3], span: (f64, f64), ends: Ends, blocked: &mut [bool]) {
-        let n = origins.len();
-        assert!(n <= PACKET && dirs.len() == n && blocked.len() == n, "a packet of at most {PACKET}");
-        let open = (0..n).filter(|&k| !blocked[k]).fold(0u32, |m, k| m | 1 << k);
-        if self.nodes.is_empty() || open == 0 {
-            return;
-        }
-        let open = if n <= 4 {
-            walk_packet4(self, &Packet::<4>::new(origins, dirs, span, ends), open)
-        } else {
-            walk_packet8(self, &Packet::<PACKET>::new(origins, dirs, span, ends), open)
-        };
-        for (k, b) in blocked.iter_mut().enumerate() {
-            *b = open & 1 << k == 0;
-        }
-    }
-}
-
-/// The elements each segment of a packet passes through without being blocked (its own ends').
-#[derive(Clone, Copy)]
-enum Ends<'a> {
-    /// The same two for every segment (a link's).
-    Shared(u32, u32),
-    /// A pair per segment.
-    Each(&'a [(u32, u32)]),
-}
-
-/// The elements a packet's segments pass through without being blocked, by lane.
-#[derive(Clone, Copy)]
-enum Skip<const N: usize> {
-    Shared(u32, u32),
-    /// Two per lane (`[end][lane]`).
-    PerLane([[u32; N]; 2]),
-}
-
-/// A packet's segments by coordinate (`[axis][lane]`), so that a box's slab test runs over the
-/// lanes at once; lanes past the packet's segments hold zeros, and their verdicts are masked out.
-struct Lanes<const N: usize> {
-    origin: [[f64; N]; 3],
-    inv: [[f64; N]; 3],
-}
-
-/// What [`walk_packet4`] and [`walk_packet8`] trace: `N` lanes.
-struct Packet<'a, const N: usize> {
-    lanes: Lanes<N>,
-    origins: &'a [DVec3],
-    dirs: &'a [DVec3],
-    span: (f64, f64),
-    skip: Skip<N>,
-    reach: Aabb,
-}
-
-impl<'a, const N: usize> Packet<'a, N> {
-    fn new(origins: &'a [DVec3], dirs: &'a [DVec3], span: (f64, f64), ends: Ends) -> Self {
-        let n = origins.len();
-        let mut lanes = Lanes { origin: [[0.0; N]; 3], inv: [[0.0; N]; 3] };
-        for k in 0..n {
-            let inv = dirs[k].recip();
-            for a in 0..3 {
-                (lanes.origin[a][k], lanes.inv[a][k]) = (origins[k][a], inv[a]);
-            }
-        }
-        let skip = match ends {
-            Ends::Shared(a, b) => Skip::Shared(a, b),
-            Ends::Each(pairs) => {
-                let mut lanes = [[u32::MAX; N]; 2];
-                for (k, &(a, b)) in pairs.iter().enumerate() {
-                    (lanes[0][k], lanes[1][k]) = (a, b);
-                }
-                Skip::PerLane(lanes)
-            }
-        };
-        // The box of the segments' swept parts: a node or a triangle outside it holds no hit for
-        // any of them. Grown by a margin far above the rounding of the points, so that it never
-        // drops a box whose slabs a segment meets.
-        let mut reach = Aabb::EMPTY;
-        for k in 0..n {
-            reach = reach.grow(origins[k] + dirs[k] * span.0).grow(origins[k] + dirs[k] * span.1);
-        }
-        let margin = 1e-9 * (reach.diagonal().length() + reach.min.abs().max(reach.max.abs()).max_element());
-        reach = Aabb { min: reach.min - DVec3::splat(margin), max: reach.max + DVec3::splat(margin) };
-        Self { lanes, origins, dirs, span, skip, reach }
-    }
-}
-
-/// Bit `k` set where lane `k`'s segment meets the slabs of `b` within `span`: [`slab_hit`] lane
-/// by lane with the same operations (a free axis, NaN, sets no bound), so the same verdicts.
-#[inline(always)]
-fn slab_mask<const N: usize>(b: &Aabb, lanes: &Lanes<N>, (t_min, t_max): (f64, f64)) -> u32 {
-    let (mut near, mut far) = ([t_min; N], [t_max; N]);
-    for a in 0..3 {
-        let (lo_b, hi_b) = (b.min[a], b.max[a]);
-        for k in 0..N {
-            let t0 = (lo_b - lanes.origin[a][k]) * lanes.inv[a][k];
-            let t1 = (hi_b - lanes.origin[a][k]) * lanes.inv[a][k];
-            let free = t0.is_nan() | t1.is_nan();
-            let (lo, hi) = if t0 < t1 { (t0, t1) } else { (t1, t0) };
-            let (lo, hi) = if free { (f64::NEG_INFINITY, f64::INFINITY) } else { (lo, hi) };
-            near[k] = if lo > near[k] { lo } else { near[k] };
-            far[k] = if hi < far[k] { hi } else { far[k] };
-        }
-    }
-    (0..N).fold(0, |m, k| m | ((near[k] <= far[k]) as u32) << k)
-}
-
-/// Tests triangle `i` against the lanes of `open` of [`walk`]'s packet, and takes the
-/// lanes it blocks out of `open`; `true` if it blocked any. Each segment's own hit as
-/// [`Bvh::occluded`] tests it (its slabs meet the triangle's box, and it crosses the triangle), so
-/// that a triangle reached for another segment of the packet, or tried first from the cache, gives
-/// every segment the verdict of its own traversal. One box test rules a triangle out for the whole
-/// packet (most of the triangles tried are the leaves' neighbours of the segments' ends, and the
-/// cached blockers).
-#[inline(always)]
-fn test_triangle<const N: usize>(bvh: &Bvh, p: &Packet<N>, i: usize, open: &mut u32) -> bool {
-    let t = &bvh.triangles[i];
-    let open_here = match p.skip {
-        Skip::Shared(a, b) if t.element == a || t.element == b => return false,
-        Skip::Shared(..) => *open,
-        Skip::PerLane(ends) => {
-            let own = (0..N).fold(0u32, |m, k| {
-                m | ((ends[0][k] == t.element) as u32 | (ends[1][k] == t.element) as u32) << k
-            });
-            *open & !own
-        }
-    };
-    if open_here == 0 || !bvh.bounds[i].overlaps(&p.reach) {
-        return false;
-    }
-    let mut lanes = slab_mask(&bvh.bounds[i], &p.lanes, p.span) & open_here;
-    let mut any = false;
-    while lanes != 0 {
-        let k = lanes.trailing_zeros() as usize;
-        lanes &= lanes - 1;
-        if segment_hits(t, p.origins[k], p.dirs[k], p.span.0, p.span.1) {
-            *open &= !(1 << k);
-            any = true;
-        }
-    }
-    any
-}
-
-/// The traversal of [`Bvh::occluded_packet`]: the lanes of `open` still unblocked when it ends.
-#[inline(always)]
-fn walk<const N: usize>(bvh: &Bvh, p: &Packet<N>, open: u32) -> u32 {
-    let mut open = open;
-    // The triangles that blocked this thread's last segments first: neighbouring links,
-    // which follow each other here, are mostly blocked by the same few.
-    let recent = BLOCKERS.with_borrow(|b| b.recent);
-    for k in recent {
-        if (k as usize) < bvh.triangles.len() {
-            test_triangle(bvh, p, k as usize, &mut open);
-        }
-    }
-    let mut stack = [0u32; 64];
-    let mut sp = 1;
-    while sp > 0 && open != 0 {
-        sp -= 1;
-        let node = &bvh.nodes[stack[sp] as usize];
-        if !node.bounds.overlaps(&p.reach) || slab_mask(&node.bounds, &p.lanes, p.span) & open == 0 {
-            continue;
-        }
-        if node.count > 0 {
-            for k in node.start..node.start + node.count {
-                if test_triangle(bvh, p, k as usize, &mut open) {
-                    BLOCKERS.with_borrow_mut(|b| b.remember(k));
-                }
-            }
-        } else {
-            stack[sp] = node.start;
-            stack[sp + 1] = node.start + 1;
-            sp += 2;
-        }
-    }
-    open
-}
-
-crate::simd::multiversion! {
-    /// [`walk`] in lanes of 4.
-    fn walk_packet4(bvh: &Bvh, p: &Packet<4>, open: u32) -> u32 {
-        walk(bvh, p, open)
-    }
-}
-
-crate::simd::multiversion! {
-    /// [`walk`] in lanes of [`PACKET`].
-    fn walk_packet8(bvh: &Bvh, p: &Packet<PACKET>, open: u32) -> u32 {
-        walk(bvh, p, open)
-    }
 }
 
 /// Surface area of a box (SAH cost weight).
