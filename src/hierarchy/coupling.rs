@@ -9,10 +9,9 @@
 
 use glam::DVec3;
 
-use super::tree::{Kind, NodeId, Tree};
+use super::tree::{Kind, NodeId, Surface, Tree};
 use crate::geometry::Patch;
 use crate::kernel::PairContext;
-use crate::kernel::assemble::may_face;
 use crate::kernel::pair::{SEPARATION, integrate_near_coarse, integrate_pair};
 use crate::kernel::point::{point_kernel, point_to_polygon};
 use crate::kernel::samples::Samples;
@@ -118,10 +117,10 @@ pub fn compute_as(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId, weight: 
     let (na, nb) = (tree.node(a), tree.node(b));
     match (&na.kind, &nb.kind) {
         (Kind::Surface(sa), Kind::Surface(sb)) => {
-            let (ea, eb) = ((sa.face as usize, &sa.patch), (sb.face as usize, &sb.patch));
+            let (ea, eb) = (Side::of(sa, na.centre, na.radius), Side::of(sb, nb.centre, nb.radius));
             match weight {
-                Weight::Full => surfaces(ctx, ea, eb),
-                Weight::Light => light_surfaces(ctx, ea, eb),
+                Weight::Full => surfaces(ctx, &ea, &eb),
+                Weight::Light => light_surfaces(ctx, &ea, &eb),
             }
         }
         _ => {
@@ -136,9 +135,36 @@ pub fn compute_as(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId, weight: 
     }
 }
 
-fn surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize, &Patch)) -> Computed {
+/// A surface end of a link, with what every link asks of it computed once per node.
+struct Side<'a> {
+    face: usize,
+    patch: &'a Patch,
+    surface: &'a Surface,
+    /// The patch's bounding sphere (its node's).
+    centre: DVec3,
+    radius: f64,
+}
+
+impl<'a> Side<'a> {
+    fn of(surface: &'a Surface, centre: DVec3, radius: f64) -> Self {
+        Side { face: surface.face as usize, patch: &surface.patch, surface, centre, radius }
+    }
+
+    /// [`crate::kernel::assemble::may_face`]`(self, other)` from the kept plane.
+    fn may_face(&self, other: &Side) -> bool {
+        self.surface.front.is_none_or(|pl| pl.any_in_front(other.patch))
+    }
+
+    /// The centres' distance over the sum of the radii (the integrators' separation).
+    fn separation(&self, other: &Side) -> f64 {
+        self.centre.distance(other.centre) / (self.radius + other.radius)
+    }
+}
+
+fn surfaces(ctx: &LinkContext, a: &Side, b: &Side) -> Computed {
     let none = Computed { coupling: None, partial: false, blocked: false };
-    if fa == fb || !may_face(pa, pb) || !may_face(pb, pa) {
+    let (fa, pa, fb, pb) = (a.face, a.patch, b.face, b.patch);
+    if fa == fb || !a.may_face(b) || !b.may_face(a) {
         return none;
     }
     let vis = match ctx.occluders {
@@ -150,8 +176,7 @@ fn surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize, &Pat
     }
     let partial = matches!(vis, Visibility::Partial(_));
     let p = &ctx.pair;
-    let ((ca, ra), (cb, rb)) = (pa.bounding_sphere(), pb.bounding_sphere());
-    let ratio = ca.distance(cb) / (ra + rb);
+    let ratio = a.separation(b);
     // Separated pairs take whole-patch samples; near ones are split by the integrator itself.
     let samples = (ratio > SEPARATION).then(|| {
         let rule = &ctx.rules[p.points_for(ratio) - 1];
@@ -181,25 +206,23 @@ fn surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize, &Pat
 /// (near pairs by the coarse analytic rule, as full links), unoccluded, times the share of a few
 /// sampled segments between them that arrive. What it leaves out (the higher coefficients, the
 /// visibility's variation over the pair) is at most what it carries, which the oracle bounds.
-fn light_surfaces(ctx: &LinkContext, (fa, pa): (usize, &Patch), (fb, pb): (usize, &Patch)) -> Computed {
+fn light_surfaces(ctx: &LinkContext, a: &Side, b: &Side) -> Computed {
     let none = Computed { coupling: None, partial: false, blocked: false };
-    if fa == fb || !may_face(pa, pb) || !may_face(pb, pa) {
+    let (fa, pa, fb, pb) = (a.face, a.patch, b.face, b.patch);
+    if fa == fb || !a.may_face(b) || !b.may_face(a) {
         return none;
     }
     let g = || {
         let (xa, xb) = (LightPoints::new(pa, &ctx.light_rule), LightPoints::new(pb, &ctx.light_rule));
-        let ((ca, ra), (cb, rb)) = (pa.bounding_sphere(), pb.bounding_sphere());
-        if ca.distance(cb) / (ra + rb) > SEPARATION {
-            xa.gauss(&xb)
-        } else {
-            (xa.to_polygon(pb), xb.to_polygon(pa))
-        }
+        if a.separation(b) > SEPARATION { xa.gauss(&xb) } else { (xa.to_polygon(pb), xb.to_polygon(pa)) }
     };
     // The segments first, and the kernel only for pairs that some of them cross (most pairs
     // tested here are blocked whole); where no segment faces, the kernel first, and the masks'
     // dearer share only for pairs that exchange something (about a seventh of the light links
     // of a monastery crop have no facing segment, and most of those none of the kernel either).
-    let ((arrived, tested), (g_ab, g_ba)) = match ctx.occluders.map(|o| (o, o.share_visible(fa, pa, fb, pb)))
+    let ((arrived, tested), (g_ab, g_ba)) = match ctx
+        .occluders
+        .map(|o| (o, o.share_visible((fa, pa, a.surface.normal), (fb, pb, b.surface.normal))))
     {
         None => ((1, 1), g()),
         Some((_, Some(share))) => {
@@ -388,11 +411,13 @@ pub(crate) struct Rays {
 /// A point below node `id` (face, position, normal): below a cluster, on a face drawn by area
 /// ([`Tree::draw_face`]); on a surface, uniform in its parameters.
 pub(crate) fn sample_point(tree: &Tree, id: NodeId, rng: &mut SplitMix) -> (u32, DVec3, DVec3) {
-    let id = if tree.node(id).is_cluster() { tree.draw_face(id, rng.next()) } else { id };
-    let Kind::Surface(s) = &tree.node(id).kind else { unreachable!("a drawn face is a surface") };
+    let (face, patch) = match &tree.node(id).kind {
+        Kind::Surface(s) => (s.face, &s.patch),
+        Kind::Cluster { .. } => tree.draw_face_patch(id, rng.next()),
+    };
     let (u, v) = (rng.next(), rng.next());
-    let n = s.patch.area_vector(u, v).normalize_or_zero();
-    (s.face, s.patch.point(u, v), n)
+    let n = patch.area_vector(u, v).normalize_or_zero();
+    (face, patch.point(u, v), n)
 }
 
 /// Deterministic uniform numbers in [0,1) (splitmix64).

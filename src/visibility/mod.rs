@@ -341,9 +341,13 @@ impl Occluders {
     /// masks of [`Occluders::part_visibility`] give. `None` when no pair of cell centres faces
     /// (parts that see each other obliquely, or only in part): [`Occluders::masked_share`] then
     /// decides, at several times the cost.
-    pub fn share_visible(&self, i: usize, pi: &Patch, j: usize, pj: &Patch) -> Option<(usize, usize)> {
+    /// `ni` and `nj` are the parts' [`Patch::centre_normal`]s.
+    pub fn share_visible(
+        &self,
+        (i, pi, ni): (usize, &Patch, DVec3),
+        (j, pj, nj): (usize, &Patch, DVec3),
+    ) -> Option<(usize, usize)> {
         let (xi, xj) = (sample_points(pi, 2), sample_points(pj, 2));
-        let (ni, nj) = (pi.centre_normal(), pj.centre_normal());
         let (mut origins, mut dirs) = ([DVec3::ZERO; SHARE_SEGMENTS], [DVec3::ZERO; SHARE_SEGMENTS]);
         let mut tested = 0;
         'pairs: for shift in [3, 0, 1, 2] {
