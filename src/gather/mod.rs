@@ -1351,31 +1351,28 @@ impl Gather<'_> {
             // rectangle put a corner beside a building up to 10% off (the monastery's ground,
             // docs/validation-real.md; tests/penumbra.rs).
             let refine = self.is_emitter[j] && mode == Mode::Rays && depth < PENUMBRA_DEPTH;
+            // The nodes lie inside the rectangle (a ninth of it from its edges): a shadow edge
+            // that crosses only that margin is seen by a ray to one of its corners instead. The
+            // corners in front of the corner's plane go with the nodes' rays (they lie in the
+            // same bounds: the same shaft's candidates, most often none, so no ray at all).
+            let mut corners = Corners::of(rx, patch, rect, refine);
             let mut m = [0.0; crate::basis::MAX_LEN];
             let m = &mut m[..out.len()];
             let (seen, count) = if depth == 0 {
-                self.gauss(rx, j, &self.nodes[j], &sub.bounds(), mode, m)
+                self.gauss(rx, j, &self.nodes[j], Among::Bounds(&sub.bounds()), mode, &mut corners, m)
             } else {
                 let nodes = GaussNodes::new(patch, rect, self.rule, self.sys.basis, self.cells_per_axis);
-                self.gauss(rx, j, &nodes, &sub.bounds(), mode, m)
+                self.gauss(rx, j, &nodes, Among::Bounds(&sub.bounds()), mode, &mut corners, m)
             };
-            // The nodes lie inside the rectangle (a ninth of it from its edges): a shadow edge
-            // that crosses only that margin is seen by a ray to one of its corners instead.
-            let mixed = refine
-                && count > 0
-                && ((seen > 0 && seen < count) || {
-                    let lit = seen == count;
-                    let corner = |(u, v): (f64, f64)| {
-                        let (s, t) = rect.map(u, v);
-                        let y = patch.point(s, t);
-                        rx.n.dot(y - rx.x) > 0.0
-                            && self.visible(rx, j, y, cell_of(s, t, self.cells_per_axis), mode) != lit
-                    };
-                    [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)].into_iter().any(corner)
-                });
+            let mixed = corners.disagree(seen, count);
             if mixed {
+                // Every quadrant's shaft lies in this rectangle's: its candidates serve them all.
+                let mut candidates = Vec::new();
+                if let Some(o) = self.occluders {
+                    o.point_candidates(rx.x, rx.n, (rx.element, j as u32), &sub.bounds(), &mut candidates);
+                }
                 for q in rect.quadrants() {
-                    self.moments(rx, j, &q, mode, depth + 1, out, None);
+                    self.penumbra(rx, j, &q, depth + 1, &candidates, out);
                 }
             } else {
                 for (o, x) in out.iter_mut().zip(m.iter()) {
@@ -1397,6 +1394,49 @@ impl Gather<'_> {
         }
         for q in rect.quadrants() {
             self.moments(rx, j, &q, mode, depth + 1, out, None);
+        }
+    }
+
+    /// [`Gather::moments`] of an emitter's rectangle inside a penumbra (with rays, no foot
+    /// ball), given the occluders that may block any segment from the corner to it (those of the
+    /// rectangle it was split from): split again while its rays disagree, down to
+    /// [`PENUMBRA_DEPTH`], each part's rays tested against those occluders alone.
+    fn penumbra(
+        &self,
+        rx: &Receiver,
+        j: usize,
+        rect: &Rect,
+        depth: u32,
+        candidates: &[usize],
+        out: &mut [f64],
+    ) {
+        if self.stop.stopped() {
+            return;
+        }
+        let patch = &self.patches[j];
+        let sub = patch.sub_patch(rect);
+        let (centre, radius) = sub.bounding_sphere();
+        if behind_plane(rx.x, rx.n, &sub, radius) {
+            return;
+        }
+        if rx.x.distance(centre) < GAUSS_RATIO * radius {
+            // Too near for the Gauss rule: the general recursion takes it.
+            return self.moments(rx, j, rect, Mode::Rays, depth, out, None);
+        }
+        let mut corners = Corners::of(rx, patch, rect, depth < PENUMBRA_DEPTH);
+        let mut m = [0.0; crate::basis::MAX_LEN];
+        let m = &mut m[..out.len()];
+        let nodes = GaussNodes::new(patch, rect, self.rule, self.sys.basis, self.cells_per_axis);
+        let (seen, count) =
+            self.gauss(rx, j, &nodes, Among::Candidates(candidates), Mode::Rays, &mut corners, m);
+        if corners.disagree(seen, count) {
+            for q in rect.quadrants() {
+                self.penumbra(rx, j, &q, depth + 1, candidates, out);
+            }
+        } else {
+            for (o, x) in out.iter_mut().zip(m.iter()) {
+                *o += x;
+            }
         }
     }
 
@@ -1436,15 +1476,18 @@ impl Gather<'_> {
         foot_on(&self.patches[j], rx.x - d * plane.normal, FOOT_BALL * d)
     }
 
-    /// The Gauss sum over `nodes` of source `j` (inside `bounds`) into `out`; how many of the
-    /// nodes in front of the corner it sees, of how many.
+    /// The Gauss sum over `nodes` of source `j` into `out`, its rays (with `Mode::Rays`) tested
+    /// against the occluders `among` gives, as are those to `corners` (their verdicts written
+    /// back); how many of the nodes in front of the corner it sees, of how many.
+    #[allow(clippy::too_many_arguments)]
     fn gauss(
         &self,
         rx: &Receiver,
         j: usize,
         nodes: &GaussNodes,
-        bounds: &Aabb,
+        among: Among,
         mode: Mode,
+        corners: &mut Corners,
         out: &mut [f64],
     ) -> (usize, usize) {
         // GAUSS_POINTS^2 nodes: fixed arrays, no allocation per moment.
@@ -1460,15 +1503,23 @@ impl Gather<'_> {
         let mut visible = [true; N];
         match (mode, self.occluders) {
             (Mode::Rays, Some(o)) if count > 0 => {
-                let targets: [DVec3; N] = std::array::from_fn(|a| nodes.position[lit[a.min(count - 1)].0]);
-                o.point_visibility(
-                    rx.x,
-                    rx.n,
-                    (rx.element, j as u32),
-                    bounds,
-                    &targets[..count],
-                    &mut visible[..count],
-                );
+                // The lit nodes, then the corners.
+                let mut targets = [DVec3::ZERO; N + 4];
+                for a in 0..count {
+                    targets[a] = nodes.position[lit[a].0];
+                }
+                let all = count + corners.count;
+                targets[count..all].copy_from_slice(&corners.points[..corners.count]);
+                let mut seen = [true; N + 4];
+                let (ends, targets, seen_all) = ((rx.element, j as u32), &targets[..all], &mut seen[..all]);
+                match among {
+                    Among::Bounds(bounds) => o.point_visibility(rx.x, rx.n, ends, bounds, targets, seen_all),
+                    Among::Candidates(candidates) => {
+                        o.visibility_among(candidates, rx.x, ends, targets, seen_all)
+                    }
+                }
+                visible[..count].copy_from_slice(&seen[..count]);
+                corners.seen[..corners.count].copy_from_slice(&seen[count..all]);
             }
             (Mode::Mask(_), _) => {
                 for a in 0..count {
@@ -1495,6 +1546,52 @@ impl Gather<'_> {
             (Mode::Mask(bits), _) => bits >> cell & 1 == 1,
         }
     }
+}
+
+/// The corners of an emitter's rectangle that a penumbra check casts rays to (those in front of
+/// the receiving corner's plane), and whether each is seen.
+struct Corners {
+    /// Whether the rectangle may be split for a penumbra at all.
+    check: bool,
+    points: [DVec3; 4],
+    count: usize,
+    seen: [bool; 4],
+}
+
+impl Corners {
+    /// The corners of `rect` of `patch` in front of the receiver; none unless `check`.
+    fn of(rx: &Receiver, patch: &Patch, rect: &Rect, check: bool) -> Self {
+        let mut corners = Corners { check, points: [DVec3::ZERO; 4], count: 0, seen: [true; 4] };
+        if check {
+            for (u, v) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)] {
+                let (s, t) = rect.map(u, v);
+                let y = patch.point(s, t);
+                if rx.n.dot(y - rx.x) > 0.0 {
+                    corners.points[corners.count] = y;
+                    corners.count += 1;
+                }
+            }
+        }
+        corners
+    }
+
+    /// Whether a rectangle is in a penumbra: of its `count` lit Gauss nodes `seen` are seen, and
+    /// some but not all, or its corners disagree with them (a shadow edge across the rectangle's
+    /// margin outside its nodes). Never where it is not to be checked.
+    fn disagree(&self, seen: usize, count: usize) -> bool {
+        let lit = seen == count;
+        self.check
+            && count > 0
+            && ((seen > 0 && seen < count) || self.seen[..self.count].iter().any(|&c| c != lit))
+    }
+}
+
+/// Where a Gauss sum's rays look for occluders: in the shaft from the corner to these bounds, or
+/// among these triangles (a penumbra's, found once for the rectangle its parts split from).
+#[derive(Clone, Copy)]
+enum Among<'a> {
+    Bounds(&'a Aabb),
+    Candidates(&'a [usize]),
 }
 
 /// Whether `sub` (of bounding radius `radius`) lies wholly behind the tangent plane of the point
