@@ -22,6 +22,8 @@
 //! 0.55%.
 
 use galerkin_radiosity::geometry::Patch;
+use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
+use galerkin_radiosity::scene::json::ObjectResult;
 use galerkin_radiosity::scene::{Material, Scene, Settings};
 use galerkin_radiosity::scenes::{box_mesh, facing, subdivided_quad};
 use galerkin_radiosity::system::{System, no_progress};
@@ -71,13 +73,9 @@ fn direct(y: DVec3, occluders: &[Triangle]) -> (f64, bool) {
     (EXITANCE * d.form_factor, d.seen > 0 && d.hidden > 0)
 }
 
-#[test]
-fn ground_corners_in_a_penumbra_match_brute_force() {
-    let scene = scene();
-    let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
-    sys.solve(scene.settings.tolerance, &|| false).unwrap();
-    sys.gather_corners(&scene, 1.0, &no_progress).unwrap();
-    let results = sys.face_results(&scene, 1.0);
+/// Over the ground corners in the penumbra: how many, and their relative RMS and worst error
+/// against brute force (of their mean `B`).
+fn penumbra_error(scene: &Scene, results: &[ObjectResult]) -> (usize, f64, f64) {
     let occluders = brute_force::triangles_of(&box_mesh("box", BOX_MIN, BOX_MAX, 1, false, 1));
     let ground = &scene.objects[0];
     let (mut sq, mut sum, mut worst, mut count) = (0.0, 0.0, 0.0f64, 0);
@@ -99,13 +97,33 @@ fn ground_corners_in_a_penumbra_match_brute_force() {
         }
     }
     let mean = sum / count as f64;
-    let rms = (sq / count as f64).sqrt() / mean;
-    let worst = worst / mean;
     eprintln!(
         "{count} ground corners in the penumbra: relative RMS error {:.2}%, worst {:.2}% (of their mean B {mean:.4})",
-        100.0 * rms,
-        100.0 * worst
+        100.0 * (sq / count as f64).sqrt() / mean,
+        100.0 * worst / mean
     );
+    (count, (sq / count as f64).sqrt() / mean, worst / mean)
+}
+
+#[test]
+fn ground_corners_in_a_penumbra_match_brute_force() {
+    let scene = scene();
+    let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
+    sys.solve(scene.settings.tolerance, &|| false).unwrap();
+    sys.gather_corners(&scene, 1.0, &no_progress).unwrap();
+    let (count, rms, worst) = penumbra_error(&scene, &sys.face_results(&scene, 1.0));
+    assert!(count > 100, "the penumbra covers a good part of the ground: {count} corners");
+    assert!(rms < 0.01, "relative RMS error {rms} in the penumbra");
+    assert!(worst < 0.04, "worst corner {worst} in the penumbra");
+}
+
+/// The same through the hierarchy's corner gather, which casts the light as a far source.
+#[test]
+fn ground_corners_in_a_penumbra_match_brute_force_through_the_hierarchy() {
+    let scene = scene();
+    let settings = HierarchySettings { corner_gather: true, ..HierarchySettings::of(&scene.settings) };
+    let h = solve_frame(&scene, 0.0, &settings, &no_progress).unwrap();
+    let (count, rms, worst) = penumbra_error(&scene, &h.face_results(&scene, 0.0));
     assert!(count > 100, "the penumbra covers a good part of the ground: {count} corners");
     assert!(rms < 0.01, "relative RMS error {rms} in the penumbra");
     assert!(worst < 0.04, "worst corner {worst} in the penumbra");

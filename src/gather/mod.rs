@@ -163,7 +163,7 @@ const MAX_DEPTH: u32 = 12;
 /// Splits (counted from the whole source) of an emitter's rectangle in a penumbra, at most: one
 /// whose Gauss nodes disagree on visibility, or whose corners disagree with its nodes, is split
 /// in four, down to a 16th of the light per axis (tests/penumbra.rs).
-const PENUMBRA_DEPTH: u32 = 4;
+pub(crate) const PENUMBRA_DEPTH: u32 = 4;
 
 /// A foot's ball ([`Foot`]) is told from the rest of its source to this fraction of its radius:
 /// past it the part of a rectangle the ball holds counts with the side its centre is on. (To

@@ -29,10 +29,10 @@ def test_hierarchical_bake_writes_every_frame_and_agrees_with_the_flat_bake(blen
     """The 61-face Cornell box with a moving light and box, Detail 2, Medium, Sharp Corners on:
     every object gets both attributes for every frame, finite and not negative, ``Rad`` is rho
     times ``Irr`` off the emitters, and the
-    per-object means are within 5% of the flat Update's (measured: 4.5% worst, the floor at
-    frame 2, since the flat gather splits an emitter's rectangles in a penumbra
-    (``tests/penumbra.rs``) and the hierarchical gather does not yet; 2.1% before that, 0.7%
-    median; the light's own faces equal)."""
+    per-object means are within 4% of the flat Update's (measured: 2.2% worst, the ceiling at
+    frame 1, both gathers splitting an emitter's rectangles in a penumbra,
+    ``tests/penumbra.rs``; 4.5% while only the flat gather split them; the light's own faces
+    equal)."""
     bpy = blender
     objs = scenes.cornell_box(bpy, n=3, light_frames=(1, 3))
     assert scenes.bake(bpy, method="INCREMENTAL") == {"FINISHED"}
@@ -51,7 +51,7 @@ def test_hierarchical_bake_writes_every_frame_and_agrees_with_the_flat_bake(blen
         b, h = (scenes.stored_named(objs[name].data, f"{p}_0002") for p in ("Rad", "Irr"))
         assert np.abs(b - rho * h).max() < 1e-5 * b.max(), name
     hier = _means(objs)
-    assert _worst(hier, flat) < 0.05, sorted((abs(hier[k] / flat[k] - 1), k) for k in flat)[-3:]
+    assert _worst(hier, flat) < 0.04, sorted((abs(hier[k] / flat[k] - 1), k) for k in flat)[-3:]
     assert hier[("Light", 3)] == pytest.approx(flat[("Light", 3)], rel=1e-5)
     # Its own solve: more elements than faces (it refined below them), a later frame updated.
     assert stats["elements"] > 10 * flat_stats["elements"]

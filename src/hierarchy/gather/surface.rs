@@ -7,7 +7,7 @@ use glam::DVec3;
 
 use super::{Counters, Gather, Mode, Received, Receiver};
 use crate::basis::MAX_LEN as MAX_NB;
-use crate::gather::{FACING, FOOT_BALL, NEAR_FACING};
+use crate::gather::{FACING, FOOT_BALL, NEAR_FACING, PENUMBRA_DEPTH};
 use crate::geometry::{Patch, Rect};
 use crate::hierarchy::tree::{NodeId, Surface};
 use crate::kernel::point::point_kernel;
@@ -112,6 +112,11 @@ impl Gather<'_> {
     /// The Gauss sum over `rect` of the source into `out`, with one shadow ray per node that
     /// the point faces, cast as `rays` says; returns the sum's `integral g dA` without
     /// visibility (for [`super::near`]'s scaling to the exact form factor).
+    ///
+    /// An emitter's rectangle in a penumbra is split in four while it spans more than
+    /// `2^-PENUMBRA_DEPTH` of the node per axis, as the flat gather splits it
+    /// ([`crate::gather`]; tests/penumbra.rs): its nodes' rays disagree, or rays to its corners
+    /// disagree with them (a shadow edge across the margin outside the nodes).
     pub(super) fn gauss(
         &self,
         rx: &Receiver,
@@ -121,13 +126,79 @@ impl Gather<'_> {
         rays: Rays,
         out: &mut [f64],
     ) -> f64 {
-        let patch = src.patch;
-        const N: usize = super::GAUSS_POINTS * super::GAUSS_POINTS;
+        let lit = Lit::nodes(rx, src.patch, rect, rule);
+        if lit.count == 0 {
+            return 0.0;
+        }
+        let count = lit.count;
+        let mut targets = [DVec3::ZERO; N + 4];
+        for (t, node) in targets.iter_mut().zip(&lit.nodes[..count]) {
+            *t = node.0;
+        }
+        // The corners in front of the point go with the nodes' rays, for an emitter's
+        // rectangle that may still split.
+        let check = (rect.s1 - rect.s0).max(rect.t1 - rect.t0) > 1.0 / (1u32 << PENUMBRA_DEPTH) as f64
+            && self.inputs.emission[src.face as usize] != [0.0; 3];
+        let mut all = count;
+        if check {
+            for (u, v) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)] {
+                let (s, t) = rect.map(u, v);
+                let y = src.patch.point(s, t);
+                if rx.n.dot(y - rx.x) > 0.0 {
+                    targets[all] = y;
+                    all += 1;
+                }
+            }
+        }
+        let mut visible = [true; N + 4];
+        if let Some(o) = self.inputs.occluders {
+            let (targets, visible) = (&targets[..all], &mut visible[..all]);
+            match rays {
+                Rays::Among([]) => {}
+                Rays::Among(candidates) => {
+                    Counters::add(&self.counters.rays, all as u64);
+                    o.visibility_among(candidates, rx.x, (rx.face, src.face), targets, visible);
+                }
+                Rays::Bvh => {
+                    Counters::add(&self.counters.rays, all as u64);
+                    o.visible_from(rx.x, (rx.face, src.face), targets, visible);
+                }
+            }
+        }
+        let seen = visible[..count].iter().filter(|&&v| v).count();
+        let lit_all = seen == count;
+        if check && ((seen > 0 && seen < count) || visible[count..all].iter().any(|&c| c != lit_all)) {
+            return rect.quadrants().iter().map(|q| self.gauss(rx, src, q, rule, rays, out)).sum();
+        }
+        let basis = self.inputs.tree.basis;
         let nb = out.len();
+        let mut g = [0.0; MAX_NB];
+        for (&(_, w, s, t), _) in lit.nodes[..count].iter().zip(&visible).filter(|(_, v)| **v) {
+            basis.eval_into(s, t, &mut g[..nb]);
+            for l in 0..nb {
+                out[l] += w * g[l];
+            }
+        }
+        lit.unoccluded
+    }
+}
+
+/// Gauss nodes per rectangle, at most.
+const N: usize = super::GAUSS_POINTS * super::GAUSS_POINTS;
+
+/// The Gauss nodes of a rectangle that the point faces.
+struct Lit {
+    /// Position, weight `g w_s w_t |R| A(s,t)`, and parameters `(s, t)`.
+    nodes: [(DVec3, f64, f64, f64); N],
+    count: usize,
+    /// The weights' sum: `integral g dA` without visibility.
+    unoccluded: f64,
+}
+
+impl Lit {
+    fn nodes(rx: &Receiver, patch: &Patch, rect: &Rect, rule: &GaussLegendre) -> Self {
         let measure = rect.measure();
-        let mut lit = [(DVec3::ZERO, 0.0f64, 0.0f64, 0.0f64); N];
-        let mut count = 0;
-        let mut unoccluded = 0.0;
+        let mut lit = Lit { nodes: [(DVec3::ZERO, 0.0, 0.0, 0.0); N], count: 0, unoccluded: 0.0 };
         for (u, wu) in rule.iter() {
             for (v, wv) in rule.iter() {
                 let (s, t) = rect.map(u, v);
@@ -140,39 +211,12 @@ impl Gather<'_> {
                 let g = point_kernel(rx.x, rx.n, y, av / a);
                 if g != 0.0 {
                     let w = g * wu * wv * measure * a;
-                    lit[count] = (y, w, s, t);
-                    unoccluded += w;
-                    count += 1;
+                    lit.nodes[lit.count] = (y, w, s, t);
+                    lit.unoccluded += w;
+                    lit.count += 1;
                 }
             }
         }
-        if count == 0 {
-            return 0.0;
-        }
-        let mut visible = [true; N];
-        if let Some(o) = self.inputs.occluders {
-            let targets: [DVec3; N] = std::array::from_fn(|k| lit[k.min(count - 1)].0);
-            let (targets, visible) = (&targets[..count], &mut visible[..count]);
-            match rays {
-                Rays::Among([]) => {}
-                Rays::Among(candidates) => {
-                    Counters::add(&self.counters.rays, count as u64);
-                    o.visibility_among(candidates, rx.x, (rx.face, src.face), targets, visible);
-                }
-                Rays::Bvh => {
-                    Counters::add(&self.counters.rays, count as u64);
-                    o.visible_from(rx.x, (rx.face, src.face), targets, visible);
-                }
-            }
-        }
-        let basis = self.inputs.tree.basis;
-        let mut g = [0.0; MAX_NB];
-        for (&(_, w, s, t), _) in lit[..count].iter().zip(&visible).filter(|(_, v)| **v) {
-            basis.eval_into(s, t, &mut g[..nb]);
-            for l in 0..nb {
-                out[l] += w * g[l];
-            }
-        }
-        unoccluded
+        lit
     }
 }
