@@ -19,7 +19,8 @@
 //! some hidden): before, 5.59% relative RMS error (of their mean `B`), the worst corner 20.9%;
 //! splitting only rectangles whose nodes disagree, 1.72% and 10.7% (a shadow edge crossing a
 //! rectangle between its nodes and its edge went unseen); with the corners' rays too, 0.20% and
-//! 0.55%.
+//! 0.55%. Through the hierarchy's corner gather (the light a far source there): 4.01% and 11.9%
+//! before its Gauss sums split an emitter's rectangles alike, 0.29% and 1.10% after.
 
 use galerkin_radiosity::geometry::Patch;
 use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
