@@ -1423,6 +1423,16 @@ impl Gather<'_> {
             // Too near for the Gauss rule: the general recursion takes it.
             return self.moments(rx, j, rect, Mode::Rays, depth, out, None);
         }
+        // A list too long to test triangle by triangle (its rays would each walk the BVH) is
+        // gathered again for this part's own, narrower shaft.
+        let mut narrowed = Vec::new();
+        let candidates = match self.occluders {
+            Some(o) if candidates.len() > crate::visibility::BRUTE_FORCE_CANDIDATES => {
+                o.point_candidates(rx.x, rx.n, (rx.element, j as u32), &sub.bounds(), &mut narrowed);
+                &narrowed[..]
+            }
+            _ => candidates,
+        };
         let mut corners = Corners::of(rx, patch, rect, depth < PENUMBRA_DEPTH);
         let mut m = [0.0; crate::basis::MAX_LEN];
         let m = &mut m[..out.len()];

@@ -25,7 +25,7 @@ pub fn segments_tested() -> u64 {
 }
 
 /// Candidate lists longer than this go through the BVH instead.
-const BRUTE_FORCE_CANDIDATES: usize = 24;
+pub(crate) const BRUTE_FORCE_CANDIDATES: usize = 24;
 
 /// Segments [`Occluders::share_visible`] tests at most.
 const SHARE_SEGMENTS: usize = 4;
