@@ -1,5 +1,8 @@
 //! The hierarchy's bench table (issue 20): `cargo bench --bench hierarchy [-- --quick]`, and with
 //! `GALERKIN_MONASTERY=path/to/samurai_monastry.obj` the full 124,789-triangle monastery too.
+//! `GALERKIN_EXACT=clusters,light,near` turns the Cornell rows' approximations off (links between
+//! surfaces only, every surface link in full, near links integrated adaptively), to see what each
+//! costs in error and time.
 //!
 //! Each case runs in a child process of this binary, so that its peak RSS is its own. Errors are
 //! the relative RMS of per-face mean radiosity (largest channel, lit faces) against the flat
@@ -70,7 +73,7 @@ fn run_case(case: &str, arg: &str) {
             let settings = Settings { basis_order: 1, threads: 1, ..Default::default() };
             let coarse = scenes::cornell_box(1, settings.clone());
             let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-            let hs = HierarchySettings { accuracy, ..Default::default() };
+            let hs = without_approximations(HierarchySettings { accuracy, ..Default::default() });
             let t = Instant::now();
             let h = pool.install(|| solve_frame(&coarse, 0.0, &hs, &no_progress).unwrap());
             let seconds = t.elapsed().as_secs_f64();
@@ -109,6 +112,20 @@ fn run_case(case: &str, arg: &str) {
         c => panic!("unknown case {c}"),
     }
     eprintln!("peak {}", peak_rss_mib());
+}
+
+/// `settings` with the approximations `GALERKIN_EXACT` names (comma-separated) turned off.
+fn without_approximations(mut settings: HierarchySettings) -> HierarchySettings {
+    let exact = std::env::var("GALERKIN_EXACT").unwrap_or_default();
+    for name in exact.split(',').filter(|n| !n.is_empty()) {
+        match name {
+            "clusters" => settings.clusters = false,
+            "light" => settings.light_links = false,
+            "near" => settings.near = galerkin_radiosity::hierarchy::coupling::NearRule::Adaptive,
+            other => panic!("GALERKIN_EXACT: unknown approximation {other} (clusters, light, near)"),
+        }
+    }
+    settings
 }
 
 /// Solves `scene` on the hierarchy at its own settings and prints `seconds faces leaves links NaN`.
