@@ -45,7 +45,9 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 mod nodes;
+pub(crate) mod penumbra;
 use nodes::{GAUSS_POINTS, GaussNodes, N};
+use penumbra::Corners;
 
 use crate::error::{Error, Result};
 use crate::geometry::{Aabb, FrontPlane, Patch, Rect};
@@ -1355,7 +1357,7 @@ impl Gather<'_> {
             // that crosses only that margin is seen by a ray to one of its corners instead. The
             // corners in front of the corner's plane go with the nodes' rays (they lie in the
             // same bounds: the same shaft's candidates, most often none, so no ray at all).
-            let mut corners = Corners::of(rx, patch, rect, refine);
+            let mut corners = Corners::of((rx.x, rx.n), patch, rect, refine);
             let mut m = [0.0; crate::basis::MAX_LEN];
             let m = &mut m[..out.len()];
             let (seen, count) = if depth == 0 {
@@ -1433,7 +1435,7 @@ impl Gather<'_> {
             }
             _ => candidates,
         };
-        let mut corners = Corners::of(rx, patch, rect, depth < PENUMBRA_DEPTH);
+        let mut corners = Corners::of((rx.x, rx.n), patch, rect, depth < PENUMBRA_DEPTH);
         let mut m = [0.0; crate::basis::MAX_LEN];
         let m = &mut m[..out.len()];
         let nodes = GaussNodes::new(patch, rect, self.rule, self.sys.basis, self.cells_per_axis);
@@ -1555,44 +1557,6 @@ impl Gather<'_> {
             (Mode::Rays, Some(o)) => o.segment_visible(rx.x, y, rx.element, j as u32),
             (Mode::Mask(bits), _) => bits >> cell & 1 == 1,
         }
-    }
-}
-
-/// The corners of an emitter's rectangle that a penumbra check casts rays to (those in front of
-/// the receiving corner's plane), and whether each is seen.
-struct Corners {
-    /// Whether the rectangle may be split for a penumbra at all.
-    check: bool,
-    points: [DVec3; 4],
-    count: usize,
-    seen: [bool; 4],
-}
-
-impl Corners {
-    /// The corners of `rect` of `patch` in front of the receiver; none unless `check`.
-    fn of(rx: &Receiver, patch: &Patch, rect: &Rect, check: bool) -> Self {
-        let mut corners = Corners { check, points: [DVec3::ZERO; 4], count: 0, seen: [true; 4] };
-        if check {
-            for (u, v) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)] {
-                let (s, t) = rect.map(u, v);
-                let y = patch.point(s, t);
-                if rx.n.dot(y - rx.x) > 0.0 {
-                    corners.points[corners.count] = y;
-                    corners.count += 1;
-                }
-            }
-        }
-        corners
-    }
-
-    /// Whether a rectangle is in a penumbra: of its `count` lit Gauss nodes `seen` are seen, and
-    /// some but not all, or its corners disagree with them (a shadow edge across the rectangle's
-    /// margin outside its nodes). Never where it is not to be checked.
-    fn disagree(&self, seen: usize, count: usize) -> bool {
-        let lit = seen == count;
-        self.check
-            && count > 0
-            && ((seen > 0 && seen < count) || self.seen[..self.count].iter().any(|&c| c != lit))
     }
 }
 

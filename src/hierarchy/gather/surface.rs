@@ -7,6 +7,7 @@ use glam::DVec3;
 
 use super::{Counters, Gather, Mode, Received, Receiver};
 use crate::basis::MAX_LEN as MAX_NB;
+use crate::gather::penumbra::Corners;
 use crate::gather::{FACING, FOOT_BALL, NEAR_FACING, PENUMBRA_DEPTH};
 use crate::geometry::{Patch, Rect};
 use crate::hierarchy::tree::{NodeId, Surface};
@@ -139,17 +140,9 @@ impl Gather<'_> {
         // rectangle that may still split.
         let check = (rect.s1 - rect.s0).max(rect.t1 - rect.t0) > 1.0 / (1u32 << PENUMBRA_DEPTH) as f64
             && self.inputs.emission[src.face as usize] != [0.0; 3];
-        let mut all = count;
-        if check {
-            for (u, v) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)] {
-                let (s, t) = rect.map(u, v);
-                let y = src.patch.point(s, t);
-                if rx.n.dot(y - rx.x) > 0.0 {
-                    targets[all] = y;
-                    all += 1;
-                }
-            }
-        }
+        let mut corners = Corners::of((rx.x, rx.n), src.patch, rect, check);
+        let all = count + corners.count;
+        targets[count..all].copy_from_slice(&corners.points[..corners.count]);
         let mut visible = [true; N + 4];
         if let Some(o) = self.inputs.occluders {
             let (targets, visible) = (&targets[..all], &mut visible[..all]);
@@ -165,9 +158,9 @@ impl Gather<'_> {
                 }
             }
         }
+        corners.seen[..corners.count].copy_from_slice(&visible[count..all]);
         let seen = visible[..count].iter().filter(|&&v| v).count();
-        let lit_all = seen == count;
-        if check && ((seen > 0 && seen < count) || visible[count..all].iter().any(|&c| c != lit_all)) {
+        if corners.disagree(seen, count) {
             return rect.quadrants().iter().map(|q| self.gauss(rx, src, q, rule, rays, out)).sum();
         }
         let basis = self.inputs.tree.basis;
