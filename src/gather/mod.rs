@@ -1319,15 +1319,8 @@ impl Gather<'_> {
         out: &mut [f64],
         ball: Option<(f64, &mut f64)>,
     ) {
-        if self.stop.stopped() {
-            return;
-        }
+        let Some((sub, centre, radius)) = self.front_part(rx, j, rect) else { return };
         let patch = &self.patches[j];
-        let sub = patch.sub_patch(rect);
-        let (centre, radius) = sub.bounding_sphere();
-        if behind_plane(rx.x, rx.n, &sub, radius) {
-            return;
-        }
         let distance = rx.x.distance(centre);
         if let Some((r, weight)) = ball {
             // The ball's edge is resolved to BALL_EDGE of its radius: a rectangle smaller than
@@ -1399,6 +1392,17 @@ impl Gather<'_> {
         }
     }
 
+    /// `rect` of source `j` as a patch and its bounding sphere; `None` when the gather is stopped
+    /// or the part lies wholly behind the corner's plane (it adds nothing).
+    fn front_part(&self, rx: &Receiver, j: usize, rect: &Rect) -> Option<(Patch, DVec3, f64)> {
+        if self.stop.stopped() {
+            return None;
+        }
+        let sub = self.patches[j].sub_patch(rect);
+        let (centre, radius) = sub.bounding_sphere();
+        (!behind_plane(rx.x, rx.n, &sub, radius)).then_some((sub, centre, radius))
+    }
+
     /// [`Gather::moments`] of an emitter's rectangle inside a penumbra (with rays, no foot
     /// ball), given the occluders that may block any segment from the corner to it (those of the
     /// rectangle it was split from): split again while its rays disagree, down to
@@ -1412,15 +1416,8 @@ impl Gather<'_> {
         candidates: &[usize],
         out: &mut [f64],
     ) {
-        if self.stop.stopped() {
-            return;
-        }
+        let Some((sub, centre, radius)) = self.front_part(rx, j, rect) else { return };
         let patch = &self.patches[j];
-        let sub = patch.sub_patch(rect);
-        let (centre, radius) = sub.bounding_sphere();
-        if behind_plane(rx.x, rx.n, &sub, radius) {
-            return;
-        }
         if rx.x.distance(centre) < GAUSS_RATIO * radius {
             // Too near for the Gauss rule: the general recursion takes it.
             return self.moments(rx, j, rect, Mode::Rays, depth, out, None);
