@@ -57,15 +57,15 @@ pub fn estimate(scene: &Scene, frames: u64) -> Estimate {
 }
 
 /// The elements the flat path will solve: a face each, and with visibility on the parts of
-/// the faces split where another object comes close ([`crate::contact_split::plan`], at the
-/// first frame; up to twice the faces).
+/// the faces split where another object comes close or at a crease
+/// ([`crate::contact_split::plan_with_creases`], at the first frame; up to twice the faces).
 fn flat_elements(scene: &Scene) -> u64 {
     let faces = (scene.face_count() - scene.degenerate_faces.len()) as u64;
     if !scene.settings.visibility || faces == 0 {
         return faces;
     }
     let elements = crate::system::build_elements(scene, scene.frames.0 as f64, crate::basis::Basis::new(0));
-    crate::contact_split::plan(scene, &elements).iter().map(|parts| parts.len() as u64).sum()
+    crate::contact_split::plan_with_creases(scene, &elements).iter().map(|parts| parts.len() as u64).sum()
 }
 
 /// [`estimate`] with `n` elements.

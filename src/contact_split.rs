@@ -13,13 +13,32 @@
 //! domain, each a bilinear patch: every kernel sees only patches) where a triangle of another
 //! object lies in front of it within [`NEAR`] radii of the part's sphere, while the part is
 //! larger than [`FINEST`] times that triangle (its corners' largest distance from its centroid):
-//! the split follows the detail of what casts the shadow, no finer. Faces of one object do not
-//! split each other (a mesh's own neighbours touch it along every edge), and emitters neither
-//! split nor are split (their light falls smoothly, and the gather casts its own rays to them).
-//! The elements added are bounded ([`MAX_ADDED`] times the faces, at least [`MIN_BUDGET`]):
-//! past it the deepest level is dropped everywhere. Objects with keys neither split nor are
-//! split, so a build at any frame splits alike; the split is kept over an animation
+//! the split follows the detail of what casts the shadow, no finer. Emitters neither split nor
+//! are split (their light falls smoothly, and the gather casts its own rays to them).
+//!
+//! Faces of one object split each other only at a crease ([`Setup::crease`]): where each has a
+//! corner in front of the other's plane by more than `sin(`[`CREASE_ANGLE`]`)` of its distance (a
+//! wall standing on a platform, eaves over a wall, two walls facing each other across a
+//! courtyard). A mesh's smooth, coplanar or convex neighbours touch it along every edge and are
+//! no crease: splitting there buys nothing and costs a lot. On the decimated monastery (faces of
+//! 5 m^2 at the median, up to 620 m^2), one quadratic per face could not follow the contact
+//! shadow and the inter-reflection where its large faces meet (docs/validation-real.md, "The
+//! monastery"), and neither rule above reached them. A crease split has no [`FINEST`] limit (the
+//! other face is as large as this one); it stops at [`MAX_DEPTH`] or at parts smaller than
+//! [`CREASE_FINEST`] of the scene's size, which keeps the small creases of a bunny or a teddy
+//! whole. `tests/crease_split.rs` is its differential test.
+//!
+//! The elements added are bounded ([`MAX_ADDED`] times the faces, at least [`MIN_BUDGET`]). The
+//! flat path ([`plan_with_creases`]) splits from one queue, crease parts before contact parts and
+//! the largest first, until the budget is spent: where both fit, the contact parts are those of
+//! [`plan`], and on the monastery the creases take the budget that the contact split spent on the
+//! ground under the buildings (where it bought nothing). The hierarchy splits by contacts alone
+//! ([`plan`], which drops its deepest level everywhere past the budget). Objects with keys neither
+//! split nor are split, so a build at any frame splits alike; the split is kept over an animation
 //! ([`parts_of`]; a deforming mesh keeps its first frame's): a part moves with its face.
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -45,59 +64,233 @@ const MAX_DEPTH: u32 = 6;
 const MAX_ADDED: f64 = 1.0;
 const MIN_BUDGET: usize = 1024;
 
+/// Two faces meet at a crease when each has a corner in front of the other's plane by more
+/// than the sine of this angle (degrees) times its distance: a concave angle sharper than
+/// 180 - 30 degrees, or two faces that face each other across a gap.
+const CREASE_ANGLE: f64 = 30.0;
+
+/// A crease does not split a part whose bounding radius is below this fraction of the
+/// diagonal of the scene's bounding box.
+const CREASE_FINEST: f64 = 0.04;
+
 /// Per face element (one per face, in [`crate::system::build_elements`] order), the parts of
-/// its parameter domain it is split into (`[Rect::UNIT]` where nothing comes close).
+/// its parameter domain the contact split alone makes (`[Rect::UNIT]` where nothing comes
+/// close): the hierarchy's split ahead of linking (`hierarchy::Tree::split_for_contacts`).
 pub fn plan(scene: &Scene, faces: &[Element]) -> Vec<Vec<Rect>> {
-    // An emitter's light falls smoothly (the gather casts its own rays to it), and its own
-    // radiosity is its emission: emitters neither split nor are split.
-    let emits: Vec<bool> = faces.iter().map(|f| emits_at_some_frame(scene, f)).collect();
-    // Only objects without keys split or are split: a fresh build at any frame then splits as
-    // the first one did, which the animation keeps (`parts_of`), so both have the same elements.
-    let keyed: Vec<bool> = faces.iter().map(|f| scene.objects[f.object as usize].is_animated()).collect();
-    // With Blender lights or a World, the scene's hull (a room's walls, a ground plane) is not
-    // split: their shadow rays (crate::lights, the hull included as a caster: a sun shines in
-    // from outside) meet it at T-junctions between parts of different sizes, where a ray through
-    // a vertex can slip between the triangles (a closed box let 0.03% of the World's light reach
-    // a floor inside, tests/lights.rs). Emitting faces' rays never test the hull.
-    let hull: Vec<bool> = if scene.lights.is_empty() && scene.world.is_none() {
-        vec![false; faces.len()]
-    } else {
-        let patches: Vec<Patch> = faces.iter().map(|f| f.patch).collect();
-        let occluders = crate::visibility::Occluders::new(&patches, 1);
-        (0..faces.len()).map(|e| occluders.on_hull(e)).collect()
-    };
-    let mut tris = Vec::with_capacity(faces.len() * 2);
-    for (e, f) in faces.iter().enumerate() {
-        if emits[e] || keyed[e] {
-            continue;
+    Setup::new(scene, faces).contacts(faces, budget(faces.len()))
+}
+
+/// The flat path's parts: [`plan`]'s, and parts split where faces of one object meet at a
+/// concave crease or face each other close by ([`Setup::crease`], no [`FINEST`] limit), in one queue within the same budget: crease parts first, then contact parts, each
+/// the largest first. Where everything fits, the contact parts are [`plan`]'s.
+pub fn plan_with_creases(scene: &Scene, faces: &[Element]) -> Vec<Vec<Rect>> {
+    Setup::new(scene, faces).split_largest_first(faces, budget(faces.len()))
+}
+
+fn budget(faces: usize) -> usize {
+    (MAX_ADDED * faces as f64).max(MIN_BUDGET as f64) as usize
+}
+
+/// What the splits need: which faces may split, and the triangles that split them.
+struct Setup {
+    /// Faces that neither split nor are split (emitters, keyed objects, the hull with Blender
+    /// lights or a World).
+    fixed: Vec<bool>,
+    bvh: Bvh,
+    /// Per BVH triangle, its size ([`triangle_radius`]) and front normal.
+    sizes: Vec<f64>,
+    normals: Vec<DVec3>,
+    /// Per face, its object.
+    object: Vec<u32>,
+    /// The smallest bounding radius of a part a crease splits ([`CREASE_FINEST`]).
+    finest: f64,
+}
+
+impl Setup {
+    fn new(scene: &Scene, faces: &[Element]) -> Setup {
+        // An emitter's light falls smoothly (the gather casts its own rays to it), and its own
+        // radiosity is its emission: emitters neither split nor are split.
+        let emits: Vec<bool> = faces.iter().map(|f| emits_at_some_frame(scene, f)).collect();
+        // Only objects without keys split or are split: a fresh build at any frame then splits as
+        // the first one did, which the animation keeps (`parts_of`), so both have the same elements.
+        let keyed: Vec<bool> = faces.iter().map(|f| scene.objects[f.object as usize].is_animated()).collect();
+        // With Blender lights or a World, the scene's hull (a room's walls, a ground plane) is not
+        // split: their shadow rays (crate::lights, the hull included as a caster: a sun shines in
+        // from outside) meet it at T-junctions between parts of different sizes, where a ray through
+        // a vertex can slip between the triangles (a closed box let 0.03% of the World's light reach
+        // a floor inside, tests/lights.rs). Emitting faces' rays never test the hull.
+        let hull: Vec<bool> = if scene.lights.is_empty() && scene.world.is_none() {
+            vec![false; faces.len()]
+        } else {
+            let patches: Vec<Patch> = faces.iter().map(|f| f.patch).collect();
+            let occluders = crate::visibility::Occluders::new(&patches, 1);
+            (0..faces.len()).map(|e| occluders.on_hull(e)).collect()
+        };
+        let mut tris = Vec::with_capacity(faces.len() * 2);
+        for (e, f) in faces.iter().enumerate() {
+            if emits[e] || keyed[e] {
+                continue;
+            }
+            for v in f.patch.triangles() {
+                tris.push(Triangle { v, element: e as u32 });
+            }
         }
-        for v in f.patch.triangles() {
-            tris.push(Triangle { v, element: e as u32 });
+        let bvh = Bvh::build(tris);
+        let sizes: Vec<f64> = bvh.triangles().iter().map(|t| triangle_radius(&t.v)).collect();
+        let normals: Vec<DVec3> = bvh
+            .triangles()
+            .iter()
+            .map(|t| (t.v[1] - t.v[0]).cross(t.v[2] - t.v[0]).normalize_or_zero())
+            .collect();
+        let object: Vec<u32> = faces.iter().map(|f| f.object).collect();
+        let (lo, hi) = faces
+            .iter()
+            .flat_map(|f| f.patch.corners)
+            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| (lo.min(p), hi.max(p)));
+        let finest = if faces.is_empty() { 0.0 } else { CREASE_FINEST * (hi - lo).length() };
+        let fixed = (0..faces.len()).map(|e| emits[e] || keyed[e] || hull[e]).collect();
+        Setup { fixed, bvh, sizes, normals, object, finest }
+    }
+
+    /// The contact split alone: each face's parts, at most `budget` added (the deepest level
+    /// dropped everywhere until they fit).
+    fn contacts(&self, faces: &[Element], budget: usize) -> Vec<Vec<Rect>> {
+        let mut depth = MAX_DEPTH;
+        loop {
+            let parts: Vec<Vec<Rect>> = faces
+                .par_iter()
+                .enumerate()
+                .map(|(e, face)| {
+                    if self.fixed[e] {
+                        return vec![Rect::UNIT];
+                    }
+                    let mut out = Vec::new();
+                    split(&self.bvh, &self.sizes, &self.object, e, &face.patch, Rect::UNIT, depth, &mut out);
+                    out
+                })
+                .collect();
+            let added: usize = parts.iter().map(|p| p.len() - 1).sum();
+            if added <= budget || depth == 0 {
+                return parts;
+            }
+            depth -= 1;
         }
     }
-    let bvh = Bvh::build(tris);
-    let sizes: Vec<f64> = bvh.triangles().iter().map(|t| triangle_radius(&t.v)).collect();
-    let object: Vec<u32> = faces.iter().map(|f| f.object).collect();
-    let mut depth = MAX_DEPTH;
-    loop {
-        let parts: Vec<Vec<Rect>> = faces
-            .par_iter()
-            .enumerate()
-            .map(|(e, face)| {
-                if emits[e] || keyed[e] || hull[e] {
-                    return vec![Rect::UNIT];
-                }
-                let mut out = Vec::new();
-                split(&bvh, &sizes, &object, e, &face.patch, Rect::UNIT, depth, &mut out);
-                out
-            })
+
+    /// Faces split from whole while [`Setup::wants_split`] says so, crease parts before contact
+    /// parts and the largest first, until `budget` elements are added.
+    fn split_largest_first(&self, faces: &[Element], budget: usize) -> Vec<Vec<Rect>> {
+        let candidate = |e: usize, r: Rect| {
+            self.wants_split(faces, e, &r)
+                .map(|crease| Candidate(crease, faces[e].patch.sub_patch(&r).area(), e, r))
+        };
+        let mut heap: BinaryHeap<Candidate> = (0..faces.len())
+            .into_par_iter()
+            .filter(|&e| !self.fixed[e])
+            .filter_map(|e| candidate(e, Rect::UNIT))
             .collect();
-        let added: usize = parts.iter().map(|p| p.len() - 1).sum();
-        let budget = (MAX_ADDED * faces.len() as f64).max(MIN_BUDGET as f64);
-        if added as f64 <= budget || depth == 0 {
-            return parts;
+        let mut parts = vec![vec![Rect::UNIT]; faces.len()];
+        let mut added = 0;
+        while let Some(Candidate(_, _, e, rect)) = heap.pop() {
+            if added + 3 > budget {
+                break;
+            }
+            let at = parts[e].iter().position(|r| *r == rect).expect("a candidate is a part");
+            let quadrants = rect.quadrants();
+            parts[e].splice(at..=at, quadrants);
+            added += 3;
+            heap.extend(quadrants.into_par_iter().filter_map(|q| candidate(e, q)).collect::<Vec<_>>());
         }
-        depth -= 1;
+        parts
+    }
+
+    /// Whether part `rect` of face `e` is split, and whether for a crease: it meets another face
+    /// at a crease ([`Setup::crease`]), or another object's triangle comes close ([`near`]).
+    fn wants_split(&self, faces: &[Element], e: usize, rect: &Rect) -> Option<bool> {
+        if depth_of(rect) >= MAX_DEPTH {
+            return None;
+        }
+        let sub = faces[e].patch.sub_patch(rect);
+        let (centre, radius) = sub.bounding_sphere();
+        if self.crease(e, &sub, centre, radius) {
+            Some(true)
+        } else if near(&self.bvh, &self.sizes, &self.object, e, &sub, centre, radius) {
+            Some(false)
+        } else {
+            None
+        }
+    }
+
+    /// Whether part `sub` (centre, radius) of face `e`, larger than `finest`, meets the triangle
+    /// of another face of its own object (another object's come under [`near`]) within
+    /// `(1 + NEAR) radius` of its centre at a crease: a corner of the triangle lies in front of
+    /// the part's plane by more than `sin(CREASE_ANGLE)` of its distance from the centre, and a
+    /// corner or the centre of the part in front of the triangle's plane by more than as much of
+    /// its distance from the triangle. Coplanar and convex neighbours are neither.
+    fn crease(&self, e: usize, sub: &Patch, centre: DVec3, radius: f64) -> bool {
+        if radius <= self.finest {
+            return false;
+        }
+        let reach = (1.0 + NEAR) * radius;
+        let query = Aabb { min: centre - DVec3::splat(reach), max: centre + DVec3::splat(reach) };
+        let normal = sub.centre_normal();
+        let sine = CREASE_ANGLE.to_radians().sin();
+        let points = [sub.corners[0], sub.corners[1], sub.corners[2], sub.corners[3], centre];
+        let mut found = false;
+        self.bvh.for_each_overlapping(&query, |k| {
+            if found {
+                return;
+            }
+            let t = &self.bvh.triangles()[k];
+            let f = t.element as usize;
+            if f == e || self.object[f] != self.object[e] {
+                return;
+            }
+            let faces_part = t.v.iter().any(|v| {
+                let h = normal.dot(*v - centre);
+                h > 1e-9 * radius && h > sine * v.distance(centre)
+            });
+            if !faces_part || point_triangle_distance(centre, &t.v) >= reach {
+                return;
+            }
+            let n = self.normals[k];
+            found = points.iter().any(|p| {
+                let h = n.dot(*p - t.v[0]);
+                h > 1e-9 * radius && h > sine * point_triangle_distance(*p, &t.v)
+            });
+        });
+        found
+    }
+}
+
+/// The splits below a face that made `rect`.
+fn depth_of(rect: &Rect) -> u32 {
+    (1.0 / (rect.s1 - rect.s0)).log2().round() as u32
+}
+
+/// A part to split: whether at a crease (those first), its area (the largest first), its face
+/// and domain (ties in face order, then the lower corner first).
+struct Candidate(bool, f64, usize, Rect);
+
+impl PartialEq for Candidate {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == Ordering::Equal
+    }
+}
+impl Eq for Candidate {}
+impl PartialOrd for Candidate {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Candidate {
+    fn cmp(&self, other: &Self) -> Ordering {
+        self.0
+            .cmp(&other.0)
+            .then_with(|| self.1.total_cmp(&other.1))
+            .then_with(|| other.2.cmp(&self.2))
+            .then_with(|| other.3.s0.total_cmp(&self.3.s0))
+            .then_with(|| other.3.t0.total_cmp(&self.3.t0))
     }
 }
 

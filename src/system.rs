@@ -204,10 +204,10 @@ impl System {
         };
         let start = Instant::now();
         let faces = build_elements(scene, frame, basis);
-        // Faces split where another object comes close (crate::contact_split): only shadows
-        // need it, and there are none without visibility.
+        // Faces split where another object comes close or faces of one object meet at a crease
+        // (crate::contact_split): only shadows need it, and there are none without visibility.
         let elements = if s.visibility {
-            let parts = crate::contact_split::plan(scene, &faces);
+            let parts = crate::contact_split::plan_with_creases(scene, &faces);
             crate::contact_split::split_faces(faces, &parts, basis, &[])
         } else {
             faces

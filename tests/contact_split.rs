@@ -12,7 +12,7 @@
 
 use galerkin_radiosity::geometry::Patch;
 use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
-use galerkin_radiosity::scene::{Material, Object, Scene, Settings};
+use galerkin_radiosity::scene::{Key, KeyTransform, Material, Object, Scene, Settings};
 use galerkin_radiosity::scenes::{box_mesh, facing, merge, subdivided_quad};
 use galerkin_radiosity::system::{System, no_progress};
 use galerkin_radiosity::visibility::bvh::Triangle;
@@ -142,20 +142,27 @@ fn hierarchical_ground_error(scene: &Scene, ground: usize) -> (f64, f64, usize) 
 
 #[test]
 fn ground_next_to_a_box_follows_its_shadow() {
-    // The box and the ground as one object, joined through the corner they share: one piece,
-    // which does not split itself (the ground as before the split).
+    // The box and the ground as one object with a key that does not move it: an object with keys
+    // neither splits nor is split (the ground as before the split).
+    let mut keyed = merge("ground and box", vec![ground(), black_box()]);
+    keyed.animation = vec![Key { frame: 1.0, transform: KeyTransform::Translation(DVec3::ZERO) }];
+    let (before, min_before, n_before) = ground_error(&scene(vec![keyed, light()]), 0);
+    // The same object without the key: its faces split each other where the box's sides meet
+    // the ground at a concave crease (the crease rule), down to 4% of the scene's size only.
     let one = scene(vec![merge("ground and box", vec![ground(), black_box()]), light()]);
-    let (before, min_before, n_before) = ground_error(&one, 0);
+    let (crease, _, n_crease) = ground_error(&one, 0);
     let split = scene(vec![ground(), black_box(), light()]);
     let (after, min_after, n_after) = ground_error(&split, 0);
     eprintln!(
         "ground within 0.35 m of the box, relative RMS error against brute force: one face each \
-         {:.1}% (lowest B {min_before:.3}, {n_before} elements), split {:.1}% (lowest B {min_after:.3}, \
-         {n_after} elements)",
+         {:.1}% (lowest B {min_before:.3}, {n_before} elements), one object split at its creases \
+         {:.1}% ({n_crease} elements), split {:.1}% (lowest B {min_after:.3}, {n_after} elements)",
         100.0 * before,
+        100.0 * crease,
         100.0 * after
     );
     assert!(n_after > n_before, "the ground next to the box is split");
+    assert!(crease < before, "the crease split lowers the error: {crease} against {before}");
     assert!(after < 0.12, "split ground {after} from brute force");
     // A quadratic over a face half in the box's shadow goes negative under the box; the parts
     // do not (B >= 0 up to the rounding of the fit).
