@@ -81,8 +81,9 @@ pub fn plan(scene: &Scene, faces: &[Element]) -> Vec<Vec<Rect>> {
 }
 
 /// The flat path's parts: [`plan`]'s, and parts split where faces of one object meet at a
-/// concave crease or face each other close by ([`Setup::crease`], no [`FINEST`] limit), in one queue within the same budget: crease parts first, then contact parts, each
-/// the largest first. Where everything fits, the contact parts are [`plan`]'s.
+/// concave crease or face each other close by ([`Setup::crease`], no [`FINEST`] limit), from
+/// one queue within the same budget: crease parts first, then contact parts, each the largest
+/// first. Where everything fits, the contact parts are [`plan`]'s.
 pub fn plan_with_creases(scene: &Scene, faces: &[Element]) -> Vec<Vec<Rect>> {
     Setup::new(scene, faces).split_largest_first(faces, budget(faces.len()))
 }

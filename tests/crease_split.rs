@@ -20,8 +20,8 @@
 //! The light is 4 x 4 faces. The kernel sees an emitter through its 2 x 2 visibility cells, so
 //! with the light as one face the split wall's penumbra comes out in four steps, and the split
 //! measured worse than one quadratic (29.0% and 19.0%, split finer than now): the split follows a
-//! shadow only as far as the light's visibility samples resolve it. On the monastery a 4 x 4 light changed nothing
-//! (17.87% against 17.77%), so the library's emitters stay whole.
+//! shadow only as far as the light's visibility samples resolve it. On the monastery a 4 x 4
+//! light changed nothing (17.87% against 17.77%), so the library's emitters stay whole.
 
 use galerkin_radiosity::geometry::Patch;
 use galerkin_radiosity::scene::{Material, Object, Scene, Settings};
