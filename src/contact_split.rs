@@ -166,7 +166,7 @@ impl Setup {
                         return vec![Rect::UNIT];
                     }
                     let mut out = Vec::new();
-                    split(&self.bvh, &self.sizes, &self.object, e, &face.patch, Rect::UNIT, depth, &mut out);
+                    self.split(e, &face.patch, Rect::UNIT, depth, &mut out);
                     out
                 })
                 .collect();
@@ -206,7 +206,7 @@ impl Setup {
     }
 
     /// Whether part `rect` of face `e` is split, and whether for a crease: it meets another face
-    /// at a crease ([`Setup::crease`]), or another object's triangle comes close ([`near`]).
+    /// at a crease ([`Setup::crease`]), or another object's triangle comes close ([`Setup::near`]).
     fn wants_split(&self, faces: &[Element], e: usize, rect: &Rect) -> Option<bool> {
         if depth_of(rect) >= MAX_DEPTH {
             return None;
@@ -215,7 +215,7 @@ impl Setup {
         let (centre, radius) = sub.bounding_sphere();
         if self.crease(e, &sub, centre, radius) {
             Some(true)
-        } else if near(&self.bvh, &self.sizes, &self.object, e, &sub, centre, radius) {
+        } else if self.near(e, &sub, centre, radius) {
             Some(false)
         } else {
             None
@@ -223,7 +223,7 @@ impl Setup {
     }
 
     /// Whether part `sub` (centre, radius) of face `e`, larger than `finest`, meets the triangle
-    /// of another face of its own object (another object's come under [`near`]) within
+    /// of another face of its own object (another object's come under [`Setup::near`]) within
     /// `(1 + NEAR) radius` of its centre at a crease: a corner of the triangle lies in front of
     /// the part's plane by more than `sin(CREASE_ANGLE)` of its distance from the centre, and a
     /// corner or the centre of the part in front of the triangle's plane by more than as much of
@@ -262,6 +262,40 @@ impl Setup {
         });
         found
     }
+    /// Splits `rect` of face `e` (patch `patch`) while another object's triangle comes close,
+    /// `depth` more times at most, pushing the parts kept to `out`.
+    fn split(&self, e: usize, patch: &Patch, rect: Rect, depth: u32, out: &mut Vec<Rect>) {
+        let sub = patch.sub_patch(&rect);
+        let (centre, radius) = sub.bounding_sphere();
+        if depth == 0 || !self.near(e, &sub, centre, radius) {
+            out.push(rect);
+            return;
+        }
+        for q in rect.quadrants() {
+            self.split(e, patch, q, depth - 1, out);
+        }
+    }
+
+    /// Whether a triangle of another object than face `e`'s lies in front of `sub` (centre,
+    /// radius) within `(1 + NEAR) radius` of its centre and is smaller than `radius / FINEST`.
+    fn near(&self, e: usize, sub: &Patch, centre: DVec3, radius: f64) -> bool {
+        let reach = (1.0 + NEAR) * radius;
+        let query = Aabb { min: centre - DVec3::splat(reach), max: centre + DVec3::splat(reach) };
+        let normal = sub.centre_normal();
+        let mut found = false;
+        self.bvh.for_each_overlapping(&query, |k| {
+            if found {
+                return;
+            }
+            let t = &self.bvh.triangles()[k];
+            if self.object[t.element as usize] == self.object[e] || FINEST * self.sizes[k] >= radius {
+                return;
+            }
+            let in_front = t.v.iter().any(|v| normal.dot(*v - centre) > 1e-9 * radius);
+            found = in_front && point_triangle_distance(centre, &t.v) < reach;
+        });
+        found
+    }
 }
 
 /// The splits below a face that made `rect`.
@@ -293,52 +327,6 @@ impl Ord for Candidate {
             .then_with(|| other.3.s0.total_cmp(&self.3.s0))
             .then_with(|| other.3.t0.total_cmp(&self.3.t0))
     }
-}
-
-/// Splits `rect` of face `e` (patch `patch`) while another object's triangle comes close,
-/// `depth` more times at most, pushing the parts kept to `out`.
-#[allow(clippy::too_many_arguments)]
-fn split(
-    bvh: &Bvh,
-    sizes: &[f64],
-    object: &[u32],
-    e: usize,
-    patch: &Patch,
-    rect: Rect,
-    depth: u32,
-    out: &mut Vec<Rect>,
-) {
-    let sub = patch.sub_patch(&rect);
-    let (centre, radius) = sub.bounding_sphere();
-    if depth == 0 || !near(bvh, sizes, object, e, &sub, centre, radius) {
-        out.push(rect);
-        return;
-    }
-    for q in rect.quadrants() {
-        split(bvh, sizes, object, e, patch, q, depth - 1, out);
-    }
-}
-
-/// Whether a triangle of another object than face `e`'s (`object`, per face) lies in front of
-/// `sub` (centre, radius) within `(1 + NEAR) radius` of its centre and is smaller than
-/// `radius / FINEST`.
-fn near(bvh: &Bvh, sizes: &[f64], object: &[u32], e: usize, sub: &Patch, centre: DVec3, radius: f64) -> bool {
-    let reach = (1.0 + NEAR) * radius;
-    let query = Aabb { min: centre - DVec3::splat(reach), max: centre + DVec3::splat(reach) };
-    let normal = sub.centre_normal();
-    let mut found = false;
-    bvh.for_each_overlapping(&query, |k| {
-        if found {
-            return;
-        }
-        let t = &bvh.triangles()[k];
-        if object[t.element as usize] == object[e] || FINEST * sizes[k] >= radius {
-            return;
-        }
-        let in_front = t.v.iter().any(|v| normal.dot(*v - centre) > 1e-9 * radius);
-        found = in_front && point_triangle_distance(centre, &t.v) < reach;
-    });
-    found
 }
 
 /// Whether face element `f` emits at its material's base or at any of its keys (not only at the

@@ -135,10 +135,8 @@ pub fn compute_as(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId, weight: 
     }
 }
 
-/// A surface end of a link, with what every link asks of it computed once per node.
+/// A surface end of a link, with what every link asks of it kept in its node.
 struct Side<'a> {
-    face: usize,
-    patch: &'a Patch,
     surface: &'a Surface,
     /// The patch's bounding sphere (its node's).
     centre: DVec3,
@@ -147,12 +145,17 @@ struct Side<'a> {
 
 impl<'a> Side<'a> {
     fn of(surface: &'a Surface, centre: DVec3, radius: f64) -> Self {
-        Side { face: surface.face as usize, patch: &surface.patch, surface, centre, radius }
+        Side { surface, centre, radius }
+    }
+
+    /// The face index and the patch.
+    fn face_patch(&self) -> (usize, &'a Patch) {
+        (self.surface.face as usize, &self.surface.patch)
     }
 
     /// [`crate::kernel::assemble::may_face`]`(self, other)` from the kept plane.
     fn may_face(&self, other: &Side) -> bool {
-        self.surface.front.is_none_or(|pl| pl.any_in_front(other.patch))
+        self.surface.front.is_none_or(|pl| pl.any_in_front(&other.surface.patch))
     }
 
     /// The centres' distance over the sum of the radii (the integrators' separation).
@@ -163,7 +166,7 @@ impl<'a> Side<'a> {
 
 fn surfaces(ctx: &LinkContext, a: &Side, b: &Side) -> Computed {
     let none = Computed { coupling: None, partial: false, blocked: false };
-    let (fa, pa, fb, pb) = (a.face, a.patch, b.face, b.patch);
+    let ((fa, pa), (fb, pb)) = (a.face_patch(), b.face_patch());
     if fa == fb || !a.may_face(b) || !b.may_face(a) {
         return none;
     }
@@ -208,7 +211,7 @@ fn surfaces(ctx: &LinkContext, a: &Side, b: &Side) -> Computed {
 /// visibility's variation over the pair) is at most what it carries, which the oracle bounds.
 fn light_surfaces(ctx: &LinkContext, a: &Side, b: &Side) -> Computed {
     let none = Computed { coupling: None, partial: false, blocked: false };
-    let (fa, pa, fb, pb) = (a.face, a.patch, b.face, b.patch);
+    let ((fa, pa), (fb, pb)) = (a.face_patch(), b.face_patch());
     if fa == fb || !a.may_face(b) || !b.may_face(a) {
         return none;
     }

@@ -21,7 +21,7 @@ pub const PACKET: usize = 8;
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 pub(super) struct Twin {
-    /// The children's boxes, `[axis][child]`, grown by [`Twins::margin`] (rounded outward).
+    /// The children's boxes, `[axis][child]`, grown by [`MARGIN`] times the scene's magnitude.
     lo: [[f32; 2]; 3],
     hi: [[f32; 2]; 3],
     /// Per child: its own twin's index when it is inner (`count` 0), else its first triangle.
@@ -324,7 +324,11 @@ fn slab_mask<const N: usize>(b: &Aabb, lanes: &Lanes<N>, (t_min, t_max): (f64, f
             far[k] = if hi < far[k] { hi } else { far[k] };
         }
     }
-    (0..N).fold(0, |m, k| m | ((near[k] <= far[k]) as u32) << k)
+    let mut hit = [false; N];
+    for k in 0..N {
+        hit[k] = near[k] <= far[k];
+    }
+    lane_bits(hit)
 }
 
 /// Tests triangle `i` against the lanes of `lanes` and takes those it blocks out of `open`;
