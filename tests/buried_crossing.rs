@@ -21,9 +21,8 @@
 //! corner was black; a corner of the block inside the slab stays black.
 
 use galerkin_radiosity::geometry::Patch;
-use galerkin_radiosity::scene::{Material, Scene, Settings};
-use galerkin_radiosity::scenes::{box_mesh, facing, merge, subdivided_quad};
-use galerkin_radiosity::system::{System, no_progress};
+use galerkin_radiosity::scene::Scene;
+use galerkin_radiosity::scenes::{box_mesh, merge, subdivided_quad};
 use galerkin_radiosity::visibility::bvh::Triangle;
 use glam::DVec3;
 
@@ -40,25 +39,17 @@ const BLOCK_MIN: DVec3 = DVec3::new(WALL, -0.2, 0.05);
 const BLOCK_MAX: DVec3 = DVec3::new(0.5, 0.5, 0.3);
 
 fn light_corners() -> [DVec3; 4] {
-    let p = |x, y| DVec3::new(x, y, LIGHT_HEIGHT);
-    let h = LIGHT_HALF;
-    facing([p(-h, -h), p(h, -h), p(h, h), p(-h, h)], DVec3::ZERO, false)
+    brute_force::ceiling_light(LIGHT_HALF, LIGHT_HEIGHT)
 }
 
 fn scene() -> Scene {
-    let materials = vec![
-        Material { name: "grey".into(), reflectance: [RHO; 3], emission: [0.0; 3] },
-        Material { name: "black".into(), reflectance: [0.0; 3], emission: [0.0; 3] },
-        Material { name: "light".into(), reflectance: [0.0; 3], emission: [EXITANCE; 3] },
-    ];
     let slab = box_mesh("slab", DVec3::ZERO, DVec3::new(1.0, 1.0, 0.1), 1, false, 0);
     let block = box_mesh("block", BLOCK_MIN, BLOCK_MAX, 1, false, 1);
     // One object of two closed pieces, as the teddy's hulls are (the contact split, which only
     // splits faces by other objects, leaves the slab's top one face).
     let hulls = merge("hulls", vec![slab, block]);
     let light = subdivided_quad("light", light_corners(), 1, 2);
-    let settings = Settings { basis_order: 2, tolerance: 1e-6, ..Settings::default() };
-    Scene::new(settings, (1, 1), materials, vec![Vec::new(); 3], vec![hulls, light]).unwrap()
+    brute_force::grey_black_light(RHO, EXITANCE, vec![hulls, light])
 }
 
 /// `E_d` at `y` (normal +z) by brute force, shadowed by `occluders`.
@@ -70,9 +61,7 @@ fn direct(y: DVec3, occluders: &[Triangle]) -> f64 {
 #[test]
 fn a_corner_beside_a_crossing_piece_is_lit() {
     let scene = scene();
-    let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
-    sys.solve(scene.settings.tolerance, &|| false).unwrap();
-    sys.gather_corners(&scene, 1.0, &no_progress).unwrap();
+    let sys = brute_force::gathered(&scene);
     let results = sys.face_results(&scene, 1.0);
     let obj = &scene.objects[0];
     let block = brute_force::triangles_of(&box_mesh("block", BLOCK_MIN, BLOCK_MAX, 1, false, 1));

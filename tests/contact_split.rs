@@ -12,7 +12,7 @@
 
 use galerkin_radiosity::geometry::Patch;
 use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
-use galerkin_radiosity::scene::{Key, KeyTransform, Material, Object, Scene, Settings};
+use galerkin_radiosity::scene::{Key, KeyTransform, Object, Scene};
 use galerkin_radiosity::scenes::{box_mesh, facing, merge, subdivided_quad};
 use galerkin_radiosity::system::{System, no_progress};
 use galerkin_radiosity::visibility::bvh::Triangle;
@@ -23,16 +23,8 @@ mod brute_force;
 
 const RHO: f64 = 0.7;
 const EXITANCE: f64 = 10.0;
-const LIGHT: [f64; 2] = [-0.25, 0.25];
+const LIGHT_HALF: f64 = 0.25;
 const LIGHT_HEIGHT: f64 = 1.0;
-
-fn materials() -> Vec<Material> {
-    vec![
-        Material { name: "grey".into(), reflectance: [RHO; 3], emission: [0.0; 3] },
-        Material { name: "black".into(), reflectance: [0.0; 3], emission: [0.0; 3] },
-        Material { name: "light".into(), reflectance: [0.0; 3], emission: [EXITANCE; 3] },
-    ]
-}
 
 fn ground() -> Object {
     let p = |x, y| DVec3::new(x, y, 0.0);
@@ -46,30 +38,17 @@ fn black_box() -> Object {
 }
 
 fn light() -> Object {
-    let [a, b] = LIGHT;
-    let p = |x, y| DVec3::new(x, y, LIGHT_HEIGHT);
-    subdivided_quad("light", facing([p(a, a), p(b, a), p(b, b), p(a, b)], DVec3::ZERO, false), 1, 2)
+    subdivided_quad("light", brute_force::ceiling_light(LIGHT_HALF, LIGHT_HEIGHT), 1, 2)
 }
 
 fn scene(objects: Vec<Object>) -> Scene {
-    let settings = Settings { basis_order: 2, tolerance: 1e-6, ..Settings::default() };
-    Scene::new(settings, (1, 1), materials(), vec![Vec::new(); 3], objects).unwrap()
+    brute_force::grey_black_light(RHO, EXITANCE, objects)
 }
 
 /// `rho E_d(y)` at a ground point, by brute force.
 fn ground_truth(y: DVec3, occluders: &[Triangle]) -> f64 {
     let m = 24;
-    let [a, b] = LIGHT;
-    let light = Patch::from_corners(&facing(
-        [
-            DVec3::new(a, a, LIGHT_HEIGHT),
-            DVec3::new(b, a, LIGHT_HEIGHT),
-            DVec3::new(b, b, LIGHT_HEIGHT),
-            DVec3::new(a, b, LIGHT_HEIGHT),
-        ],
-        DVec3::ZERO,
-        false,
-    ));
+    let light = Patch::from_corners(&brute_force::ceiling_light(LIGHT_HALF, LIGHT_HEIGHT));
     RHO * EXITANCE * brute_force::direct_light(&light, y, DVec3::Z, occluders, m).form_factor
 }
 

@@ -24,9 +24,8 @@
 //! light changed nothing (17.87% against 17.77%), so the library's emitters stay whole.
 
 use galerkin_radiosity::geometry::Patch;
-use galerkin_radiosity::scene::{Material, Object, Scene, Settings};
+use galerkin_radiosity::scene::{Object, Scene};
 use galerkin_radiosity::scenes::{facing, merge, subdivided_quad};
-use galerkin_radiosity::system::{System, no_progress};
 use galerkin_radiosity::visibility::bvh::Triangle;
 use glam::DVec3;
 
@@ -63,16 +62,10 @@ fn l_shape() -> Object {
 }
 
 fn scene() -> Scene {
-    let materials = vec![
-        Material { name: "grey".into(), reflectance: [RHO; 3], emission: [0.0; 3] },
-        Material { name: "black".into(), reflectance: [0.0; 3], emission: [0.0; 3] },
-        Material { name: "light".into(), reflectance: [0.0; 3], emission: [EXITANCE; 3] },
-    ];
     // The light as 4 x 4 faces: the kernel sees an emitter through 2 x 2 visibility samples per
     // element, which would draw the penumbra on the split wall as four steps (see the module doc).
     let light = subdivided_quad("light", light_corners(), 4, 2);
-    let settings = Settings { basis_order: 2, tolerance: 1e-6, ..Settings::default() };
-    Scene::new(settings, (1, 1), materials, vec![Vec::new(); 3], vec![l_shape(), light]).unwrap()
+    brute_force::grey_black_light(RHO, EXITANCE, vec![l_shape(), light])
 }
 
 /// The platform's triangles, for the brute force's shadow rays.
@@ -92,9 +85,7 @@ fn wall_truth(y: f64, z: f64, platform: &[Triangle]) -> f64 {
 #[test]
 fn faces_of_one_object_split_at_a_concave_crease() {
     let scene = scene();
-    let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
-    sys.solve(scene.settings.tolerance, &|| false).unwrap();
-    sys.gather_corners(&scene, 1.0, &no_progress).unwrap();
+    let sys = brute_force::gathered(&scene);
     let wall_elements = sys.elements.iter().filter(|e| e.object == 0 && e.face == 0).count();
     let platform = platform_triangles();
     let object = &scene.objects[0];

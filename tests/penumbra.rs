@@ -24,10 +24,10 @@
 
 use galerkin_radiosity::geometry::Patch;
 use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
+use galerkin_radiosity::scene::Scene;
 use galerkin_radiosity::scene::json::ObjectResult;
-use galerkin_radiosity::scene::{Material, Scene, Settings};
 use galerkin_radiosity::scenes::{box_mesh, facing, subdivided_quad};
-use galerkin_radiosity::system::{System, no_progress};
+use galerkin_radiosity::system::no_progress;
 use galerkin_radiosity::visibility::bvh::Triangle;
 use glam::DVec3;
 
@@ -42,17 +42,10 @@ const BOX_MIN: DVec3 = DVec3::new(-0.1, -0.35, 0.4);
 const BOX_MAX: DVec3 = DVec3::new(0.4, 0.15, 0.5);
 
 fn light_corners() -> [DVec3; 4] {
-    let p = |x, y| DVec3::new(x, y, LIGHT_HEIGHT);
-    let h = LIGHT_HALF;
-    facing([p(-h, -h), p(h, -h), p(h, h), p(-h, h)], DVec3::ZERO, false)
+    brute_force::ceiling_light(LIGHT_HALF, LIGHT_HEIGHT)
 }
 
 fn scene() -> Scene {
-    let materials = vec![
-        Material { name: "grey".into(), reflectance: [RHO; 3], emission: [0.0; 3] },
-        Material { name: "black".into(), reflectance: [0.0; 3], emission: [0.0; 3] },
-        Material { name: "light".into(), reflectance: [0.0; 3], emission: [EXITANCE; 3] },
-    ];
     let p = |x, y| DVec3::new(x, y, 0.0);
     let ground = subdivided_quad(
         "ground",
@@ -62,8 +55,7 @@ fn scene() -> Scene {
     );
     let occluder = box_mesh("box", BOX_MIN, BOX_MAX, 1, false, 1);
     let light = subdivided_quad("light", light_corners(), 1, 2);
-    let settings = Settings { basis_order: 2, tolerance: 1e-6, ..Settings::default() };
-    Scene::new(settings, (1, 1), materials, vec![Vec::new(); 3], vec![ground, occluder, light]).unwrap()
+    brute_force::grey_black_light(RHO, EXITANCE, vec![ground, occluder, light])
 }
 
 /// `E_d` at `y` (normal +z) by brute force, shadowed by `occluders`; and whether some of the
@@ -109,9 +101,7 @@ fn penumbra_error(scene: &Scene, results: &[ObjectResult]) -> (usize, f64, f64) 
 #[test]
 fn ground_corners_in_a_penumbra_match_brute_force() {
     let scene = scene();
-    let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
-    sys.solve(scene.settings.tolerance, &|| false).unwrap();
-    sys.gather_corners(&scene, 1.0, &no_progress).unwrap();
+    let sys = brute_force::gathered(&scene);
     let (count, rms, worst) = penumbra_error(&scene, &sys.face_results(&scene, 1.0));
     assert!(count > 100, "the penumbra covers a good part of the ground: {count} corners");
     assert!(rms < 0.01, "relative RMS error {rms} in the penumbra");
