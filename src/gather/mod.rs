@@ -1362,6 +1362,8 @@ impl Gather<'_> {
             let mixed = corners.disagree(seen, count);
             if mixed {
                 // Every quadrant's shaft lies in this rectangle's: its candidates serve them all.
+                // (Queried again here, only for a rectangle in a penumbra: the Gauss sum above
+                // keeps its list in a thread-local, which no allocation per rectangle needs.)
                 let mut candidates = Vec::new();
                 if let Some(o) = self.occluders {
                     o.point_candidates(rx.x, rx.n, (rx.element, j as u32), &sub.bounds(), &mut candidates);
