@@ -101,44 +101,67 @@ impl ReceivedBlocks {
     pub fn new(links: &[Link], incoming: &Incoming, nb: usize) -> Result<Self> {
         let what = "the hierarchy's links packed for the solve";
         let nodes = incoming.offsets.len() - 1;
-        let of_kind = |constant: bool| {
-            incoming
-                .entries
-                .iter()
-                .filter(|&&(l, _)| match links[l as usize].coupling {
-                    Coupling::Surfaces(_) => !constant,
-                    Coupling::Constants { .. } => constant,
-                    Coupling::Clusters { .. } => false,
+        let nb2 = nb * nb;
+        // In parallel, counts then copies, each run of receivers written by one thread: the
+        // links are read at random (a surface link's blocks are boxed), and done in turn this
+        // took a third of the full monastery's solve (5.0 of 14.7 s; 2.8 s on two threads).
+        let counts: Vec<(usize, usize)> = (0..nodes)
+            .into_par_iter()
+            .map(|r| {
+                incoming.of(r).iter().fold((0, 0), |(s, c), &(l, _)| match links[l as usize].coupling {
+                    Coupling::Surfaces(_) => (s + 1, c),
+                    Coupling::Constants { .. } => (s, c + 1),
+                    Coupling::Clusters { .. } => (s, c),
                 })
-                .count()
-        };
-        let (count, constant_count) = (of_kind(false), of_kind(true));
+            })
+            .collect();
         let mut offsets = budget::try_vec(nodes + 1, what)?;
-        let mut sources = budget::try_vec(count, what)?;
-        let mut blocks = budget::try_vec(count.saturating_mul(nb * nb), what)?;
         let mut constant_offsets = budget::try_vec(nodes + 1, what)?;
-        let mut constants = budget::try_vec(constant_count, what)?;
         offsets.push(0);
         constant_offsets.push(0);
-        for r in 0..nodes {
-            for &(l, side) in incoming.of(r) {
-                let link = &links[l as usize];
-                let source = if side == 0 { link.b } else { link.a };
-                match &link.coupling {
-                    Coupling::Surfaces(both) => {
-                        let side = side as usize;
-                        sources.push(source);
-                        blocks.extend_from_slice(&both[side * nb * nb..(side + 1) * nb * nb]);
+        for &(s, c) in &counts {
+            offsets.push(offsets.last().copied().unwrap_or(0) + s);
+            constant_offsets.push(constant_offsets.last().copied().unwrap_or(0) + c);
+        }
+        let (count, constant_count) = (offsets[nodes], constant_offsets[nodes]);
+        let mut sources = budget::try_filled(count, 0 as NodeId, what)?;
+        let mut blocks = budget::try_filled(count.saturating_mul(nb2), 0.0f32, what)?;
+        let mut constants = budget::try_filled(constant_count, (0 as NodeId, 0.0f32), what)?;
+        // Receivers in runs of `RUN`, each run's part of the three outputs split off in order.
+        const RUN: usize = 4096;
+        let mut runs = Vec::with_capacity(nodes.div_ceil(RUN));
+        let (mut src, mut blk, mut con) = (&mut sources[..], &mut blocks[..], &mut constants[..]);
+        for r0 in (0..nodes).step_by(RUN) {
+            let r1 = (r0 + RUN).min(nodes);
+            let (n, m) = (offsets[r1] - offsets[r0], constant_offsets[r1] - constant_offsets[r0]);
+            let (s_run, s_rest) = std::mem::take(&mut src).split_at_mut(n);
+            let (b_run, b_rest) = std::mem::take(&mut blk).split_at_mut(n * nb2);
+            let (c_run, c_rest) = std::mem::take(&mut con).split_at_mut(m);
+            (src, blk, con) = (s_rest, b_rest, c_rest);
+            runs.push((r0..r1, s_run, b_run, c_run));
+        }
+        runs.into_par_iter().for_each(|(receivers, src, blk, con)| {
+            let (mut k, mut j) = (0, 0);
+            for r in receivers {
+                for &(l, side) in incoming.of(r) {
+                    let link = &links[l as usize];
+                    let source = if side == 0 { link.b } else { link.a };
+                    match &link.coupling {
+                        Coupling::Surfaces(both) => {
+                            let side = side as usize;
+                            src[k] = source;
+                            blk[k * nb2..(k + 1) * nb2].copy_from_slice(&both[side * nb2..(side + 1) * nb2]);
+                            k += 1;
+                        }
+                        Coupling::Constants { ab, ba } => {
+                            con[j] = (source, if side == 0 { *ab } else { *ba });
+                            j += 1;
+                        }
+                        Coupling::Clusters { .. } => {}
                     }
-                    Coupling::Constants { ab, ba } => {
-                        constants.push((source, if side == 0 { *ab } else { *ba }))
-                    }
-                    Coupling::Clusters { .. } => {}
                 }
             }
-            offsets.push(sources.len());
-            constant_offsets.push(constants.len());
-        }
+        });
         Ok(Self { offsets, sources, blocks, constant_offsets, constants, nb })
     }
 
