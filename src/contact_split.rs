@@ -144,11 +144,8 @@ impl Setup {
             .map(|t| (t.v[1] - t.v[0]).cross(t.v[2] - t.v[0]).normalize_or_zero())
             .collect();
         let object: Vec<u32> = faces.iter().map(|f| f.object).collect();
-        let (lo, hi) = faces
-            .iter()
-            .flat_map(|f| f.patch.corners)
-            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| (lo.min(p), hi.max(p)));
-        let finest = if faces.is_empty() { 0.0 } else { CREASE_FINEST * (hi - lo).length() };
+        let scene_box = faces.iter().fold(Aabb::EMPTY, |b, f| b.union(f.patch.bounds()));
+        let finest = if faces.is_empty() { 0.0 } else { CREASE_FINEST * scene_box.diagonal().length() };
         let fixed = (0..faces.len()).map(|e| emits[e] || keyed[e] || hull[e]).collect();
         Setup { fixed, bvh, sizes, normals, object, finest }
     }
@@ -262,6 +259,7 @@ impl Setup {
         });
         found
     }
+
     /// Splits `rect` of face `e` (patch `patch`) while another object's triangle comes close,
     /// `depth` more times at most, pushing the parts kept to `out`.
     fn split(&self, e: usize, patch: &Patch, rect: Rect, depth: u32, out: &mut Vec<Rect>) {

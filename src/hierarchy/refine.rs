@@ -249,6 +249,24 @@ impl Oracle {
     }
 }
 
+/// Tests every entry of `list` in parallel (the tree and the estimates are only read) and moves
+/// those `fails` gives a pair for onto `work`, keeping the others in order.
+fn take_failing<T: Sync>(
+    list: &mut Vec<T>,
+    work: &mut Vec<(NodeId, NodeId)>,
+    fails: impl Fn(&T) -> Option<(NodeId, NodeId)> + Sync,
+) {
+    let failed: Vec<Option<(NodeId, NodeId)>> = list.par_iter().map(&fails).collect();
+    let mut verdicts = failed.into_iter();
+    list.retain(|_| match verdicts.next().expect("a verdict per entry") {
+        Some(pair) => {
+            work.push(pair);
+            false
+        }
+        None => true,
+    });
+}
+
 /// Links of a tree and the oracle that made them.
 pub struct Hierarchy {
     pub tree: Tree,
@@ -358,36 +376,18 @@ impl Hierarchy {
         // The same test that made each link, with the new brightness (in parallel: the tree and
         // the estimates are only read); a light link that may now carry more than a light link
         // may is computed again in full.
-        let keep: Vec<bool> = self
-            .links
-            .par_iter()
-            .map(|l| {
-                let light = matches!(l.coupling, coupling::Coupling::Constants { .. });
-                matches!(oracle.decide(tree, radiosity, l.a, l.b, bar), Verdict::Link)
-                    && !(light && oracle.weight(tree, radiosity, l.a, l.b) == Weight::Full)
-            })
-            .collect();
-        let mut verdicts = keep.iter();
-        self.links.retain(|l| {
-            let keep = *verdicts.next().expect("a verdict per link");
-            if !keep {
-                work.push((l.a, l.b));
-            }
-            keep
+        take_failing(&mut self.links, &mut work, |l| {
+            let light = matches!(l.coupling, coupling::Coupling::Constants { .. });
+            let kept = matches!(oracle.decide(tree, radiosity, l.a, l.b, bar), Verdict::Link)
+                && !(light && oracle.weight(tree, radiosity, l.a, l.b) == Weight::Full);
+            (!kept).then_some((l.a, l.b))
         });
         // Hidden pairs decided while their ends were dark (a first round knows only the
         // emitters' light) are split now if they may carry enough: kept whole, each would drop
         // all its light from the solve, always the same way (the Cornell box's faces came out
         // 1-5% too dark).
-        let again: Vec<bool> =
-            self.blocked.par_iter().map(|&(a, b)| oracle.may_carry_much(tree, radiosity, a, b)).collect();
-        let mut verdicts = again.iter();
-        self.blocked.retain(|&(a, b)| {
-            let again = *verdicts.next().expect("a verdict per hidden pair");
-            if again {
-                work.push((a, b));
-            }
-            !again
+        take_failing(&mut self.blocked, &mut work, |&(a, b)| {
+            oracle.may_carry_much(tree, radiosity, a, b).then_some((a, b))
         });
         stats.relinked = work.len();
         self.refine_pairs(ctx, radiosity, work, &mut stats, progress)?;

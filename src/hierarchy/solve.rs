@@ -117,13 +117,14 @@ impl ReceivedBlocks {
             .collect();
         let mut offsets = budget::try_vec(nodes + 1, what)?;
         let mut constant_offsets = budget::try_vec(nodes + 1, what)?;
-        offsets.push(0);
-        constant_offsets.push(0);
+        let (mut count, mut constant_count) = (0, 0);
         for &(s, c) in &counts {
-            offsets.push(offsets.last().copied().unwrap_or(0) + s);
-            constant_offsets.push(constant_offsets.last().copied().unwrap_or(0) + c);
+            offsets.push(count);
+            constant_offsets.push(constant_count);
+            (count, constant_count) = (count + s, constant_count + c);
         }
-        let (count, constant_count) = (offsets[nodes], constant_offsets[nodes]);
+        offsets.push(count);
+        constant_offsets.push(constant_count);
         let mut sources = budget::try_filled(count, 0 as NodeId, what)?;
         let mut blocks = budget::try_filled(count.saturating_mul(nb2), 0.0f32, what)?;
         let mut constants = budget::try_filled(constant_count, (0 as NodeId, 0.0f32), what)?;
