@@ -203,8 +203,9 @@ impl World<'_> {
         h
     }
 
-    /// The nearest front hit of the ray from `x` (on `i`) along `d`: (element, s, t, distance),
-    /// or `Err(true)` for a back face, `Err(false)` for a miss.
+    /// The nearest hit of the ray from `x` (on `i`) along `d` on a front, or on a back where the
+    /// face has one (`galerkin_radiosity::backs`): (element, s, t, distance), or `Err(true)`
+    /// for a face without a back met from behind, `Err(false)` for a miss.
     fn trace(&self, x: DVec3, d: DVec3, i: usize) -> Result<(usize, f64, f64, f64), bool> {
         let mut v = Nearest {
             o: x,
@@ -223,7 +224,22 @@ impl World<'_> {
         let (s, t) = patch.locate(y);
         let (s, t) = (s.clamp(0.0, 1.0), t.clamp(0.0, 1.0));
         if patch.area_vector(s, t).dot(d) >= 0.0 {
-            return Err(true);
+            // The back part holding the hit point, if the face has a back.
+            let el = &self.sys.elements[e];
+            let start = self
+                .sys
+                .elements
+                .partition_point(|b| (b.object, b.face, b.back) < (el.object, el.face, true));
+            return self.sys.elements[start..]
+                .iter()
+                .take_while(|b| (b.object, b.face, b.back) == (el.object, el.face, true))
+                .enumerate()
+                .find_map(|(k, b)| {
+                    let (s, t) = b.patch.locate(y);
+                    let inside = (-1e-9..=1.0 + 1e-9).contains(&s) && (-1e-9..=1.0 + 1e-9).contains(&t);
+                    inside.then_some((start + k, s.clamp(0.0, 1.0), t.clamp(0.0, 1.0), v.best))
+                })
+                .ok_or(true);
         }
         Ok((e, s, t, v.best))
     }
@@ -322,7 +338,8 @@ fn main() {
     sys.solution.b = full;
 
     let mut tris = Vec::new();
-    for (e, el) in sys.elements.iter().enumerate() {
+    // The fronts' triangles: a back is its face met from behind (`World::trace`).
+    for (e, el) in sys.elements.iter().enumerate().filter(|(_, el)| !el.back) {
         for v in el.patch.triangles() {
             tris.push(Triangle { v, element: e as u32 });
         }

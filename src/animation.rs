@@ -16,8 +16,8 @@
 //! enter or leave: the visibility changes the seed left to a separate shadow algorithm (issue 3,
 //! item 4). A static
 //! pair's segments do not move, so its mask is re-checked against the moved triangles alone
-//! (old and new positions, [`Occluders::relink_visibility`]); the shaft traversal remains for
-//! pairs with a moved element and for the rare segment only the movers' old position blocked.
+//! (old and new positions, [`crate::visibility::Occluders::relink_visibility`]); the shaft
+//! traversal remains for pairs with a moved element and for the rare segment only the movers' old position blocked.
 //!
 //! How a changed pair is updated ([`Method::Incremental`](crate::session::Method)): while the
 //! relative motion is a translation along the direction of the pair's expansion, within
@@ -44,7 +44,7 @@ use crate::scene::Scene;
 use crate::solver;
 use crate::system::{Progress, System, build_elements_reusing};
 use crate::visibility::shaft::Shaft;
-use crate::visibility::{MovedTriangles, Occluders, Visibility};
+use crate::visibility::{MovedTriangles, Visibility};
 
 /// What one update did.
 #[derive(Clone, Debug, Default)]
@@ -76,10 +76,10 @@ pub struct UpdateStats {
     pub shaft_tests: usize,
     /// Pairs examined in detail: moved relative to each other, or shaft entered by the swept bounds.
     pub candidates: usize,
-    /// Link visibility evaluations by a shaft traversal ([`Occluders::link_visibility`]).
+    /// Link visibility evaluations by a shaft traversal ([`crate::visibility::Occluders::link_visibility`]).
     pub visibility_checks: usize,
     /// Static pairs whose visibility was re-checked against the moved triangles only
-    /// ([`Occluders::relink_visibility`]).
+    /// ([`crate::visibility::Occluders::relink_visibility`]).
     pub visibility_relinked: usize,
     /// Sample segments tested against occluders (`m^4` per link that needed rays).
     pub segments_tested: u64,
@@ -115,8 +115,8 @@ pub struct AnimationState {
     index: PairIndex,
     /// The element geometry of the last update, for elements that do not move in the next.
     geometry: Option<KeptGeometry>,
-    /// Per element: whether its plane has culled occluders ([`Occluders::culls`]) in any frame
-    /// since the build; `None` before the first update.
+    /// Per element: whether its plane has culled occluders
+    /// ([`crate::visibility::Occluders::culls`]) in any frame since the build; `None` before the first update.
     culled: Option<Vec<bool>>,
     /// Buffers of the last update, reused so that a frame does not fault in fresh pages: the
     /// batches' blocks and the blocks the store replaced.
@@ -318,11 +318,16 @@ pub fn advance(
     let basis = sys.basis;
     let nb = basis.len();
     // Split faces keep their parts (crate::contact_split), decided when the system was built.
+    // (Open surfaces' backs are faces here: crate::backs.)
     let faces = build_elements_reusing(next, frame, basis, &sys.elements);
+    let faces = crate::backs::with_backs(next, frame, faces, basis, &sys.elements);
     let parts = crate::contact_split::parts_of(&faces, &sys.elements);
     let new_elements = crate::contact_split::split_faces(faces, &parts, basis, &sys.elements);
     if new_elements.len() != sys.elements.len()
-        || new_elements.iter().zip(&sys.elements).any(|(a, b)| (a.object, a.face) != (b.object, b.face))
+        || new_elements
+            .iter()
+            .zip(&sys.elements)
+            .any(|(a, b)| (a.object, a.face, a.back) != (b.object, b.face, b.back))
     {
         return Ok(Outcome::NeedsRebuild);
     }
@@ -457,7 +462,9 @@ pub fn advance(
         // The occluders' BVH is built on one thread: the other scans meanwhile.
         let ((occluders, geom), per_element) = rayon::join(
             || {
-                let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
+                let occluders = s
+                    .visibility
+                    .then(|| crate::system::occluders_of(&new_elements, &patches, s.visibility_samples));
                 (occluders, ElementGeometry::reusing(kept_geometry, &patches, &moved, &ctx))
             },
             scan,
@@ -469,8 +476,10 @@ pub fn advance(
         // Static pairs re-check their masks against the moved triangles only (exact, see
         // `Occluders::relink_visibility`) when neither element has culled occluders by its plane
         // since the build: then every mask they hold is an any-hit mask over all occluders.
-        let moved_triangles =
-            MovedTriangles::new((0..n).filter(|&e| moved[e]).map(|e| (old[e], &patches[e])));
+        // (A back's triangles are its front's: crate::backs.)
+        let moved_triangles = MovedTriangles::new(
+            (0..n).filter(|&e| moved[e] && !new_elements[e].back).map(|e| (old[e], &patches[e])),
+        );
         if let Some(o) = &occluders {
             let before = state.culled.take().unwrap_or_else(|| {
                 // First update since the build: the system still holds the build's occluders.
@@ -478,7 +487,7 @@ pub fn advance(
                     Some(b) => (0..n).map(|e| b.culls(e)).collect(),
                     None => {
                         let built: Vec<Patch> = old.iter().map(|p| **p).collect();
-                        let b = Occluders::new(&built, s.visibility_samples);
+                        let b = crate::system::occluders_of(&sys.elements, &built, s.visibility_samples);
                         (0..n).map(|e| b.culls(e)).collect()
                     }
                 }

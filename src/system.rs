@@ -44,6 +44,9 @@ pub struct Element {
     /// Placed with reversed winding (a mirroring matrix, [`crate::scene::placement::front_order`]):
     /// the face's `(s,t)` is the patch's `(1 - s, t)`.
     pub mirrored: bool,
+    /// The back of an open surface's face ([`crate::backs`]): reflects, emits nothing, is read
+    /// back nowhere.
+    pub back: bool,
 }
 
 impl Element {
@@ -52,8 +55,12 @@ impl Element {
         scene.reflectance_of(self.object as usize, self.face as usize, self.material)
     }
 
-    /// The surface's exitance over the element at `frame`: its face's ([`Scene::emission_of`]).
+    /// The surface's exitance over the element at `frame`: its face's ([`Scene::emission_of`]);
+    /// none for a back.
     pub fn emission(&self, scene: &Scene, frame: f64) -> [f64; 3] {
+        if self.back {
+            return [0.0; 3];
+        }
         scene.emission_of(self.object as usize, self.face as usize, self.material, frame)
     }
 }
@@ -124,7 +131,26 @@ pub(crate) fn element(
             }
         }
     }
-    Element { object, face, domain, patch, material, area, moments, mirrored: false }
+    Element { object, face, domain, patch, material, area, moments, mirrored: false, back: false }
+}
+
+/// The occluders of `elements` (their patches `patches`) with `m x m` visibility samples: a back
+/// ([`crate::backs`]) and its parts share the triangles of its face's last front part, which
+/// comes before them.
+pub fn occluders_of(elements: &[Element], patches: &[Patch], m: usize) -> Occluders {
+    let mut front = 0;
+    let alias = elements
+        .iter()
+        .enumerate()
+        .map(|(e, el)| {
+            if !el.back {
+                front = e;
+            }
+            debug_assert!(!el.back || (elements[front].object, elements[front].face) == (el.object, el.face));
+            front as u32
+        })
+        .collect();
+    Occluders::with_aliases(patches, m, alias)
 }
 
 /// [`crate::hemisphere::bounded_reflectance`] of every element.
@@ -203,7 +229,8 @@ impl System {
             adaptive: s.adaptive_quadrature,
         };
         let start = Instant::now();
-        let faces = build_elements(scene, frame, basis);
+        // Open surfaces' faces reflect from both sides (crate::backs): a back is split as a face.
+        let faces = crate::backs::with_backs(scene, frame, build_elements(scene, frame, basis), basis, &[]);
         // Faces split where another object comes close or faces of one object meet at a crease
         // (crate::contact_split): only shadows need it, and there are none without visibility.
         let elements = if s.visibility {
@@ -213,7 +240,7 @@ impl System {
             faces
         };
         let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
-        let occluders = s.visibility.then(|| Occluders::new(&patches, s.visibility_samples));
+        let occluders = s.visibility.then(|| occluders_of(&elements, &patches, s.visibility_samples));
         let geom = ElementGeometry::new(&patches, &ctx);
         let mut links = assemble(&ctx, &geom, occluders.as_ref(), &|done, total| {
             progress(if total > 0 { done as f64 / total as f64 } else { 1.0 }, "kernel")
@@ -434,9 +461,10 @@ impl System {
                 let res = &mut out[o];
                 // The face's elements (several where it was split, crate::contact_split).
                 let start = self.elements.partition_point(|e| (e.object as usize, e.face as usize) < (o, f));
+                // (A back, after them, is read back nowhere: crate::backs.)
                 let count = self.elements[start..]
                     .iter()
-                    .take_while(|e| e.object as usize == o && e.face as usize == f)
+                    .take_while(|e| e.object as usize == o && e.face as usize == f && !e.back)
                     .count();
                 if count == 0 {
                     // A skipped zero-area face shows its own exitance.
@@ -525,7 +553,7 @@ impl System {
         let start = self.elements.partition_point(|e| (e.object as usize, e.face as usize) < (o, f));
         self.elements[start..]
             .iter()
-            .take_while(|e| e.object as usize == o && e.face as usize == f)
+            .take_while(|e| e.object as usize == o && e.face as usize == f && !e.back)
             .position(|e| {
                 let s = if e.mirrored { 1.0 - s } else { s };
                 e.domain.s0 <= s && s <= e.domain.s1 && e.domain.t0 <= t && t <= e.domain.t1

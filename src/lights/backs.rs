@@ -36,7 +36,7 @@ pub(super) fn emitter_backs(scene: &Scene, frame: f64, elements: &[Element]) -> 
     elements
         .iter()
         .enumerate()
-        .filter(|(_, e)| scene.two_sided.get(e.object as usize).copied().unwrap_or(false))
+        .filter(|(_, e)| !e.back && scene.two_sided.get(e.object as usize).copied().unwrap_or(false))
         .filter_map(|(i, e)| {
             let exitance = e.emission(scene, frame);
             if exitance.iter().all(|&c| c <= 0.0) {

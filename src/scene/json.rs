@@ -195,6 +195,7 @@ struct SettingsFile {
     threads: Option<usize>,
     adaptive_quadrature: Option<bool>,
     corner_gather: Option<bool>,
+    reflecting_backs: Option<bool>,
     memory_budget_mb: Option<u64>,
     accuracy: Option<f64>,
 }
@@ -284,6 +285,7 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
         threads: s.threads.unwrap_or(d.threads),
         adaptive_quadrature: s.adaptive_quadrature.unwrap_or(d.adaptive_quadrature),
         corner_gather: s.corner_gather.unwrap_or(d.corner_gather),
+        reflecting_backs: s.reflecting_backs.unwrap_or(d.reflecting_backs),
         memory_budget_mb: s.memory_budget_mb.unwrap_or(d.memory_budget_mb),
         accuracy: s.accuracy.unwrap_or(d.accuracy),
     };
@@ -534,7 +536,7 @@ pub fn scene_to_json(scene: &Scene) -> String {
         "version": 1,
         "settings": {
             "basis_order": s.basis_order, "quadrature_order": s.quadrature_order, "tolerance": s.tolerance,
-            "visibility": s.visibility, "visibility_samples": s.visibility_samples, "threads": s.threads, "adaptive_quadrature": s.adaptive_quadrature, "corner_gather": s.corner_gather, "accuracy": s.accuracy,
+            "visibility": s.visibility, "visibility_samples": s.visibility_samples, "threads": s.threads, "adaptive_quadrature": s.adaptive_quadrature, "corner_gather": s.corner_gather, "reflecting_backs": s.reflecting_backs, "accuracy": s.accuracy,
             "memory_budget_mb": s.memory_budget_mb,
         },
         "frames": [scene.frames.0, scene.frames.1],

@@ -41,6 +41,9 @@ pub struct Settings {
     /// Face corners report `B` gathered at the corner from the solution ([`crate::gather`]),
     /// with its own shadow rays, instead of the face polynomial's value there.
     pub corner_gather: bool,
+    /// Faces of open surfaces reflect from both sides, as Cycles' diffuse surfaces do
+    /// ([`crate::backs`]; the flat path only). Off (the default): every face is one-sided.
+    pub reflecting_backs: bool,
     /// The memory a bake may plan to use, in MiB ([`crate::budget`]); 0: 80% of the memory
     /// available when the session starts.
     pub memory_budget_mb: u64,
@@ -60,6 +63,7 @@ impl Default for Settings {
             threads: 0,
             adaptive_quadrature: true,
             corner_gather: true,
+            reflecting_backs: false,
             memory_budget_mb: 0,
             accuracy: crate::hierarchy::DEFAULT_ACCURACY,
         }

@@ -106,10 +106,23 @@ pub struct Occluders {
     sample_bounds: Vec<Aabb>,
     /// Per element: on the scene's hull, hence not an occluder.
     hull: Vec<bool>,
+    /// Per element, the element whose triangles stand for it (itself, or a back's front: a
+    /// back adds no triangles, and its rays skip its front's as the front's own rays do); empty
+    /// when every element stands for itself.
+    alias: Vec<u32>,
 }
 
 impl Occluders {
     pub fn new(elements: &[Patch], samples_per_axis: usize) -> Self {
+        Self::with_aliases(elements, samples_per_axis, Vec::new())
+    }
+
+    /// [`Occluders::new`] where element `e`'s triangles are `alias[e]`'s (`alias[e] == e` for an
+    /// element that stands for itself, else it adds none and skips `alias[e]`'s): the backs of
+    /// open surfaces ([`crate::backs`]) share their faces' triangles.
+    pub fn with_aliases(elements: &[Patch], samples_per_axis: usize, alias: Vec<u32>) -> Self {
+        debug_assert!(alias.is_empty() || alias.len() == elements.len());
+        let alias = if alias.iter().enumerate().all(|(e, &a)| a as usize == e) { Vec::new() } else { alias };
         let bounds = elements.iter().fold(crate::geometry::Aabb::EMPTY, |b, p| b.union(p.bounds()));
         let scale = bounds.diagonal().length().max(1e-300);
         let planes: Vec<Option<(DVec3, f64)>> = elements
@@ -124,7 +137,7 @@ impl Occluders {
         let hull = on_hull(elements, &planes, 1e-9 * scale);
         let mut tris = Vec::with_capacity(elements.len() * 2);
         for (e, p) in elements.iter().enumerate() {
-            if hull[e] {
+            if hull[e] || alias.get(e).is_some_and(|&a| a as usize != e) {
                 continue;
             }
             for v in p.triangles() {
@@ -148,7 +161,20 @@ impl Occluders {
             .flat_map(|p| sample_points(p, samples_per_axis).into_iter().take(cells))
             .collect();
         let sample_bounds = samples.chunks(cells).map(Aabb::from_points).collect();
-        Occluders { bvh, edges, culling_planes, scale, samples_per_axis, samples, sample_bounds, hull }
+        Occluders { bvh, edges, culling_planes, scale, samples_per_axis, samples, sample_bounds, hull, alias }
+    }
+
+    /// The id element `e`'s own triangles carry ([`Occluders::with_aliases`]): the one a ray
+    /// from or to `e` skips.
+    #[inline]
+    fn id(&self, e: usize) -> u32 {
+        self.alias.get(e).copied().unwrap_or(e as u32)
+    }
+
+    /// [`Occluders::id`] of both ends of a segment.
+    #[inline]
+    fn ids(&self, (i, j): (u32, u32)) -> (u32, u32) {
+        (self.id(i as usize), self.id(j as usize))
     }
 
     /// Whether element `e` lies on the scene's hull and so occludes nothing (its triangles are
@@ -177,6 +203,7 @@ impl Occluders {
     /// Whether the segment from `a` (on element `i`) to `b` (on element `j`) is unobstructed by
     /// any other element: one ray, for point queries such as the corner gather.
     pub fn segment_visible(&self, a: DVec3, b: DVec3, i: u32, j: u32) -> bool {
+        let (i, j) = self.ids((i, j));
         !self.bvh.occluded(a, b - a, 1e-9, 1.0 - 1e-9, i, j)
     }
 
@@ -190,7 +217,11 @@ impl Occluders {
             (origins[k], dirs[k]) = (a, b - a);
         }
         let mut blocked = [false; bvh::PACKET];
-        self.bvh.occluded_each(&origins[..n], &dirs[..n], (1e-9, 1.0 - 1e-9), elements, &mut blocked[..n]);
+        let mut skips = [(0, 0); bvh::PACKET];
+        for (s, &e) in skips.iter_mut().zip(elements) {
+            *s = self.ids(e);
+        }
+        self.bvh.occluded_each(&origins[..n], &dirs[..n], (1e-9, 1.0 - 1e-9), &skips[..n], &mut blocked[..n]);
         for (v, b) in visible.iter_mut().zip(&blocked[..n]) {
             *v = !b;
         }
@@ -240,7 +271,7 @@ impl Occluders {
         let (own, source) = ((n, n.dot(x)), self.culling_planes[j as usize]);
         let both = [own, source.unwrap_or(own)];
         let planes = &both[..1 + source.is_some() as usize];
-        shaft_candidates(self, &shaft, planes, (i, j), out);
+        shaft_candidates(self, &shaft, planes, self.ids((i, j)), out);
     }
 
     /// Which segments from `x` (on element `i`) to `targets` (on element `j`) are unobstructed,
@@ -265,6 +296,7 @@ impl Occluders {
                 }
             });
         } else {
+            let (i, j) = self.ids((i, j));
             for (o, &y) in out.iter_mut().zip(targets) {
                 *o = !self.bvh.occluded(x, y - x, 1e-9, 1.0 - 1e-9, i, j);
             }
@@ -278,6 +310,7 @@ impl Occluders {
     pub fn any_near(&self, x: DVec3, n: DVec3, r: f64, i: u32) -> bool {
         let query = crate::geometry::Aabb { min: x - DVec3::splat(r), max: x + DVec3::splat(r) };
         let eps = 1e-2 * r;
+        let i = self.id(i as usize);
         let mut found = false;
         self.bvh.for_each_overlapping(&query, |t| {
             let tri = &self.bvh.triangles()[t];
@@ -292,7 +325,7 @@ impl Occluders {
         let (culling, count) = self.culling_pair(i, j);
         CANDIDATES.with_borrow_mut(|candidates| {
             // Segments between the fronts of two planar elements stay in front of both planes.
-            shaft_candidates(self, &shaft, &culling[..count], (i as u32, j as u32), candidates);
+            shaft_candidates(self, &shaft, &culling[..count], self.ids((i as u32, j as u32)), candidates);
             if candidates.is_empty() {
                 return Visibility::Full;
             }
@@ -324,7 +357,7 @@ impl Occluders {
         let shaft = Shaft::new(&Aabb::from_points(xi), &Aabb::from_points(xj));
         let (culling, count) = self.culling_pair(i, j);
         CANDIDATES.with_borrow_mut(|candidates| {
-            shaft_candidates(self, &shaft, &culling[..count], (i as u32, j as u32), candidates);
+            shaft_candidates(self, &shaft, &culling[..count], self.ids((i as u32, j as u32)), candidates);
             if candidates.is_empty() {
                 return Visibility::Full;
             }
@@ -370,7 +403,8 @@ impl Occluders {
         }
         let mut blocked = [false; SHARE_SEGMENTS];
         let (o, d, b) = (&origins[..tested], &dirs[..tested], &mut blocked[..tested]);
-        self.bvh.occluded_packet(o, d, 1e-9, 1.0 - 1e-9, i as u32, j as u32, b);
+        let (i, j) = self.ids((i as u32, j as u32));
+        self.bvh.occluded_packet(o, d, 1e-9, 1.0 - 1e-9, i, j, b);
         Some((b.iter().filter(|&&x| !x).count(), tested))
     }
 
@@ -507,8 +541,9 @@ impl Occluders {
             let in_group = |b: &crate::geometry::Aabb| {
                 b.overlaps(&group.bounds) && group.may_contain_overlapping_box(b, eps)
             };
+            let own = self.id(i);
             self.bvh.for_each_accepted(in_group, |t| {
-                if tris[t].element as usize != i && group.may_contain_triangle(&tris[t].v, eps) {
+                if tris[t].element != own && group.may_contain_triangle(&tris[t].v, eps) {
                     list.push(t);
                 }
             });
@@ -526,7 +561,7 @@ impl Occluders {
                     candidates.clear();
                     candidates.extend(list.iter().copied().filter(|&t| {
                         let b = &bounds[t];
-                        tris[t].element as usize != j
+                        tris[t].element != self.id(j)
                             && b.overlaps(&shaft.bounds)
                             && shaft.may_contain_overlapping_box(b, eps)
                             && shaft.may_contain_triangle(&tris[t].v, eps)
@@ -592,9 +627,10 @@ impl Occluders {
                 }
             });
         } else {
+            let (ii, jj) = self.ids((i as u32, j as u32));
             for (r, a) in xi.iter().enumerate() {
                 for (s, b) in xj.iter().enumerate() {
-                    if !self.bvh.occluded(*a, *b - *a, 1e-9, 1.0 - 1e-9, i as u32, j as u32) {
+                    if !self.bvh.occluded(*a, *b - *a, 1e-9, 1.0 - 1e-9, ii, jj) {
                         let k = r * cells + s;
                         bits[k / 64] |= 1 << (k % 64);
                         visible += 1;

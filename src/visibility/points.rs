@@ -32,6 +32,7 @@ impl Occluders {
     /// into `out`: any-hit rays through the BVH, without gathering the shaft's triangles first
     /// (for a few rays to a far source the shaft query costs more than the rays).
     pub fn visible_from(&self, x: DVec3, (i, j): (u32, u32), targets: &[DVec3], out: &mut [bool]) {
+        let (i, j) = self.ids((i, j));
         for (o, &y) in out.iter_mut().zip(targets) {
             *o = !self.bvh.occluded(x, y - x, 1e-9, 1.0 - 1e-9, i, j);
         }
