@@ -42,7 +42,8 @@ impl Solids {
     /// size, so that meshes whose vertices are split along seams still close).
     pub fn new(elements: &[Element], objects: usize) -> Self {
         let mut by_object: Vec<Vec<usize>> = vec![Vec::new(); objects];
-        for (e, el) in elements.iter().enumerate() {
+        // (Backs, crate::backs, lie on their fronts: not part of a solid.)
+        for (e, el) in elements.iter().enumerate().filter(|(_, el)| !el.back) {
             by_object[el.object as usize].push(e);
         }
         let scale = elements.iter().fold(Aabb::EMPTY, |b, e| b.union(e.patch.bounds())).diagonal().length();

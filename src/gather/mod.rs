@@ -690,8 +690,7 @@ fn buried_points(
     patches: &[Patch],
     points: &[CornerPoint],
 ) -> Vec<bool> {
-    // (Backs, crate::backs, are not part of a solid either.)
-    let split = sys.elements.iter().any(|e| e.domain != Rect::UNIT || e.back);
+    let split = sys.elements.iter().any(|e| e.domain != Rect::UNIT);
     let faces = split.then(|| crate::system::build_elements(scene, frame, crate::basis::Basis::new(0)));
     let solids = Solids::new(faces.as_deref().unwrap_or(&sys.elements), scene.objects.len());
     if solids.is_empty() {

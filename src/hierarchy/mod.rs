@@ -164,7 +164,8 @@ pub fn solve_frame(
     progress: Progress,
 ) -> Result<HierarchicalFrame> {
     let basis = Basis::new(scene.settings.basis_order);
-    let faces = build_elements(scene, frame, basis);
+    // Open surfaces' backs (crate::backs) are faces of the tree, after their fronts.
+    let faces = crate::backs::with_backs(scene, frame, build_elements(scene, frame, basis), basis, &[]);
     if faces.is_empty() {
         return Err(Error::InvalidScene("the scene has no faces with area".into()));
     }
@@ -211,7 +212,9 @@ impl Lighting {
         let patches: Vec<Patch> = faces.iter().map(|e| e.patch).collect();
         Self {
             emission: faces.iter().map(|e| e.emission(scene, frame)).collect(),
-            occluders: s.visibility.then(|| Occluders::new(&patches, s.visibility_samples)),
+            occluders: s
+                .visibility
+                .then(|| crate::system::occluders_of(faces, &patches, s.visibility_samples)),
             lights: DirectLight::new(scene, frame, faces),
             tolerance: s.tolerance,
         }
@@ -360,12 +363,12 @@ fn finish(
 }
 
 impl HierarchicalFrame {
-    /// The index among the tree's faces of face `f` of object `o`; `None` for a face skipped
-    /// for having no area.
+    /// The index among the tree's faces of face `f` of object `o` (its front); `None` for a
+    /// face skipped for having no area.
     pub fn face_index(&self, o: usize, f: usize) -> Option<usize> {
         let faces = &self.hierarchy.tree.faces;
-        let key = (o as u32, f as u32);
-        faces.binary_search_by(|e| (e.object, e.face).cmp(&key)).ok()
+        let key = (o as u32, f as u32, false);
+        faces.binary_search_by(|e| (e.object, e.face, e.back).cmp(&key)).ok()
     }
 
     /// Area-mean `B` of face `f` (index into the tree's faces).
@@ -412,7 +415,8 @@ impl HierarchicalFrame {
         let tree = &self.hierarchy.tree;
         let to_f32 = |v: [f64; 3]| v.map(|x| x as f32);
         let mut out = Vec::with_capacity(scene.objects.len());
-        let mut faces = tree.faces.iter().enumerate().peekable();
+        // (A back, crate::backs, is read back nowhere.)
+        let mut faces = tree.faces.iter().enumerate().filter(|(_, e)| !e.back).peekable();
         for (o, obj) in scene.objects.iter().enumerate() {
             let mut res = ObjectResult {
                 name: obj.name.clone(),

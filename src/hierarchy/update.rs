@@ -54,8 +54,12 @@ pub fn update_frame(
     let basis = Basis::new(scene.settings.basis_order);
     let old = &previous.hierarchy.tree;
     let faces = build_elements_reusing(scene, frame, basis, &old.faces);
+    let faces = crate::backs::with_backs(scene, frame, faces, basis, &old.faces);
     let same_faces = faces.len() == old.faces.len()
-        && faces.iter().zip(&old.faces).all(|(a, b)| (a.object, a.face) == (b.object, b.face));
+        && faces
+            .iter()
+            .zip(&old.faces)
+            .all(|(a, b)| (a.object, a.face, a.back) == (b.object, b.face, b.back));
     if !same_faces || basis != old.basis {
         return super::solve_frame(scene, frame, hs, progress);
     }

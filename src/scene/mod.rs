@@ -42,7 +42,7 @@ pub struct Settings {
     /// with its own shadow rays, instead of the face polynomial's value there.
     pub corner_gather: bool,
     /// Faces of open surfaces reflect from both sides, as Cycles' diffuse surfaces do
-    /// ([`crate::backs`]; the flat path only). Off (the default): every face is one-sided.
+    /// ([`crate::backs`]). Off (the default): every face is one-sided.
     pub reflecting_backs: bool,
     /// The memory a bake may plan to use, in MiB ([`crate::budget`]); 0: 80% of the memory
     /// available when the session starts.

@@ -228,8 +228,8 @@ pub fn corners_with(
         scene,
         frame,
         |o, f, s, t| {
-            let key = (o as u32, f as u32);
-            let face = tree.faces.binary_search_by(|e| (e.object, e.face).cmp(&key)).ok()?;
+            let key = (o as u32, f as u32, false);
+            let face = tree.faces.binary_search_by(|e| (e.object, e.face, e.back).cmp(&key)).ok()?;
             // The face's own parameters (a mirrored face runs its `s` backwards, as
             // `HierarchicalFrame::eval_face` reads it).
             let s = if tree.faces[face].mirrored { 1.0 - s } else { s };
