@@ -179,3 +179,39 @@ fn the_hierarchy_reflects_from_backs_too() {
         assert!((o - LAMP_EXITANCE).abs() < 1e-6, "one-sided: nothing returns, {o}");
     }
 }
+
+/// The CLI's `--reflecting-backs` turns backs on for a scene file that has them off, and the
+/// setting round-trips through the scene file.
+#[test]
+fn the_cli_flag_turns_backs_on() {
+    use galerkin_radiosity::scene::json::{parse_scene, scene_to_json};
+    let scene = lamp_and_sheet(true, false, 1, DVec3::ZERO);
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("backs-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = dir.join("scene.json");
+    std::fs::write(&input, scene_to_json(&scene)).unwrap();
+    let lamp_mean = |flags: &[&str]| -> f64 {
+        let out = dir.join("out.json");
+        let run = std::process::Command::new(env!("CARGO_BIN_EXE_galerkin-radiosity"))
+            .arg("bake")
+            .arg(&input)
+            .arg("-o")
+            .arg(&out)
+            .args(["--quiet", "--no-corner-gather"])
+            .args(flags)
+            .output()
+            .unwrap();
+        assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+        let result: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+        let faces = result["frames"][0]["objects"][0]["face_radiosity"].as_array().unwrap().clone();
+        faces.iter().map(|v| v[0].as_f64().unwrap()).sum::<f64>() / faces.len() as f64
+    };
+    let (off, on) = (lamp_mean(&[]), lamp_mean(&["--reflecting-backs"]));
+    assert!((off - LAMP_EXITANCE).abs() < 1e-6, "one-sided: {off}");
+    assert!(on > 1.2 * LAMP_EXITANCE, "with backs the sheet returns light: {on}");
+    let with_backs =
+        Scene { settings: Settings { reflecting_backs: true, ..scene.settings.clone() }, ..scene };
+    let parsed = parse_scene(&scene_to_json(&with_backs)).unwrap();
+    assert!(parsed.settings.reflecting_backs);
+}

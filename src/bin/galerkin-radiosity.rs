@@ -1,7 +1,7 @@
 //! `galerkin-radiosity`: bake a scene file, or write the demo scene.
 //!
 //! ```text
-//! galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact | --hierarchy] [--accuracy A] [--threads N] [--memory-budget MB] [--no-corner-gather] [--quiet]
+//! galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact | --hierarchy] [--accuracy A] [--threads N] [--memory-budget MB] [--no-corner-gather] [--reflecting-backs] [--quiet]
 //! galerkin-radiosity demo-scene -o SCENE.json [--frames N] [--subdiv N] [--order N]
 //! ```
 //! Exits 0 on success, 1 on any error with a one-line message on stderr, 2 on a usage error.
@@ -19,7 +19,7 @@ use galerkin_radiosity::scenes;
 use galerkin_radiosity::session::{Method, Session};
 
 const USAGE: &str = "usage:
-  galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact | --hierarchy] [--accuracy A] [--threads N] [--memory-budget MB] [--no-corner-gather] [--quiet]
+  galerkin-radiosity bake SCENE.json -o OUT.json [--frames A:B] [--full | --exact | --hierarchy] [--accuracy A] [--threads N] [--memory-budget MB] [--no-corner-gather] [--reflecting-backs] [--quiet]
   galerkin-radiosity demo-scene -o SCENE.json [--kind cornell|cornell-light|room|billiard] [--frames N] [--subdiv N] [--order N]";
 
 fn main() -> ExitCode {
@@ -99,6 +99,7 @@ fn bake(args: &[String]) -> Result<(), CliError> {
     let exact = take_flag(&mut args, "--exact");
     let quiet = take_flag(&mut args, "--quiet");
     let no_gather = take_flag(&mut args, "--no-corner-gather");
+    let backs = take_flag(&mut args, "--reflecting-backs");
     if [full, exact, hierarchy].iter().filter(|&&x| x).count() > 1 {
         return Err(CliError::Usage("--full, --exact and --hierarchy exclude each other".into()));
     }
@@ -115,8 +116,13 @@ fn bake(args: &[String]) -> Result<(), CliError> {
     } else {
         Method::Incremental
     };
-    let result =
-        bake_into(input, &out, &partial, (frames, threads, budget, accuracy), (method, quiet, no_gather));
+    let result = bake_into(
+        input,
+        &out,
+        &partial,
+        (frames, threads, budget, accuracy),
+        (method, quiet, no_gather, backs),
+    );
     let _ = std::fs::remove_file(&partial);
     result
 }
@@ -145,7 +151,7 @@ fn bake_into(
     out: &str,
     partial: &Path,
     (frames, threads, budget, accuracy): (Option<String>, Option<String>, Option<u64>, Option<f64>),
-    (method, quiet, no_gather): (Method, bool, bool),
+    (method, quiet, no_gather, backs): (Method, bool, bool, bool),
 ) -> Result<(), CliError> {
     let mut scene = read_scene(&PathBuf::from(input))?;
     if let Some(a) = accuracy {
@@ -163,6 +169,9 @@ fn bake_into(
     }
     if no_gather {
         scene.settings.corner_gather = false;
+    }
+    if backs {
+        scene.settings.reflecting_backs = true;
     }
     if let Some(mb) = budget {
         scene.settings.memory_budget_mb = mb;
