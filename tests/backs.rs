@@ -215,3 +215,34 @@ fn the_cli_flag_turns_backs_on() {
     let parsed = parse_scene(&scene_to_json(&with_backs)).unwrap();
     assert!(parsed.settings.reflecting_backs);
 }
+
+/// A mirrored placement (negative scale; Blender keeps the object-space front side): the sheet's
+/// vertices mirrored in x about 0.5 and placed with a mirror in x, the same world positions. The
+/// vertex mirror turned the object-space front over, so its front faces the lamp and its back
+/// faces up, where the plain sheet's front faces up: each back is opposite its front, and a sheet
+/// with backs returns the same light to the lamp whichever side is its front.
+#[test]
+fn a_mirrored_sheet_has_its_back_opposite_its_front() {
+    let plain = lamp_and_sheet(true, true, 1, DVec3::ZERO);
+    let mut mirrored = plain.clone();
+    let sheet = &mut mirrored.objects[1];
+    for v in &mut sheet.vertices {
+        v.x = 1.0 - v.x;
+    }
+    sheet.matrix =
+        DMat4::from_translation(DVec3::new(1.0, 0.0, 0.0)) * DMat4::from_scale(DVec3::new(-1.0, 1.0, 1.0));
+    assert!(mirrored.objects[1].mirrored_at(1.0));
+    let (a, b) = (solved(&plain), solved(&mirrored));
+    // Front normals' z: up in the plain sheet, down in the mirrored one; backs the other way.
+    for (sys, front_z) in [(&a, 1.0), (&b, -1.0)] {
+        let sheet: Vec<_> = sys.elements.iter().filter(|e| e.object == 1).collect();
+        assert_eq!(sheet.iter().filter(|e| e.back).count(), 9);
+        for e in sheet {
+            let z = e.patch.centre_normal().z;
+            let want = if e.back { -front_z } else { front_z };
+            assert!((z - want).abs() < 1e-9, "back {}: normal z {z}, want {want}", e.back);
+        }
+    }
+    let worst = worst_relative(&lamp_values(&mirrored, &b), &lamp_values(&plain, &a));
+    assert!(worst < 1e-4, "mirrored against plain: worst {worst:e}");
+}
