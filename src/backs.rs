@@ -11,14 +11,19 @@
 //! the face with the winding reversed. It is not an occluder of its own: the face's triangles
 //! already are, and rays leaving the back skip them as they skip the front's
 //! ([`crate::visibility::Occluders::with_aliases`]). It emits nothing (a two-sided emitter's back
-//! is [`crate::lights`]' job), it is never split, and it is read back nowhere: a corner attribute
-//! holds one value per corner, the front's, as Cycles bakes the front.
+//! is [`crate::lights`]' job), it is split as a face ([`crate::contact_split`]), and it is read
+//! back nowhere: a corner attribute holds one value per corner, the front's, as Cycles bakes the
+//! front. Only planar faces get one (within `1e-9`, [`Patch::front_plane`]). On with
+//! `settings.reflecting_backs`, off by default: docs/validation-real.md, "Backs".
+//!
+//! Which faces are open is worked out again at every frame placed (a hash of the edges, linear
+//! in the faces): cheap next to a frame's links, not kept.
 
 use std::collections::HashMap;
 
-use crate::basis::Basis;
 use glam::DVec3;
 
+use crate::basis::Basis;
 use crate::geometry::{Aabb, Patch, Rect};
 use crate::quadrature::GaussLegendre;
 use crate::scene::placement::front_order;
