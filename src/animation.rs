@@ -17,7 +17,8 @@
 //! item 4). A static
 //! pair's segments do not move, so its mask is re-checked against the moved triangles alone
 //! (old and new positions, [`crate::visibility::Occluders::relink_visibility`]); the shaft
-//! traversal remains for pairs with a moved element and for the rare segment only the movers' old position blocked.
+//! traversal remains for pairs with a moved element and for the rare segment only the movers'
+//! old position blocked.
 //!
 //! How a changed pair is updated ([`Method::Incremental`](crate::session::Method)): while the
 //! relative motion is a translation along the direction of the pair's expansion, within
@@ -76,7 +77,8 @@ pub struct UpdateStats {
     pub shaft_tests: usize,
     /// Pairs examined in detail: moved relative to each other, or shaft entered by the swept bounds.
     pub candidates: usize,
-    /// Link visibility evaluations by a shaft traversal ([`crate::visibility::Occluders::link_visibility`]).
+    /// Link visibility evaluations by a shaft traversal
+    /// ([`crate::visibility::Occluders::link_visibility`]).
     pub visibility_checks: usize,
     /// Static pairs whose visibility was re-checked against the moved triangles only
     /// ([`crate::visibility::Occluders::relink_visibility`]).
@@ -116,7 +118,8 @@ pub struct AnimationState {
     /// The element geometry of the last update, for elements that do not move in the next.
     geometry: Option<KeptGeometry>,
     /// Per element: whether its plane has culled occluders
-    /// ([`crate::visibility::Occluders::culls`]) in any frame since the build; `None` before the first update.
+    /// ([`crate::visibility::Occluders::culls`]) in any frame since the build; `None` before the
+    /// first update.
     culled: Option<Vec<bool>>,
     /// Buffers of the last update, reused so that a frame does not fault in fresh pages: the
     /// batches' blocks and the blocks the store replaced.

@@ -39,22 +39,16 @@ pub fn faces_with_backs(scene: &Scene) -> Vec<Vec<bool>> {
     scene
         .objects
         .iter()
-        .map(|obj| {
+        .enumerate()
+        .map(|(o, obj)| {
             let open = open_faces(obj);
             obj.faces
                 .iter()
                 .enumerate()
-                .map(|(f, _)| open[f] && !material_may_emit(scene, obj.face_materials[f] as usize))
+                .map(|(f, _)| open[f] && !scene.may_emit(o, f, obj.face_materials[f]))
                 .collect()
         })
         .collect()
-}
-
-/// Whether material `m` emits at some frame (its emission or one of its keys).
-fn material_may_emit(scene: &Scene, m: usize) -> bool {
-    let lit = |e: &[f64; 3]| e.iter().any(|&c| c > 0.0);
-    lit(&scene.materials[m].emission)
-        || scene.emission_keys.get(m).is_some_and(|k| k.iter().any(|k| lit(&k.emission)))
 }
 
 /// Per face of `obj`: whether its connected piece (faces joined by shared edges, vertices welded
@@ -202,11 +196,6 @@ pub fn with_backs(
         out.push(back);
     }
     out
-}
-
-/// The number of backs `scene` gets at its first frame (the memory estimate's count).
-pub fn back_count(scene: &Scene) -> usize {
-    faces_with_backs(scene).iter().map(|b| b.iter().filter(|&&x| x).count()).sum()
 }
 
 #[cfg(test)]

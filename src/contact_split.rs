@@ -117,7 +117,8 @@ impl Setup {
     fn new(scene: &Scene, faces: &[Element]) -> Setup {
         // An emitter's light falls smoothly (the gather casts its own rays to it), and its own
         // radiosity is its emission: emitters neither split nor are split.
-        let emits: Vec<bool> = faces.iter().map(|f| emits_at_some_frame(scene, f)).collect();
+        let emits: Vec<bool> =
+            faces.iter().map(|f| scene.may_emit(f.object as usize, f.face as usize, f.material)).collect();
         // Only objects without keys split or are split: a fresh build at any frame then splits as
         // the first one did, which the animation keeps (`parts_of`), so both have the same elements.
         let keyed: Vec<bool> = faces.iter().map(|f| scene.objects[f.object as usize].is_animated()).collect();
@@ -338,15 +339,6 @@ impl Ord for Candidate {
             .then_with(|| other.3.s0.total_cmp(&self.3.s0))
             .then_with(|| other.3.t0.total_cmp(&self.3.t0))
     }
-}
-
-/// Whether face element `f` emits at its material's base or at any of its keys (not only at the
-/// frame built: the split must not change when a keyed light comes on).
-fn emits_at_some_frame(scene: &Scene, f: &Element) -> bool {
-    let m = f.material as usize;
-    let scale = scene.emission_scale(f.object as usize, f.face as usize);
-    let lit = |e: [f64; 3]| e.iter().zip(scale).any(|(&x, s)| x * s > 0.0);
-    lit(scene.materials[m].emission) || scene.emission_keys[m].iter().any(|k| lit(k.emission))
 }
 
 /// A triangle's size: the largest distance from its centroid to a corner (a sliver's shortest

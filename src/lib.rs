@@ -2,7 +2,8 @@
 //! Michelin (2001). See README.md for the method and ARCHITECTURE.md for the layout.
 //!
 //! Conventions: right-handed world space, units as given (the solver is scale-free); radiosity
-//! and exitance in W/m^2 per RGB channel; faces are one-sided, front counter-clockwise (open surfaces get a back, [`backs`]).
+//! and exitance in W/m^2 per RGB channel; faces are one-sided, front counter-clockwise (open
+//! surfaces may get a back, [`backs`]).
 
 // Numeric kernels index several arrays with one loop variable, as the equations do.
 #![allow(clippy::needless_range_loop)]

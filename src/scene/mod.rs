@@ -269,6 +269,16 @@ impl Scene {
         self.surfaces.get(o).and_then(|s| s.face_emission.get(f)).copied().unwrap_or([1.0; 3])
     }
 
+    /// Whether face `f` of object `o`, whose material is `material`, emits at some frame: at its
+    /// material's base or at any of its keys, times the face's scale (not only at one frame: what
+    /// depends on it must not change when a keyed light comes on).
+    pub fn may_emit(&self, o: usize, f: usize, material: u32) -> bool {
+        let m = material as usize;
+        let scale = self.emission_scale(o, f);
+        let lit = |e: [f64; 3]| e.iter().zip(scale).any(|(&x, s)| x * s > 0.0);
+        lit(self.materials[m].emission) || self.emission_keys[m].iter().any(|k| lit(k.emission))
+    }
+
     /// The exitance of face `f` of object `o`, whose material is `material`, at `frame`: the
     /// material's emission (keys included) times the face's scale ([`Scene::emission_scale`]).
     pub fn emission_of(&self, o: usize, f: usize, material: u32, frame: f64) -> [f64; 3] {
