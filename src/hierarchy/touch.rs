@@ -141,9 +141,19 @@ pub fn take_touched(hierarchy: &mut Hierarchy, touch: &Touch) -> Vec<(NodeId, No
     match by_walk(hierarchy, touch) {
         Some(found) => {
             let set: PairSet = found.iter().map(|&(a, b)| pair_tree::key(a, b)).collect();
-            // Still a pass over the stored pairs, but a lookup each, not a shaft test; and the
-            // pairs come back in the scan's order, so both ways refine the same work.
-            hierarchy.take_touched(|a, b| set.contains(&pair_tree::key(a, b)))
+            // A pair can be found only if both its ends are ends of found pairs: a look at two
+            // flags spares most stored pairs the hash lookup (which took a tenth of an updated
+            // frame of a 30k-triangle model).
+            let mut end = vec![false; hierarchy.tree.nodes.len()];
+            for &(a, b) in &found {
+                end[a as usize] = true;
+                end[b as usize] = true;
+            }
+            // Still a pass over the stored pairs, but no shaft test; and the pairs come back in
+            // the scan's order, so both ways refine the same work.
+            hierarchy.take_touched(|a, b| {
+                end[a as usize] && end[b as usize] && set.contains(&pair_tree::key(a, b))
+            })
         }
         None => hierarchy.take_touched(|a, b| touch.pair(a, b)),
     }
