@@ -136,6 +136,9 @@ pub struct HierarchyStats {
     pub updated: bool,
     pub moved_faces: usize,
     pub touched_pairs: usize,
+    /// Links and blocked pairs the relink rounds tested again with the solution's brightness
+    /// ([`refine::RefineStats::tested`]).
+    pub retested: usize,
     pub kept_links: usize,
     /// Of an update with the pair tree kept: the pairs its touched ones were refined again from
     /// (fewer than `touched_pairs` where whole subtrees were touched and could coarsen).
@@ -298,6 +301,7 @@ fn link_and_solve(
             None => {
                 let relinked = hierarchy.relink(ctx, &mut radiosity, &linked)?;
                 stats.compute_seconds += relinked.compute_seconds;
+                stats.retested += relinked.tested;
                 if relinked.relinked == 0 {
                     break;
                 }

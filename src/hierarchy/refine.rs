@@ -120,6 +120,42 @@ impl Oracle {
         a != b && matches!(self.decide(tree, radiosity, a, b, self.threshold), Verdict::Link)
     }
 
+    /// How near the link between `a` and `b` (`light`: a light link) comes at `radiosity` to
+    /// failing the test that made it: the largest of its power over the threshold (none when
+    /// neither end can split: that link stands whatever it carries) and, for a light link, its
+    /// power over a light link's limit. Each is linear in either end's brightness, so the test
+    /// can fail later only where this times the growth of an end's brightness exceeds 1.
+    /// Rounded up a little, so that the `f32` never understates it.
+    pub fn load(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId, light: bool) -> f32 {
+        let bar = self.threshold;
+        let split = if self.splittable(tree, a) || self.splittable(tree, b) {
+            self.pair_carried(tree, radiosity, a, b) / bar
+        } else {
+            0.0
+        };
+        let heavy =
+            if light { self.pair_power(tree, radiosity, a, b) / (coupling::LIGHT_SHARE * bar) } else { 0.0 };
+        let load = split.max(heavy) * (1.0 + 1e-6);
+        if load.is_finite() { load as f32 } else { f32::INFINITY }
+    }
+
+    /// What [`Oracle::load`] is for a link, for a pair none of whose rays passed: how near it
+    /// comes at `radiosity` to [`Oracle::may_carry_much`], which splits it.
+    pub fn blocked_load(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId) -> f32 {
+        if !(self.splittable(tree, a) || self.splittable(tree, b)) {
+            return 0.0;
+        }
+        let load = self.pair_power(tree, radiosity, a, b) / (PARTIAL_SHARE * self.threshold) * (1.0 + 1e-6);
+        if load.is_finite() { load as f32 } else { f32::INFINITY }
+    }
+
+    /// The two oracles decide alike but for their thresholds (which [`Hierarchy::decided_at`]
+    /// is relative to).
+    pub fn same_rules(&self, other: &Oracle) -> bool {
+        let rules = |o: &Oracle| (o.min_area, o.max_depth, o.clusters, o.cluster_separation, o.light_links);
+        rules(self) == rules(other)
+    }
+
     fn splittable(&self, tree: &Tree, id: NodeId) -> bool {
         match &tree.node(id).kind {
             Kind::Cluster { .. } => true,
@@ -249,21 +285,16 @@ impl Oracle {
     }
 }
 
-/// Tests every entry of `list` in parallel (the tree and the estimates are only read) and moves
-/// those `fails` gives a pair for onto `work`, keeping the others in order.
-fn take_failing<T: Sync>(
-    list: &mut Vec<T>,
-    work: &mut Vec<(NodeId, NodeId)>,
-    fails: impl Fn(&T) -> Option<(NodeId, NodeId)> + Sync,
-) {
-    let failed: Vec<Option<(NodeId, NodeId)>> = list.par_iter().map(&fails).collect();
-    let mut verdicts = failed.into_iter();
-    list.retain(|_| match verdicts.next().expect("a verdict per entry") {
-        Some(pair) => {
-            work.push(pair);
-            false
+/// Keeps the entries of `list` whose `keep` is true, in order, and hands the others to
+/// `removed`.
+fn keep_where<T>(list: &mut Vec<T>, keep: &[bool], mut removed: impl FnMut(&T)) {
+    let mut keep = keep.iter();
+    list.retain(|x| {
+        let k = *keep.next().expect("a verdict per entry");
+        if !k {
+            removed(x);
         }
-        None => true,
+        k
     });
 }
 
@@ -274,6 +305,9 @@ pub struct Hierarchy {
     /// Pairs the oracle accepted whose sampled rays were all blocked ([`coupling::Computed`]):
     /// no link for the solve, sources the corner gather tries with its own rays.
     pub blocked: Vec<(NodeId, NodeId)>,
+    /// Per blocked pair, in `blocked`'s order, what [`Link::load`] is to a link
+    /// ([`Oracle::blocked_load`]); shorter than `blocked`: unknown, tested.
+    pub blocked_load: Vec<f32>,
     /// Pairs of different faces that exchange nothing as they stand: one behind the other's
     /// plane, facing away, or no sample between them arriving. Kept so that a later frame in
     /// which they move can link them ([`super::update`]): with `links` and `blocked` they
@@ -283,6 +317,15 @@ pub struct Hierarchy {
     /// The inner pairs of the refinement and where each was split, when kept for an animation's
     /// coarsening ([`super::pair_tree`]).
     pub splits: Splits,
+    /// Per node, a brightness (radiosity estimate over the oracle's threshold) no higher than
+    /// the one at which each link and blocked pair at the node was last decided;
+    /// `NEG_INFINITY` (or no entry): unknown. [`Hierarchy::relink`] tests again only pairs with
+    /// an end now brighter than this: the rest of a verdict is the pair's geometry, which only
+    /// a move changes (and a move's pairs are linked again, [`super::update`]), and every test
+    /// that splits a pair grows with either end's brightness ([`Oracle::carried_as`] is linear
+    /// in it). Tested whole, the relink rounds were a third of an updated frame of the full
+    /// monastery.
+    pub decided_at: Vec<f64>,
 }
 
 /// Counts of one refinement.
@@ -291,6 +334,9 @@ pub struct RefineStats {
     pub links: usize,
     pub split_for_shadows: usize,
     pub relinked: usize,
+    /// Links and blocked pairs [`Hierarchy::relink`] tested again (the others could not fail:
+    /// [`Hierarchy::decided_at`]).
+    pub tested: usize,
     /// Wall seconds spent computing the accepted pairs' couplings (quadrature and visibility),
     /// apart from deciding and filing them: what the seed's series could replace at most.
     pub compute_seconds: f64,
@@ -298,7 +344,39 @@ pub struct RefineStats {
 
 impl Hierarchy {
     pub fn new(tree: Tree, oracle: Oracle, splits: Splits) -> Self {
-        Self { tree, links: Vec::new(), blocked: Vec::new(), idle: Vec::new(), oracle, splits }
+        let (links, blocked, blocked_load, idle) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        Self { tree, links, blocked, blocked_load, idle, oracle, splits, decided_at: Vec::new() }
+    }
+
+    /// Records that every pair at every node was just decided at `radiosity` (or, for a node
+    /// not `all`, that its new pairs were: it keeps the lower of its record and this), and that
+    /// the nodes from `new_from` on are new, all their pairs decided now.
+    fn note_decided(&mut self, radiosity: &[f64], new_from: usize, all: bool) {
+        let bar = self.oracle.threshold;
+        if !(bar > 0.0 && bar.is_finite()) {
+            self.decided_at.clear();
+            return;
+        }
+        let now = |i: usize| radiosity.get(i).map_or(f64::NEG_INFINITY, |&r| r / bar);
+        let n = self.tree.nodes.len();
+        self.decided_at.resize(new_from.min(n), f64::NEG_INFINITY);
+        for (i, v) in self.decided_at.iter_mut().enumerate() {
+            *v = if all { now(i) } else { v.min(now(i)) };
+        }
+        self.decided_at.extend((self.decided_at.len()..n).map(now));
+    }
+
+    /// Per node, how many times brighter it is now, at `radiosity`, than its pairs were decided
+    /// at ([`Hierarchy::decided_at`]); infinite where that is unknown or was dark.
+    fn growth(&self, radiosity: &[f64]) -> Vec<f64> {
+        let bar = self.oracle.threshold;
+        (0..self.tree.nodes.len())
+            .map(|i| match (self.decided_at.get(i), radiosity.get(i)) {
+                (_, Some(&r)) if r <= 0.0 => 0.0,
+                (Some(&v), Some(&r)) if v > 0.0 => r / bar / v,
+                _ => f64::INFINITY,
+            })
+            .collect()
     }
 
     /// Refines the node pairs of `work` into links, as [`Hierarchy::link_all`] refines the
@@ -311,7 +389,9 @@ impl Hierarchy {
         progress: LinkProgress,
     ) -> Result<RefineStats> {
         let mut stats = RefineStats::default();
+        let before = self.tree.nodes.len();
         self.refine_pairs(ctx, radiosity, work, &mut stats, progress)?;
+        self.note_decided(radiosity, before, false);
         stats.links = self.links.len();
         Ok(stats)
     }
@@ -327,15 +407,17 @@ impl Hierarchy {
             }
             !hit
         });
-        for list in [&mut self.blocked, &mut self.idle] {
-            list.retain(|&(a, b)| {
-                let hit = touched(a, b);
-                if hit {
-                    out.push((a, b));
-                }
-                !hit
-            });
-        }
+        let keep: Vec<bool> = self.blocked.iter().map(|&(a, b)| !touched(a, b)).collect();
+        self.blocked_load.resize(self.blocked.len(), f32::INFINITY);
+        keep_where(&mut self.blocked_load, &keep, |_| {});
+        keep_where(&mut self.blocked, &keep, |&p| out.push(p));
+        self.idle.retain(|&(a, b)| {
+            let hit = touched(a, b);
+            if hit {
+                out.push((a, b));
+            }
+            !hit
+        });
         out
     }
 
@@ -356,6 +438,7 @@ impl Hierarchy {
         let root = self.tree.root;
         let mut stats = RefineStats::default();
         self.refine_pairs(ctx, radiosity, vec![(root, root)], &mut stats, progress)?;
+        self.note_decided(radiosity, 0, true);
         stats.links = self.links.len();
         Ok(stats)
     }
@@ -371,26 +454,69 @@ impl Hierarchy {
         let mut stats = RefineStats::default();
         let bar = self.oracle.threshold;
         let mut work = Vec::new();
+        // Only a pair with an end brighter than when it was decided can fail now, and a link
+        // only if its load grew past 1 (`Oracle::load`: linear in each end's brightness).
+        let growth = self.growth(radiosity);
+        let grown = |a: NodeId, b: NodeId| growth[a as usize].max(growth[b as usize]);
         let tree = &self.tree;
         let oracle = &self.oracle;
         // The same test that made each link, with the new brightness (in parallel: the tree and
         // the estimates are only read); a light link that may now carry more than a light link
-        // may is computed again in full.
-        take_failing(&mut self.links, &mut work, |l| {
-            let light = matches!(l.coupling, coupling::Coupling::Constants { .. });
-            let kept = matches!(oracle.decide(tree, radiosity, l.a, l.b, bar), Verdict::Link)
-                && !(light && oracle.weight(tree, radiosity, l.a, l.b) == Weight::Full);
-            (!kept).then_some((l.a, l.b))
-        });
+        // may is computed again in full. Every kept link's load is brought to the brightness
+        // now, which `decided_at` records below: scaled by its ends' growth where untested (a
+        // bound still), computed again where tested.
+        let tested = std::sync::atomic::AtomicUsize::new(0);
+        let verdicts: Vec<bool> = self
+            .links
+            .par_iter_mut()
+            .map(|l| {
+                // (A NaN, an unknown end's growth times no load, is tested.)
+                let bound = l.load as f64 * grown(l.a, l.b);
+                if bound <= 1.0 {
+                    l.load = (bound * (1.0 + 1e-6)) as f32;
+                    return true;
+                }
+                tested.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let light = matches!(l.coupling, coupling::Coupling::Constants { .. });
+                let kept = matches!(oracle.decide(tree, radiosity, l.a, l.b, bar), Verdict::Link)
+                    && !(light && oracle.weight(tree, radiosity, l.a, l.b) == Weight::Full);
+                if kept {
+                    l.load = oracle.load(tree, radiosity, l.a, l.b, light);
+                }
+                kept
+            })
+            .collect();
+        keep_where(&mut self.links, &verdicts, |l| work.push((l.a, l.b)));
         // Hidden pairs decided while their ends were dark (a first round knows only the
         // emitters' light) are split now if they may carry enough: kept whole, each would drop
         // all its light from the solve, always the same way (the Cornell box's faces came out
         // 1-5% too dark).
-        take_failing(&mut self.blocked, &mut work, |&(a, b)| {
-            oracle.may_carry_much(tree, radiosity, a, b).then_some((a, b))
-        });
+        // (Their loads as the links' above.)
+        self.blocked_load.resize(self.blocked.len(), f32::INFINITY);
+        let verdicts: Vec<bool> = self
+            .blocked
+            .par_iter()
+            .zip(self.blocked_load.par_iter_mut())
+            .map(|(&(a, b), load)| {
+                let bound = *load as f64 * grown(a, b);
+                if bound <= 1.0 {
+                    *load = (bound * (1.0 + 1e-6)) as f32;
+                    return true;
+                }
+                tested.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let kept = !oracle.may_carry_much(tree, radiosity, a, b);
+                if kept {
+                    *load = oracle.blocked_load(tree, radiosity, a, b);
+                }
+                kept
+            })
+            .collect();
+        keep_where(&mut self.blocked_load, &verdicts, |_| {});
+        keep_where(&mut self.blocked, &verdicts, |&p| work.push(p));
         stats.relinked = work.len();
+        stats.tested = tested.into_inner();
         self.refine_pairs(ctx, radiosity, work, &mut stats, progress)?;
+        self.note_decided(radiosity, 0, true);
         stats.links = self.links.len();
         Ok(stats)
     }
@@ -479,6 +605,7 @@ impl Hierarchy {
                 budget::try_reserve(&mut self.links, part.len(), LINKS)?;
                 budget::try_reserve(&mut self.idle, part.len(), LINKS)?;
                 budget::try_reserve(&mut self.blocked, part.len(), LINKS)?;
+                budget::try_reserve(&mut self.blocked_load, part.len(), LINKS)?;
                 for (&(a, b, _), c) in chunk.iter().zip(part.drain(..)) {
                     if self.take_computed(a, b, c, radiosity, &mut work, stats)? {
                         settled += space.faces_between(&self.tree, a, b);
@@ -510,8 +637,17 @@ impl Hierarchy {
             return Ok(false);
         }
         match c.coupling {
-            Some(coupling) => self.links.push(Link { a, b, coupling }),
-            None if c.blocked => self.blocked.push((a, b)),
+            Some(coupling) => {
+                let light = matches!(coupling, coupling::Coupling::Constants { .. });
+                let load = self.oracle.load(&self.tree, radiosity, a, b, light);
+                self.links.push(Link { a, b, coupling, load })
+            }
+            None if c.blocked => {
+                // (Unknown loads before this one stay unknown.)
+                self.blocked_load.resize(self.blocked.len(), f32::INFINITY);
+                self.blocked_load.push(self.oracle.blocked_load(&self.tree, radiosity, a, b));
+                self.blocked.push((a, b));
+            }
             None if !self.same_face(a, b) => self.idle.push((a, b)),
             None => {}
         }

@@ -80,13 +80,21 @@ pub fn update_frame(
     state.add_sources(&tree, &lit.emission, lit.lights.as_ref());
     state.refresh(&tree);
     let oracle = Oracle::of(hs, state.source_power(&tree), total_area);
+    // What the last frame's verdicts were decided at holds for this oracle only if it decides
+    // by the same rules.
+    let mut decided_at = std::mem::take(&mut previous.hierarchy.decided_at);
+    if !oracle.same_rules(&previous.hierarchy.oracle) {
+        decided_at.clear();
+    }
     let mut hierarchy = Hierarchy {
         tree,
         links: std::mem::take(&mut previous.hierarchy.links),
         blocked: std::mem::take(&mut previous.hierarchy.blocked),
+        blocked_load: std::mem::take(&mut previous.hierarchy.blocked_load),
         idle: std::mem::take(&mut previous.hierarchy.idle),
         oracle,
         splits: std::mem::take(&mut previous.hierarchy.splits),
+        decided_at,
     };
     // Kept or not, the record follows the settings from here on.
     if hs.keep_pair_tree != hierarchy.splits.is_kept() {

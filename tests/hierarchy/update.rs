@@ -195,6 +195,42 @@ fn updated_frames_agree_with_frames_solved_from_scratch() {
     assert!(err < 0.01, "dimmed light: updated off the fresh frame by {err} rms");
 }
 
+/// The relink rounds test again only links and blocked pairs whose recorded load, times their
+/// ends' growth in brightness since, passes 1 (`Hierarchy::decided_at`, `Link::load`): over the
+/// demo animation with the light dimming and brightening, the frames are the same, link for link
+/// and bit for bit, as when every pair is tested (the records cleared before each update), with
+/// fewer pairs tested.
+#[test]
+fn relinking_tests_only_what_may_fail() {
+    let mut scene = animated();
+    let light = scene.materials.iter().position(|m| m.emission[0] > 0.0).unwrap();
+    let e = scene.materials[light].emission;
+    scene.emission_keys[light] = emission_ramp((1.0, e.map(|x| 0.3 * x)), (8.0, e.map(|x| 2.0 * x)));
+    let hs = HierarchySettings { keep_pair_tree: true, ..Default::default() };
+    let mut filtered = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
+    let mut every = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
+    let (mut tested_filtered, mut tested_every) = (0, 0);
+    for frame in 2..=8 {
+        let f = frame as f64;
+        every.hierarchy.decided_at.clear();
+        every.hierarchy.blocked_load.clear();
+        let a = update_frame(&mut filtered, &scene, f, &hs, &no_progress).unwrap();
+        let b = update_frame(&mut every, &scene, f, &hs, &no_progress).unwrap();
+        let pairs = |h: &HierarchicalFrame| {
+            let mut p: Vec<_> = h.hierarchy.links.iter().map(|l| (l.a, l.b)).collect();
+            p.sort_unstable();
+            (p, h.hierarchy.blocked.len(), h.hierarchy.idle.len())
+        };
+        assert_eq!(pairs(&a), pairs(&b), "frame {frame}: the links differ");
+        assert_eq!(face_means(&a), face_means(&b), "frame {frame}: the solutions differ");
+        tested_filtered += a.stats.retested;
+        tested_every += b.stats.retested;
+        (filtered, every) = (a, b);
+    }
+    println!("pairs tested again: {tested_filtered} with the records, {tested_every} without");
+    assert!(tested_every > 0 && tested_filtered * 4 < tested_every);
+}
+
 /// A cancelled update leaves the last frame readable as it was, and the next frame is solved
 /// from scratch (the cancelled update took the links).
 #[test]
