@@ -29,8 +29,6 @@
 
 use rayon::prelude::*;
 
-use glam::DVec3;
-
 use crate::error::{Error, Result};
 use crate::geometry::{Aabb, Patch};
 use crate::hemisphere;
@@ -43,9 +41,13 @@ use crate::quadrature::GaussLegendre;
 use crate::replay::Replay;
 use crate::scene::Scene;
 use crate::solver;
-use crate::system::{Progress, System, build_elements_reusing};
+use crate::system::{Progress, System};
 use crate::visibility::shaft::Shaft;
 use crate::visibility::{MovedTriangles, Visibility};
+
+mod motion;
+
+use motion::{FrameMotion, NewFrame};
 
 /// What one update did.
 #[derive(Clone, Debug, Default)]
@@ -152,6 +154,15 @@ impl AnimationState {
             replay: None,
             updates: 0,
             visibility_changed: Vec::new(),
+        }
+    }
+
+    /// Bumps the epoch of every element that did not move by a pure translation this frame.
+    fn bump_epochs(&mut self, translated: &[bool]) {
+        for (e, &t) in translated.iter().enumerate() {
+            if !t {
+                self.epochs[e] = self.epochs[e].wrapping_add(1);
+            }
         }
     }
 
@@ -320,54 +331,15 @@ pub fn advance(
     let s = &next.settings;
     let basis = sys.basis;
     let nb = basis.len();
-    // Split faces keep their parts (crate::contact_split), decided when the system was built.
-    // (Open surfaces' backs are faces here: crate::backs.)
-    let faces = build_elements_reusing(next, frame, basis, &sys.elements);
-    let faces = crate::backs::with_backs(next, frame, faces, basis, &sys.elements);
-    let parts = crate::contact_split::parts_of(&faces, &sys.elements);
-    let new_elements = crate::contact_split::split_faces(faces, &parts, basis, &sys.elements);
-    if new_elements.len() != sys.elements.len()
-        || new_elements
-            .iter()
-            .zip(&sys.elements)
-            .any(|(a, b)| (a.object, a.face, a.back) != (b.object, b.face, b.back))
-    {
+    let Some(new) = NewFrame::place(sys, next, frame) else {
         return Ok(Outcome::NeedsRebuild);
-    }
+    };
+    let FrameMotion { scene_scale, eps, shift, translated, swept } = FrameMotion::of(&new, &sys.elements);
+    state.bump_epochs(&translated);
+    let mut stats = UpdateStats { moved_elements: new.moved_count(), ..Default::default() };
+    let NewFrame { elements: new_elements, patches, moved } = new;
     let n = new_elements.len();
-    let patches: Vec<Patch> = new_elements.iter().map(|e| e.patch).collect();
     let old: Vec<&Patch> = sys.elements.iter().map(|e| &e.patch).collect();
-    let moved: Vec<bool> = (0..n).map(|e| patches[e] != *old[e]).collect();
-    // A face that starts or stops covering a coplanar one changes that one's weight as a source,
-    // so every pair of it (crate::overlap): rebuild, which is rare.
-    if moved.iter().any(|&m| m) && crate::overlap::source_weights(&patches) != sys.source_weights {
-        return Ok(Outcome::NeedsRebuild);
-    }
-    let scene_scale = patches.iter().fold(Aabb::EMPTY, |b, p| b.union(p.bounds())).diagonal().length();
-    let eps = 1e-12 * scene_scale.max(1e-300);
-    // This frame's motion of each element, and whether it is a pure translation.
-    let shift: Vec<DVec3> = (0..n).map(|e| patches[e].corners[0] - old[e].corners[0]).collect();
-    let translated: Vec<bool> = (0..n)
-        .map(|e| (0..4).all(|c| (patches[e].corners[c] - old[e].corners[c] - shift[e]).length() <= eps))
-        .collect();
-    for e in 0..n {
-        if !translated[e] {
-            state.epochs[e] = state.epochs[e].wrapping_add(1);
-        }
-    }
-    // The bounds each moving object sweeps (old and new position), one box per object while
-    // they are few: a light at the ceiling and a block on the floor together would span the room.
-    let mut swept_by_object = std::collections::BTreeMap::new();
-    for e in (0..n).filter(|&e| moved[e]) {
-        let b = swept_by_object.entry(sys.elements[e].object).or_insert(Aabb::EMPTY);
-        *b = b.union(old[e].bounds()).union(patches[e].bounds());
-    }
-    let mut swept: Vec<Aabb> = swept_by_object.into_values().collect();
-    if swept.len() > MAX_SWEPT_BOXES {
-        swept = vec![swept.iter().fold(Aabb::EMPTY, |a, b| a.union(*b))];
-    }
-    let mut stats =
-        UpdateStats { moved_elements: moved.iter().filter(|&&m| m).count(), ..Default::default() };
     let mut delta_b = vec![[0.0f64; 3]; n * nb];
     // The last frame's shots, replayed as this frame's first guess (`crate::replay`). Taken out
     // of the state: it goes back only with a finished solve (it must describe the kernel the
@@ -980,9 +952,6 @@ struct KernelChange<'a> {
 /// How many changes ahead `Delta K (b - u)` prefetches blocks.
 const PREFETCH_CHANGES: usize = 4;
 
-/// Moving objects up to which each gets its own swept box (each box costs a test per pair).
-const MAX_SWEPT_BOXES: usize = 4;
-
 /// A pair whose visibility changed (or that was added) is not expanded until its visibility has
 /// held for this many updates. In a moving penumbra a pair's mask changes every few frames, and
 /// each change drops its series: re-expanded the next frame, as before session 7, the moving-light
@@ -1076,6 +1045,8 @@ fn delta_kb_nb<const NB: usize>(
 
 #[cfg(test)]
 mod tests {
+    use glam::DVec3;
+
     use super::*;
     use crate::scene::{Key, KeyTransform, Material, Settings};
     use crate::scenes::subdivided_quad;
