@@ -46,6 +46,7 @@ use crate::visibility::shaft::Shaft;
 use crate::visibility::{MovedTriangles, Visibility};
 
 mod motion;
+mod solve;
 
 use motion::{FrameMotion, NewFrame};
 
@@ -855,48 +856,8 @@ pub fn advance(
     stats.segments_tested = crate::visibility::segments_tested() - segments_before;
     stats.kernel_seconds = start.elapsed().as_secs_f64();
 
-    // Emission changes, the lights' direct light among them, enter as Delta e (eq. 9).
-    let (emission, direct, lights) = crate::system::frame_sources(next, frame, &new_elements, basis);
-    let old_sources = sys.sources();
-    (sys.direct, sys.lights) = (direct, lights);
-    for (k, d) in delta_b.iter_mut().enumerate() {
-        let new =
-            std::array::from_fn::<f64, 3, _>(|c| emission[k][c] + sys.direct.get(k).map_or(0.0, |x| x[c]));
-        for c in 0..3 {
-            d[c] += new[c] - old_sources[k][c];
-        }
-    }
-    for (k, d) in delta_b.iter().enumerate() {
-        for c in 0..3 {
-            sys.solution.b[k][c] += d[c];
-            sys.solution.unshot[k][c] += d[c];
-        }
-    }
-    sys.elements = new_elements;
-    // The transfers were moved with the previous areas; a scaled element reweighs them all.
-    sys.links.set_receiver_areas(&sys.areas());
-    sys.emission = emission;
-    let surface: Vec<[f64; 3]> = sys.elements.iter().map(|e| e.reflectance(next)).collect();
-    if surface != sys.surface_reflectance {
-        // A material changed: Delta K is not formed for that (as before the bound), the bound
-        // is taken afresh.
-        sys.reflectance = crate::system::bounded_reflectances(&sys.links, &surface);
-        sys.surface_reflectance = surface;
-    }
-
-    let solve_start = std::time::Instant::now();
-    // Replay the last frame's shots, then shoot what is left; record this frame's for the next.
-    let before = sys.solution.clone();
-    // (Under other reflectances than the recorded ones the replay would not keep the invariant.)
-    if let Some(r) = replay.as_ref().filter(|r| r.applies_to(&sys.surface_reflectance)) {
-        stats.replay_scale = r.apply(&mut sys.solution, &delta_k_sigma, sys.links.transfers());
-    }
-    let stop = s.tolerance * sys.emitted_power();
-    let cancel = || !progress(1.0, "solve");
-    let shot = solver::shoot(&sys.links, &sys.reflectance, &mut sys.solution, stop, &cancel)?;
-    state.replay = Some(Replay::record(&before, &sys.solution, &sys.surface_reflectance));
-    stats.solve_seconds = solve_start.elapsed().as_secs_f64();
-    stats.shots = shot.shots;
+    solve::enter_frame(sys, next, frame, new_elements, &mut delta_b);
+    state.replay = Some(solve::solve(sys, replay, &delta_k_sigma, s.tolerance, progress, &mut stats)?);
     Ok(Outcome::Updated(stats))
 }
 
