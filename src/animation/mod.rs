@@ -30,10 +30,10 @@
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::geometry::{Aabb, Patch};
+use crate::geometry::Patch;
 use crate::hemisphere;
 use crate::kernel::PairContext;
-use crate::kernel::assemble::{ElementGeometry, KeptGeometry, integrate_visible_into};
+use crate::kernel::assemble::{KeptGeometry, integrate_visible_into};
 use crate::kernel::pair::SEPARATION;
 use crate::kernel::series::{self, PairSeries, SERIES_MAX_T, SERIES_ORDER};
 use crate::links::{LinkStore, PairId, ReplacedBlocks};
@@ -42,12 +42,13 @@ use crate::replay::Replay;
 use crate::scene::Scene;
 use crate::solver;
 use crate::system::{Progress, System};
-use crate::visibility::shaft::Shaft;
 use crate::visibility::{MovedTriangles, Visibility};
 
+mod candidates;
 mod motion;
 mod solve;
 
+use candidates::{Candidate, Found, PairCandidate};
 use motion::{FrameMotion, NewFrame};
 
 /// What one update did.
@@ -306,18 +307,6 @@ struct UpdateBatch {
     visibility_relinked: usize,
 }
 
-/// Relative motion of the frame for the candidates with a moved element.
-#[derive(Clone, Copy)]
-enum Candidate {
-    /// The two elements moved relative to each other.
-    Moved,
-    /// Only visibility may have changed (a static pair near a moving object, or a rigid pair).
-    VisibilityOnly,
-}
-
-/// A pair `(i, j)`, `i < j`, that may have changed.
-type PairCandidate = (u32, u32, Candidate);
-
 /// Updates `sys` (solved for `prev`) to `next` at `frame`.
 pub fn advance(
     sys: &mut System,
@@ -335,11 +324,12 @@ pub fn advance(
     let Some(new) = NewFrame::place(sys, next, frame) else {
         return Ok(Outcome::NeedsRebuild);
     };
-    let FrameMotion { scene_scale, eps, shift, translated, swept } = FrameMotion::of(&new, &sys.elements);
-    state.bump_epochs(&translated);
+    let motion = FrameMotion::of(&new, &sys.elements);
+    state.bump_epochs(&motion.translated);
     let mut stats = UpdateStats { moved_elements: new.moved_count(), ..Default::default() };
-    let NewFrame { elements: new_elements, patches, moved } = new;
-    let n = new_elements.len();
+    let n = new.elements.len();
+    let (patches, moved) = (&new.patches, &new.moved);
+    let FrameMotion { ref shift, ref translated, .. } = motion;
     let old: Vec<&Patch> = sys.elements.iter().map(|e| &e.patch).collect();
     let mut delta_b = vec![[0.0f64; 3]; n * nb];
     // The last frame's shots, replayed as this frame's first guess (`crate::replay`). Taken out
@@ -357,104 +347,17 @@ pub fn advance(
             vis_axis: s.visibility_samples,
             adaptive: s.adaptive_quadrature,
         };
-        let kept_geometry = state.geometry.take();
-        let shaft_eps = 1e-9 * scene_scale;
-        // A static pair's mask can change only where a moved triangle meets one of its segments,
-        // which lie between the two elements' visibility samples: the shafts between the samples'
-        // bounds (narrower than the patches') hold them (`visibility::sample_bounds`).
-        let bounds: Vec<Aabb> =
-            patches.iter().map(|p| crate::visibility::sample_bounds(p, s.visibility_samples)).collect();
-        // Per swept box and element, 3 bits "min <= swept max" and 3 bits "max >= swept min"
-        // (x, y, z): a pair's union box overlaps the swept box when its two codes have all six.
-        let codes: Vec<Vec<u8>> = swept
-            .iter()
-            .map(|x| {
-                let code =
-                    |b: &Aabb| (b.min.cmple(x.max).bitmask() | x.min.cmple(b.max).bitmask() << 3) as u8;
-                bounds.iter().map(code).collect()
-            })
-            .collect();
-        // Per element i, its candidates (i, j > i) and how many shafts it tested.
-        let moved_bytes: Vec<u8> = moved.iter().map(|&m| m as u8).collect();
-        let scan = || -> Vec<(Vec<PairCandidate>, usize)> {
-            (0..n)
-                .into_par_iter()
-                .map_init(Vec::new, |worth, i| {
-                    // First, branch-free over all j > i (vectorised), whether (i, j) is worth a
-                    // look: a moved element, or a pair box meeting a swept box. Most pairs are
-                    // neither (85% on the moving-light box). The scan on one thread, least of 3
-                    // frames, 3 runs: 3.2 -> 2.2 ms, of which the shaft tests take 0.9.
-                    let rest = (i + 1)..n;
-                    worth.clear();
-                    worth.extend(moved_bytes[rest.clone()].iter().map(|&m| m | moved_bytes[i]));
-                    if s.visibility {
-                        for code in &codes {
-                            let ci = code[i];
-                            for (w, &cj) in worth.iter_mut().zip(&code[rest.clone()]) {
-                                *w |= (((ci | cj) == 0b11_1111) as u8) << 1;
-                            }
-                        }
-                    }
-                    let mut found = Vec::new();
-                    let mut tests = 0;
-                    // (Eight at a time: a whole zero word is skipped at once.)
-                    worth.resize(worth.len().next_multiple_of(8), 0);
-                    let words = worth
-                        .chunks_exact(8)
-                        .enumerate()
-                        .filter(|(_, w)| u64::from_ne_bytes((*w).try_into().expect("eight bytes")) != 0);
-                    let marked = words.flat_map(|(c, w)| {
-                        w.iter().enumerate().filter(|(_, x)| **x != 0).map(move |(k, _)| 8 * c + k)
-                    });
-                    for k in marked {
-                        let j = i + 1 + k;
-                        if moved[i] || moved[j] {
-                            let rigid =
-                                translated[i] && translated[j] && (shift[j] - shift[i]).length() <= eps;
-                            if !rigid {
-                                found.push((i as u32, j as u32, Candidate::Moved));
-                                continue;
-                            }
-                        }
-                        if !s.visibility {
-                            continue;
-                        }
-                        let (bi, bj) = (&bounds[i], &bounds[j]);
-                        for (x, code) in swept.iter().zip(&codes) {
-                            if code[i] | code[j] != 0b11_1111 {
-                                continue; // The pair's box misses this swept box.
-                            }
-                            tests += 1;
-                            if Shaft::between_may_contain_box(bi, bj, x, shaft_eps) {
-                                found.push((i as u32, j as u32, Candidate::VisibilityOnly));
-                                break;
-                            }
-                        }
-                    }
-                    (found, tests)
-                })
-                .collect()
-        };
-        // The occluders' BVH is built on one thread: the other scans meanwhile.
-        let ((occluders, geom), per_element) = rayon::join(
-            || {
-                let occluders = s
-                    .visibility
-                    .then(|| crate::system::occluders_of(&new_elements, &patches, s.visibility_samples));
-                (occluders, ElementGeometry::reusing(kept_geometry, &patches, &moved, &ctx))
-            },
-            scan,
-        );
+        let found = candidates::find(&new, &motion, state.geometry.take(), &ctx, s);
         state.index.sync(&sys.links);
-        stats.shaft_tests = per_element.iter().map(|(_, t)| t).sum();
-        let candidates: Vec<PairCandidate> = per_element.into_iter().flat_map(|(c, _)| c).collect();
-        stats.candidates = candidates.len();
+        stats.shaft_tests = found.shaft_tests;
+        stats.candidates = found.pairs.len();
+        let Found { pairs: candidates, occluders, geom, .. } = found;
         // Static pairs re-check their masks against the moved triangles only (exact, see
         // `Occluders::relink_visibility`) when neither element has culled occluders by its plane
         // since the build: then every mask they hold is an any-hit mask over all occluders.
         // (A back's triangles are its front's: crate::backs.)
         let moved_triangles = MovedTriangles::new(
-            (0..n).filter(|&e| moved[e] && !new_elements[e].back).map(|e| (old[e], &patches[e])),
+            (0..n).filter(|&e| moved[e] && !new.elements[e].back).map(|e| (old[e], &patches[e])),
         );
         if let Some(o) = &occluders {
             let before = state.culled.take().unwrap_or_else(|| {
@@ -818,7 +721,7 @@ pub fn advance(
             .into_par_iter()
             .filter(|&r| first[r] < first[r + 1])
             .filter_map(|r| {
-                let rho = new_elements[r].reflectance(next);
+                let rho = new.elements[r].reflectance(next);
                 let bounded = hemisphere::bounded_reflectance(&sys_ref.links, r as u32, rho);
                 (bounded != sys_ref.reflectance[r]).then_some((r, bounded))
             })
@@ -856,7 +759,7 @@ pub fn advance(
     stats.segments_tested = crate::visibility::segments_tested() - segments_before;
     stats.kernel_seconds = start.elapsed().as_secs_f64();
 
-    solve::enter_frame(sys, next, frame, new_elements, &mut delta_b);
+    solve::enter_frame(sys, next, frame, new.elements, &mut delta_b);
     state.replay = Some(solve::solve(sys, replay, &delta_k_sigma, s.tolerance, progress, &mut stats)?);
     Ok(Outcome::Updated(stats))
 }
