@@ -29,27 +29,26 @@
 
 use rayon::prelude::*;
 
-use crate::error::{Error, Result};
-use crate::geometry::Patch;
+use crate::error::Result;
 use crate::hemisphere;
 use crate::kernel::PairContext;
-use crate::kernel::assemble::{KeptGeometry, integrate_visible_into};
-use crate::kernel::pair::SEPARATION;
-use crate::kernel::series::{self, PairSeries, SERIES_MAX_T, SERIES_ORDER};
+use crate::kernel::assemble::KeptGeometry;
+use crate::kernel::series::PairSeries;
 use crate::links::{LinkStore, PairId, ReplacedBlocks};
 use crate::quadrature::GaussLegendre;
 use crate::replay::Replay;
 use crate::scene::Scene;
 use crate::solver;
 use crate::system::{Progress, System};
-use crate::visibility::{MovedTriangles, Visibility};
 
 mod candidates;
 mod motion;
+mod pairs;
 mod solve;
 
-use candidates::{Candidate, Found, PairCandidate};
+use candidates::Found;
 use motion::{FrameMotion, NewFrame};
+use pairs::{PairPhase, PairUpdate, Reason, SeriesAction};
 
 /// What one update did.
 #[derive(Clone, Debug, Default)]
@@ -231,82 +230,6 @@ impl PairIndex {
     }
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Reason {
-    Series,
-    Bound,
-    Direction,
-    HalfSpace,
-    Visibility,
-    NonTranslation,
-    Translation,
-}
-
-enum SeriesAction {
-    Keep,
-    Drop,
-    Set(Box<PairSeries>),
-}
-
-/// How a changed pair gets its new kernel.
-enum Kernel<'s> {
-    /// The stored series at displacement `p`.
-    Series(&'s PairSeries, f64),
-    /// Just (re-)expanded at the current position.
-    Expanded(Box<PairSeries>),
-    /// Quadrature (eq. 6) with the pair's visibility.
-    Exact,
-}
-
-/// A candidate that changed: its new visibility and how to get its kernel.
-struct Decision<'s> {
-    i: u32,
-    j: u32,
-    id: Option<PairId>,
-    vis: Visibility,
-    kernel: Kernel<'s>,
-    reason: Reason,
-}
-
-impl<'s> Decision<'s> {
-    /// The terms a series evaluation will read.
-    fn series_terms(&self) -> Option<&'s [f32]> {
-        match self.kernel {
-            Kernel::Series(ser, p) => Some(ser.terms_at(p)),
-            _ => None,
-        }
-    }
-}
-
-/// How many decided pairs ahead the series terms are prefetched.
-const PREFETCH_SERIES: usize = 2;
-
-/// The new state of one changed pair (its blocks are in its [`UpdateBatch`]).
-struct PairUpdate {
-    i: u32,
-    j: u32,
-    id: Option<PairId>,
-    /// `Blocked` when the pair no longer exchanges light.
-    vis: Visibility,
-    series: SeriesAction,
-    reason: Reason,
-}
-
-/// The updates of a run of candidates: per update, its new blocks `[G_ij | G_ji]` (f32, as
-/// stored, `2 nb^2`) in one flat array.
-#[derive(Default)]
-struct UpdateBatch {
-    updates: Vec<PairUpdate>,
-    blocks: Vec<f32>,
-    /// The f64 blocks being computed.
-    scratch: Vec<f64>,
-    /// Series terms read.
-    series_terms: usize,
-    /// Visibility by a whole traversal, and by the moved triangles only (`UpdateStats`).
-    visibility_checks: usize,
-    visibility_relinked: usize,
-}
-
 /// Updates `sys` (solved for `prev`) to `next` at `frame`.
 pub fn advance(
     sys: &mut System,
@@ -329,8 +252,6 @@ pub fn advance(
     let mut stats = UpdateStats { moved_elements: new.moved_count(), ..Default::default() };
     let n = new.elements.len();
     let (patches, moved) = (&new.patches, &new.moved);
-    let FrameMotion { ref shift, ref translated, .. } = motion;
-    let old: Vec<&Patch> = sys.elements.iter().map(|e| &e.patch).collect();
     let mut delta_b = vec![[0.0f64; 3]; n * nb];
     // The last frame's shots, replayed as this frame's first guess (`crate::replay`). Taken out
     // of the state: it goes back only with a finished solve (it must describe the kernel the
@@ -352,232 +273,23 @@ pub fn advance(
         stats.shaft_tests = found.shaft_tests;
         stats.candidates = found.pairs.len();
         let Found { pairs: candidates, occluders, geom, .. } = found;
-        // Static pairs re-check their masks against the moved triangles only (exact, see
-        // `Occluders::relink_visibility`) when neither element has culled occluders by its plane
-        // since the build: then every mask they hold is an any-hit mask over all occluders.
-        // (A back's triangles are its front's: crate::backs.)
-        let moved_triangles = MovedTriangles::new(
-            (0..n).filter(|&e| moved[e] && !new.elements[e].back).map(|e| (old[e], &patches[e])),
-        );
-        if let Some(o) = &occluders {
-            let before = state.culled.take().unwrap_or_else(|| {
-                // First update since the build: the system still holds the build's occluders.
-                match &sys.occluders {
-                    Some(b) => (0..n).map(|e| b.culls(e)).collect(),
-                    None => {
-                        let built: Vec<Patch> = old.iter().map(|p| **p).collect();
-                        let b = crate::system::occluders_of(&sys.elements, &built, s.visibility_samples);
-                        (0..n).map(|e| b.culls(e)).collect()
-                    }
-                }
-            });
-            state.culled = Some((0..n).map(|e| before[e] || o.culls(e)).collect());
-        }
+        let moved_triangles =
+            pairs::prepare_relink(&mut state.culled, sys, &new, occluders.as_ref(), s.visibility_samples);
         stats.scan_seconds = start.elapsed().as_secs_f64();
-        let relink_ok = |i: usize, j: usize| state.culled.as_ref().is_some_and(|c| !c[i] && !c[j]);
-        let total = candidates.len();
-        let done = std::sync::atomic::AtomicUsize::new(0);
-        let mut pool = std::mem::take(&mut state.block_pool);
+        let pool = std::mem::take(&mut state.block_pool);
         let mut replaced = std::mem::take(&mut state.replaced);
-        // Per candidate: its visibility and how its kernel is obtained (`decide`), then its new
-        // blocks (`emit`), written into the batch of its run of candidates.
-        let decide = |(i, j, kind): PairCandidate, batch: &mut UpdateBatch| -> Result<Option<Decision>> {
-            let (iu, ju) = (i as usize, j as usize);
-            let id = state.index.get(i, j);
-            // A pair that cannot face each other exchanges nothing whatever its visibility
-            // (`integrate_visible` gives `None`; a stored pair is emptied with `Blocked`).
-            let facing = geom.face_each_other(iu, ju);
-            if !facing && (id.is_none() || matches!(kind, Candidate::VisibilityOnly)) {
-                // (A static or rigid pair's facing never changes: if stored, it is already empty.)
-                return Ok(None);
-            }
-            let old_vis = id.map_or(&Visibility::Blocked, |p| &sys.links.pair(p).visibility);
-            let static_pair = !moved[iu] && !moved[ju];
-            let vis = match &occluders {
-                _ if !facing => Visibility::Blocked,
-                Some(o) => {
-                    // An absent pair, or one stored as `Blocked`, was either blocked or has a
-                    // kernel that is zero whatever its mask (the one-sided `g >= 0` vanished at
-                    // every visible sample: then at every sample, as the pair has not moved).
-                    // Re-checking from `Blocked` is exact in the first case and gives a mask
-                    // that still yields the zero kernel in the second.
-                    let relinked = (static_pair && relink_ok(iu, ju))
-                        .then(|| {
-                            o.relink_visibility(
-                                (iu, &patches[iu]),
-                                (ju, &patches[ju]),
-                                old_vis,
-                                &moved_triangles,
-                            )
-                        })
-                        .flatten();
-                    if relinked.is_some() {
-                        batch.visibility_relinked += 1;
-                    }
-                    relinked.unwrap_or_else(|| {
-                        batch.visibility_checks += 1;
-                        o.link_visibility(iu, &patches[iu], ju, &patches[ju])
-                    })
-                }
-                None => Visibility::Full,
-            };
-            let existing_series = id.and_then(|p| state.series.get(p as usize)).and_then(|s| s.as_deref());
-            let decision = match kind {
-                Candidate::VisibilityOnly => {
-                    if vis == *old_vis || (id.is_none() && vis == Visibility::Blocked) {
-                        return Ok(None);
-                    }
-                    Decision { i, j, id, vis, kernel: Kernel::Exact, reason: Reason::Visibility }
-                }
-                Candidate::Moved => {
-                    let motion = shift[ju] - shift[iu];
-                    let dir = motion.normalize();
-                    let both_translated = translated[iu] && translated[ju];
-                    let mut reason =
-                        if both_translated { Reason::Translation } else { Reason::NonTranslation };
-                    // The one Gauss product a fresh build integrates the pair with now (points per
-                    // axis), `None` when it is near enough to be split (`integrate_pair_into`): a
-                    // series stands for the kernel only while the pair keeps the rule it was
-                    // expanded on.
-                    let rule = {
-                        let ((ci, ri), (cj, rj)) = (geom.sphere(iu), geom.sphere(ju));
-                        let ratio = ci.distance(cj) / (ri + rj);
-                        (ratio > SEPARATION).then(|| ctx.points_for(ratio))
-                    };
-                    if let (true, Some(ser)) = (state.use_series, existing_series) {
-                        match series_check(ser, state, &patches, (iu, ju), rule, (&vis, old_vis)) {
-                            Ok(p) => {
-                                let kernel = Kernel::Series(ser, p);
-                                return Ok(Some(Decision { i, j, id, vis, kernel, reason: Reason::Series }));
-                            }
-                            Err(why) => reason = why,
-                        }
-                    }
-                    // Exact (eq. 6), re-expanded along this frame's motion when the series applies.
-                    // Expanding costs about as much as 15 quadratures: only worth it when the
-                    // pair stays within the bound for a few frames at this frame's speed, and
-                    // when its visibility has held for CALM_UPDATES updates (a pair in a moving
-                    // penumbra changes again soon, and each change drops its series).
-                    let calm = id.is_some_and(|p| {
-                        let changed = state.visibility_changed.get(p as usize).copied().unwrap_or(NEVER);
-                        vis == *old_vis && (changed == NEVER || state.updates - changed >= CALM_UPDATES)
-                    });
-                    let expand = state.use_series
-                        && both_translated
-                        && vis != Visibility::Blocked
-                        && calm
-                        && rule.is_some_and(|n| n >= MIN_SERIES_POINTS);
-                    let r_min = expand
-                        .then(|| series::eligible(&patches[iu], &patches[ju], dir))
-                        .flatten()
-                        .filter(|r| SERIES_MAX_T * r >= MIN_SERIES_FRAMES * motion.length());
-                    match r_min.zip(rule) {
-                        Some((r_min, npts)) => {
-                            let terms = series::expand(
-                                basis,
-                                ctx.vis_axis,
-                                geom.samples(iu, npts),
-                                geom.samples(ju, npts),
-                                &vis,
-                                dir,
-                            );
-                            let ser = PairSeries::new(
-                                dir,
-                                (patches[iu].corners[0], patches[ju].corners[0]),
-                                r_min,
-                                (state.epochs[iu], state.epochs[ju]),
-                                npts,
-                                terms,
-                            );
-                            Decision { i, j, id, vis, kernel: Kernel::Expanded(Box::new(ser)), reason }
-                        }
-                        None => {
-                            if reason == Reason::Translation
-                                && state.use_series
-                                && existing_series.is_none()
-                                && !series::clip_invariant_with(
-                                    (&patches[iu], geom.plane(iu)),
-                                    (&patches[ju], geom.plane(ju)),
-                                    dir,
-                                )
-                            {
-                                reason = Reason::HalfSpace;
-                            }
-                            Decision { i, j, id, vis, kernel: Kernel::Exact, reason }
-                        }
-                    }
-                }
-            };
-            Ok(Some(decision))
+        let phase = PairPhase {
+            state,
+            links: &sys.links,
+            ctx: &ctx,
+            geom: &geom,
+            occluders: occluders.as_ref(),
+            moved_triangles: &moved_triangles,
+            patches,
+            moved,
+            motion: &motion,
         };
-        // The new blocks of a decided pair, rounded to the store's f32 (Delta K (b - u), below, is
-        // then the change of the stored kernel).
-        let emit = |batch: &mut UpdateBatch, d: Decision| {
-            let n2 = nb * nb;
-            let (iu, ju) = (d.i as usize, d.j as usize);
-            batch.scratch.resize(2 * n2, 0.0);
-            let scratch = &mut batch.scratch[..];
-            let (series, exchanges) = match d.kernel {
-                Kernel::Series(ser, p) => {
-                    batch.series_terms += ser.eval_into(p, scratch) + 1;
-                    (SeriesAction::Keep, true)
-                }
-                Kernel::Expanded(ser) => {
-                    ser.eval_into(0.0, scratch);
-                    (SeriesAction::Set(ser), true)
-                }
-                Kernel::Exact => {
-                    let (ij, ji) = scratch.split_at_mut(n2);
-                    let exchanges = integrate_visible_into(&ctx, &geom, iu, ju, &d.vis, ij, ji);
-                    if !exchanges {
-                        scratch.fill(0.0);
-                    }
-                    (SeriesAction::Drop, exchanges)
-                }
-            };
-            if d.id.is_none() && !exchanges {
-                return;
-            }
-            let (ij, ji) = scratch.split_at_mut(n2);
-            geom.weigh(iu, ju, ij, ji);
-            batch.blocks.extend(scratch.iter().map(|&x| x as f32));
-            let vis = if exchanges { d.vis } else { Visibility::Blocked };
-            batch.updates.push(PairUpdate { i: d.i, j: d.j, id: d.id, vis, series, reason: d.reason });
-        };
-        // Fixed runs of candidates, each into its own batch (no merging copies). Sixteen per thread:
-        // the static pairs near a mover, the costly ones, come together in candidate order, and
-        // with eight per thread the last runs left a thread idle (pairs 13.9 -> 13.5 ms median).
-        let run = candidates.len().div_ceil(16 * rayon::current_num_threads()).max(64);
-        pool.resize_with(candidates.len().div_ceil(run), Vec::new);
-        let mut batches = candidates
-            .par_chunks(run)
-            .zip(pool.into_par_iter())
-            .map(|(run, mut blocks)| {
-                blocks.clear();
-                let mut batch = UpdateBatch { blocks, ..Default::default() };
-                // Progress and cancellation once per run (a shared counter per candidate made
-                // the two threads trade its cache line 29k times a frame).
-                let d = done.fetch_add(run.len(), std::sync::atomic::Ordering::Relaxed);
-                if !progress(d as f64 / total.max(1) as f64, "kernel update") {
-                    return Err(Error::Cancelled);
-                }
-                // Decided first, then emitted with the series terms a few pairs ahead prefetched:
-                // the solve's stream through the store evicts them between frames, and reading
-                // them from memory was most of a series evaluation.
-                let mut decided = Vec::with_capacity(run.len());
-                for &c in run {
-                    decided.extend(decide(c, &mut batch)?);
-                }
-                let terms: Vec<Option<&[f32]>> = decided.iter().map(Decision::series_terms).collect();
-                for (k, d) in decided.into_iter().enumerate() {
-                    if let Some(Some(ahead)) = terms.get(k + PREFETCH_SERIES) {
-                        crate::simd::prefetch(ahead);
-                    }
-                    emit(&mut batch, d);
-                }
-                Ok(batch)
-            })
-            .collect::<Result<Vec<UpdateBatch>>>()?;
+        let mut batches = phase.run(&candidates, pool, progress)?;
         stats.pairs_seconds = start.elapsed().as_secs_f64() - stats.scan_seconds;
         stats.visibility_checks = batches.iter().map(|b| b.visibility_checks).sum();
         stats.series_terms = batches.iter().map(|b| b.series_terms).sum();
@@ -764,46 +476,6 @@ pub fn advance(
     Ok(Outcome::Updated(stats))
 }
 
-/// The displacement `p` at which the stored series gives this frame's kernel, or why it cannot.
-/// `rule` is the Gauss product the pair takes at its new position (`None`: split), `vis` its new
-/// visibility and `old_vis` the stored one.
-fn series_check(
-    ser: &PairSeries,
-    state: &AnimationState,
-    patches: &[Patch],
-    (i, j): (usize, usize),
-    rule: Option<usize>,
-    (vis, old_vis): (&Visibility, &Visibility),
-) -> std::result::Result<f64, Reason> {
-    if ser.epochs != (state.epochs[i], state.epochs[j]) {
-        return Err(Reason::NonTranslation);
-    }
-    // Out of the series' domain, as beyond its bound: the quadrature it was integrated with is no
-    // longer the pair's (a stop-and-reverse brought a pair expanded at 1.5006 radii-sums to 1.4983,
-    // where a fresh build splits it: 2e-2 of the peak block entry apart; `PairSeries::points`).
-    if rule != Some(ser.points) {
-        return Err(Reason::Bound);
-    }
-    if !series::clip_invariant(&patches[i], &patches[j], ser.dir) {
-        return Err(Reason::HalfSpace);
-    }
-    if vis != old_vis {
-        return Err(Reason::Visibility);
-    }
-    let d = ser.displacement(patches[i].corners[0], patches[j].corners[0]);
-    let p = d.dot(ser.dir);
-    // Off the expansion line: the series in p along dir no longer describes the position.
-    if (d - p * ser.dir).length() > 1e-7 * ser.r_min {
-        return Err(Reason::Direction);
-    }
-    if p.abs() > SERIES_MAX_T * ser.r_min {
-        return Err(Reason::Bound);
-    }
-    Ok(p)
-}
-
-const _: () = assert!(SERIES_ORDER >= 2);
-
 /// A pair's kernel change for `Delta K (b - u)`: `new = [G_ij | G_ji]`, `old` the two blocks replaced
 /// (zero for a new pair).
 struct KernelChange<'a> {
@@ -835,31 +507,6 @@ fn mark_visibility_change(state: &mut AnimationState, p: PairId) {
     }
     state.visibility_changed[p as usize] = state.updates;
 }
-
-/// A pair is expanded only if, at the current speed, the series would serve at least this many
-/// frames before `p` reaches `SERIES_MAX_T r_min`. Timed per pair (session 7, thread time): an
-/// expansion 8.5-9 us, about 15 far-pair quadratures (0.4-0.7 us), which an evaluation
-/// (0.27-0.42 us) undercuts by about 0.3 us a frame, so an expansion pays back after some 25
-/// frames of use. At 3 (before session 7) the Fig. 5a room, whose light moves far relative to
-/// its pairs' distances, re-expanded 500-900 pairs a frame after 3 frames each: 13.7-15.5 ms of
-/// kernels a frame against 8.9-11.9 ms for `--exact`. At 15 it expands none (9.1-10.8 ms), and the
-/// moving-light box keeps the series for the pairs that use it long (4.9-5.6 ms, as at 3; 30
-/// drops those too: 6.6-6.9 ms). `--exact` there: 4.8 ms.
-const MIN_SERIES_FRAMES: f64 = 15.0;
-
-/// Gauss points per axis below which a pair is not expanded: its quadrature is cheaper than
-/// reading its series. Timed in the moving-light box's frames (session 11, `perf` of
-/// `kernel_update` with and without `--exact`, 39 frames each), a series evaluation takes 1.5 us
-/// there, not the 0.3-0.4 us it takes with its terms in cache (above): its ~4.5 KB of terms come
-/// from memory, the solve having streamed the link store through the caches since the last
-/// frame. A 3 x 3-point quadrature (81 point pairs, order 2's far and middle rules) takes 0.65 us,
-/// so those pairs are recomputed. From 4 x 4 points (256 point pairs, ~2 us: order 2's near rule,
-/// order 3's far one, or adaptive quadrature off) the series is level with the quadrature, not
-/// cheaper: session 12, 5 interleaved runs of 24 frames, kernel update median 52.0 ms against
-/// 52.2 for `--exact` at order 3, 29.7 against 27.5 with adaptive quadrature off (`tools.ab
-/// --bench-arg`; the re-expansions of pairs whose bound the light outruns eat the evaluations'
-/// margin). Kept at 4 so that the series, the seed's method, serves where it does not lose.
-const MIN_SERIES_POINTS: usize = 4;
 
 crate::simd::multiversion! {
     /// `out[v] += rho (G_new - G_old) x[v]` for one receiver (its `nb` coefficients, reflectance
