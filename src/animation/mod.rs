@@ -41,14 +41,16 @@ use crate::scene::Scene;
 use crate::solver;
 use crate::system::{Progress, System};
 
+mod apply;
 mod candidates;
 mod motion;
 mod pairs;
 mod solve;
 
+use apply::Written;
 use candidates::Found;
 use motion::{FrameMotion, NewFrame};
-use pairs::{PairPhase, PairUpdate, Reason, SeriesAction};
+use pairs::PairPhase;
 
 /// What one update did.
 #[derive(Clone, Debug, Default)]
@@ -295,68 +297,14 @@ pub fn advance(
         stats.series_terms = batches.iter().map(|b| b.series_terms).sum();
         stats.visibility_relinked = batches.iter().map(|b| b.visibility_relinked).sum();
 
-        // Apply: new pairs are appended one by one (rare), stored pairs rewritten in parallel.
-        let n2 = nb * nb;
-        let updates: Vec<Vec<PairUpdate>> =
-            batches.iter_mut().map(|b| std::mem::take(&mut b.updates)).collect();
-        let mut rewrites: Vec<(PairId, u32, &[f32])> = Vec::with_capacity(updates.iter().map(Vec::len).sum());
-        let mut fresh: Vec<(u32, u32, &[f32])> = Vec::new();
-        let in_order = batches
-            .iter()
-            .zip(updates)
-            .flat_map(|(b, us)| us.into_iter().enumerate().map(move |(k, u)| (b, k, u)));
-        for (batch, k, u) in in_order {
-            match u.reason {
-                Reason::Series => stats.links_series += 1,
-                Reason::Bound => stats.recomputed_bound += 1,
-                Reason::Direction => stats.recomputed_direction += 1,
-                Reason::HalfSpace => stats.recomputed_half_space += 1,
-                Reason::Visibility => stats.recomputed_visibility += 1,
-                Reason::NonTranslation => stats.recomputed_non_translation += 1,
-                Reason::Translation => stats.recomputed_translation += 1,
-            }
-            if u.reason != Reason::Series {
-                stats.links_recomputed += 1;
-            }
-            let blocks = &batch.blocks[2 * n2 * k..][..2 * n2];
-            let p = match u.id {
-                Some(p) => {
-                    if sys.links.pair(p).visibility != u.vis {
-                        mark_visibility_change(state, p);
-                    }
-                    sys.links.set_visibility(p, u.vis);
-                    rewrites.push((p, u.i, blocks));
-                    p
-                }
-                None => {
-                    let wide: Vec<f64> = blocks.iter().map(|&x| x as f64).collect();
-                    let p = sys.links.push(u.i, u.j, &wide[..n2], &wide[n2..], u.vis);
-                    state.index.insert(u.i, u.j, p);
-                    mark_visibility_change(state, p);
-                    fresh.push((u.i, u.j, blocks));
-                    p
-                }
-            };
-            if state.series.len() <= p as usize {
-                state.series.resize_with(p as usize + 1, || None);
-            }
-            match u.series {
-                SeriesAction::Keep => {}
-                SeriesAction::Drop => state.series[p as usize] = None,
-                SeriesAction::Set(ser) => {
-                    // Series are stored with the pair's own orientation (a, b).
-                    debug_assert_eq!(sys.links.pair(p).a, u.i);
-                    stats.series_expanded += 1;
-                    state.series[p as usize] = Some(ser);
-                }
-            }
-        }
-        sys.links.replace_blocks(&rewrites, &mut replaced)?;
+        let Written { rewrites, fresh } =
+            apply::write_store(sys, state, &mut batches, &mut replaced, &mut stats)?;
         // Delta K (b - u) with the previous frame's b and u (the part already shot: module docs)
         // for both receivers of each changed pair (eq. 9), summed per receiver in parallel: the
         // changes are listed by receiver (a counting sort), so each task owns its rows of Delta b
         // and sums them in change order, whatever the threads (a fold over changes allocated and
         // summed a whole Delta b per run, slower than one thread).
+        let n2 = nb * nb;
         let zeros = vec![0.0f32; n2];
         let changes: Vec<KernelChange> = rewrites
             .iter()
