@@ -26,6 +26,12 @@
 //! change, the kernel is the polynomial `sum p^n Phi_n` (eq. 16, [`crate::kernel::series`]).
 //! Otherwise it is recomputed exactly (eq. 6) and, when eligible, re-expanded at the new position
 //! along the current motion direction (3.3). Two elements moving together keep their kernel.
+//!
+//! [`advance`] runs the phases in turn, a file each: `motion.rs` places the new frame's elements
+//! and finds how each moved; `candidates.rs` scans the pairs that may have changed; `pairs.rs`
+//! decides and computes each one's new kernel; `apply.rs` writes them into the store; `delta_k.rs`
+//! forms `Delta K (b - u)` and `Delta K sigma` from the store's changes and the hemisphere bound's;
+//! `solve.rs` adds `Delta e`, moves the system to the new frame and solves it.
 
 use crate::error::Result;
 use crate::kernel::PairContext;
@@ -229,7 +235,9 @@ impl PairIndex {
     }
 }
 
-/// Updates `sys` (solved for `prev`) to `next` at `frame`.
+/// Updates `sys` (solved for `prev`) to `next` at `frame`. The phases: the new frame's elements
+/// and their motion (`motion.rs`; a change of topology rebuilds), with anything moved the kernel's
+/// changes (`update_kernel`), then `Delta e` and the solve (`solve.rs`).
 pub fn advance(
     sys: &mut System,
     state: &mut AnimationState,
@@ -240,82 +248,104 @@ pub fn advance(
     let start = std::time::Instant::now();
     state.updates += 1;
     let segments_before = crate::visibility::segments_tested();
-    let s = &next.settings;
-    let basis = sys.basis;
-    let nb = basis.len();
     let Some(new) = NewFrame::place(sys, next, frame) else {
         return Ok(Outcome::NeedsRebuild);
     };
     let motion = FrameMotion::of(&new, &sys.elements);
     state.bump_epochs(&motion.translated);
     let mut stats = UpdateStats { moved_elements: new.moved_count(), ..Default::default() };
-    let n = new.elements.len();
-    let (patches, moved) = (&new.patches, &new.moved);
-    let mut delta_b = vec![[0.0f64; 3]; n * nb];
+    let coefficients = new.elements.len() * sys.basis.len();
+    let mut delta_b = vec![[0.0f64; 3]; coefficients];
     // The last frame's shots, replayed as this frame's first guess (`crate::replay`). Taken out
     // of the state: it goes back only with a finished solve (it must describe the kernel the
     // changes below start from).
     let replay = state.replay.take();
     // `Delta K sigma`, for the replay, formed with `Delta K (b - u)` (zero without a replay).
-    let mut delta_k_sigma = vec![[0.0f64; 3]; n * nb];
-
+    let mut delta_k_sigma = vec![[0.0f64; 3]; coefficients];
     if stats.moved_elements > 0 {
-        let rule = GaussLegendre::new(s.quadrature_order);
-        let ctx = PairContext {
-            basis,
-            rule: &rule,
-            vis_axis: s.visibility_samples,
-            adaptive: s.adaptive_quadrature,
-        };
-        let found = candidates::find(&new, &motion, state.geometry.take(), &ctx, s);
-        state.index.sync(&sys.links);
-        stats.shaft_tests = found.shaft_tests;
-        stats.candidates = found.pairs.len();
-        let Found { pairs: candidates, occluders, geom, .. } = found;
-        let moved_triangles =
-            pairs::prepare_relink(&mut state.culled, sys, &new, occluders.as_ref(), s.visibility_samples);
-        stats.scan_seconds = start.elapsed().as_secs_f64();
-        let pool = std::mem::take(&mut state.block_pool);
-        let mut replaced = std::mem::take(&mut state.replaced);
-        let phase = PairPhase {
-            state,
-            links: &sys.links,
-            ctx: &ctx,
-            geom: &geom,
-            occluders: occluders.as_ref(),
-            moved_triangles: &moved_triangles,
-            patches,
-            moved,
-            motion: &motion,
-        };
-        let mut batches = phase.run(&candidates, pool, progress)?;
-        stats.pairs_seconds = start.elapsed().as_secs_f64() - stats.scan_seconds;
-        stats.visibility_checks = batches.iter().map(|b| b.visibility_checks).sum();
-        stats.series_terms = batches.iter().map(|b| b.series_terms).sum();
-        stats.visibility_relinked = batches.iter().map(|b| b.visibility_relinked).sum();
-
-        let written = apply::write_store(sys, state, &mut batches, &mut replaced, &mut stats)?;
-        let no_replay = vec![[0.0f64; 3]; n * nb];
-        let sigma = replay.as_ref().map_or(&no_replay[..], Replay::sigma);
-        let sent = delta_k::shot_part(&sys.solution, std::mem::take(&mut state.sent));
-        let mut delta_k = DeltaK { x: [&sent, sigma], out: [&mut delta_b, &mut delta_k_sigma] };
-        let first = delta_k.add_pair_changes(sys, &written, &replaced);
-        delta_k.add_bound_changes(sys, &first, &new.elements, next);
-        drop(written);
-        state.sent = sent;
-        state.block_pool = batches.into_iter().map(|b| b.blocks).collect();
-        state.replaced = replaced;
-        stats.apply_seconds = start.elapsed().as_secs_f64() - stats.scan_seconds - stats.pairs_seconds;
-        state.geometry = Some(geom.into_kept(&ctx));
-        // The new placement's occluders serve the corner gather and the next update.
-        sys.occluders = occluders;
+        let moving = Moving { next, new: &new, motion: &motion, start, progress };
+        update_kernel(sys, state, &moving, replay.as_ref(), [&mut delta_b, &mut delta_k_sigma], &mut stats)?;
     }
     stats.segments_tested = crate::visibility::segments_tested() - segments_before;
     stats.kernel_seconds = start.elapsed().as_secs_f64();
-
     solve::enter_frame(sys, next, frame, new.elements, &mut delta_b);
-    state.replay = Some(solve::solve(sys, replay, &delta_k_sigma, s.tolerance, progress, &mut stats)?);
+    let tolerance = next.settings.tolerance;
+    state.replay = Some(solve::solve(sys, replay, &delta_k_sigma, tolerance, progress, &mut stats)?);
     Ok(Outcome::Updated(stats))
+}
+
+/// A frame in which elements moved, as the kernel update reads it.
+struct Moving<'a> {
+    next: &'a Scene,
+    new: &'a NewFrame,
+    motion: &'a FrameMotion,
+    /// When the update started (the stats time its parts from it).
+    start: std::time::Instant,
+    progress: Progress<'a>,
+}
+
+/// The kernel's changes under the motion of `m` (sections 3.1 to 3.3): the candidate pairs
+/// (`candidates.rs`), their new kernels (`pairs.rs`), written into the store (`apply.rs`), and
+/// the changes `Delta K (b - u)` and `Delta K sigma` added to `delta` (`delta_k.rs`), with
+/// `replay`'s sigma. The system takes the frame's occluders, the state its geometry and buffers.
+fn update_kernel(
+    sys: &mut System,
+    state: &mut AnimationState,
+    m: &Moving,
+    replay: Option<&Replay>,
+    delta: [&mut [[f64; 3]]; 2],
+    stats: &mut UpdateStats,
+) -> Result<()> {
+    let s = &m.next.settings;
+    let rule = GaussLegendre::new(s.quadrature_order);
+    let ctx = PairContext {
+        basis: sys.basis,
+        rule: &rule,
+        vis_axis: s.visibility_samples,
+        adaptive: s.adaptive_quadrature,
+    };
+    let Found { pairs: candidates, shaft_tests, occluders, geom } =
+        candidates::find(m.new, m.motion, state.geometry.take(), &ctx, s);
+    state.index.sync(&sys.links);
+    stats.shaft_tests = shaft_tests;
+    stats.candidates = candidates.len();
+    let moved_triangles =
+        pairs::prepare_relink(&mut state.culled, sys, m.new, occluders.as_ref(), s.visibility_samples);
+    stats.scan_seconds = m.start.elapsed().as_secs_f64();
+
+    let pool = std::mem::take(&mut state.block_pool);
+    let mut replaced = std::mem::take(&mut state.replaced);
+    let phase = PairPhase {
+        state,
+        links: &sys.links,
+        ctx: &ctx,
+        geom: &geom,
+        occluders: occluders.as_ref(),
+        moved_triangles: &moved_triangles,
+        patches: &m.new.patches,
+        moved: &m.new.moved,
+        motion: m.motion,
+    };
+    let mut batches = phase.run(&candidates, pool, m.progress)?;
+    stats.pairs_seconds = m.start.elapsed().as_secs_f64() - stats.scan_seconds;
+    pairs::count(&batches, stats);
+
+    let written = apply::write_store(sys, state, &mut batches, &mut replaced, stats)?;
+    let no_replay = vec![[0.0f64; 3]; m.new.elements.len() * sys.basis.len()];
+    let sigma = replay.map_or(&no_replay[..], Replay::sigma);
+    let sent = delta_k::shot_part(&sys.solution, std::mem::take(&mut state.sent));
+    let mut delta_k = DeltaK { x: [&sent, sigma], out: delta };
+    let first = delta_k.add_pair_changes(sys, &written, &replaced);
+    delta_k.add_bound_changes(sys, &first, &m.new.elements, m.next);
+    drop(written);
+    state.sent = sent;
+    state.block_pool = batches.into_iter().map(|b| b.blocks).collect();
+    state.replaced = replaced;
+    stats.apply_seconds = m.start.elapsed().as_secs_f64() - stats.scan_seconds - stats.pairs_seconds;
+    state.geometry = Some(geom.into_kept(&ctx));
+    // The new placement's occluders serve the corner gather and the next update.
+    sys.occluders = occluders;
+    Ok(())
 }
 
 /// A pair whose visibility changed (or that was added) is not expanded until its visibility has

@@ -19,7 +19,7 @@ use crate::visibility::{MovedTriangles, Occluders, Visibility};
 
 use super::candidates::{Candidate, PairCandidate};
 use super::motion::{FrameMotion, NewFrame};
-use super::{AnimationState, CALM_UPDATES, NEVER};
+use super::{AnimationState, CALM_UPDATES, NEVER, UpdateStats};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) enum Reason {
@@ -95,6 +95,13 @@ pub(super) struct UpdateBatch {
     /// Visibility by a whole traversal, and by the moved triangles only (`UpdateStats`).
     pub(super) visibility_checks: usize,
     pub(super) visibility_relinked: usize,
+}
+
+/// The counts of `batches` into `stats`.
+pub(super) fn count(batches: &[UpdateBatch], stats: &mut UpdateStats) {
+    stats.visibility_checks = batches.iter().map(|b| b.visibility_checks).sum();
+    stats.series_terms = batches.iter().map(|b| b.series_terms).sum();
+    stats.visibility_relinked = batches.iter().map(|b| b.visibility_relinked).sum();
 }
 
 /// The triangles that moved this frame (old and new position), against which a static pair's mask
