@@ -9,7 +9,7 @@
 //! onto the floor or against a wall until it touches (or stops 2 mm short), a moving emitter;
 //! some cases key an emission (a lamp's ramp, an occluder starting to glow). Settings vary: basis
 //! order 1 or 2, visibility samples 2 or 3, adaptive quadrature on or off (off puts every pair on
-//! the 4 x 4-point rule, where the series is used: `animation::MIN_SERIES_POINTS`), visibility
+//! the 4 x 4-point rule, where the series is used: `animation::pairs::MIN_SERIES_POINTS`), visibility
 //! off in one case in ten; `corner_gather` off and tolerance 1e-6 throughout.
 //!
 //! Three chains run over each case: `Method::Full` (`System::build` and `System::solve` at every
@@ -890,7 +890,7 @@ fn seed_report(seed: u64) -> Report {
 /// then leave the lamp at 9.54 where `Full` has 12.15: 21% of the frame's peak (39% of the peak of
 /// the faces that do not emit), while the links equal the fresh build's bit for bit.
 ///
-/// Cause: `animation::advance` (src/animation.rs), the apply step, called `delta_kb` with
+/// Cause: `animation::advance` (then src/animation.rs; now src/animation/delta_k.rs), the apply step, called `delta_kb` with
 /// `sys.solution.b`; the invariant needs `b - unshot` there (then `b` and `unshot` both take
 /// `Delta e + Delta K (b - u)`, and `b = e + K' (b - u)` holds exactly), which it now uses. Eq.
 /// (9) assumes a converged previous frame (`u = 0`); the error was `Delta K u`, negligible only
@@ -955,7 +955,7 @@ fn seed_239_exact_update_matches_full_to_the_solver_tolerance() {
 /// 5 and 6, and the series chain's solution 4.1e-4 of the peak off Full's (seed 829, which the
 /// change below mends too: 3.6e-3, 4.8% of the peak of the faces that do not emit).
 ///
-/// Cause: `animation::series_check` (src/animation.rs) checked the epochs, the half-space, the
+/// Cause: `animation::series_check` (now src/animation/pairs.rs) checked the epochs, the half-space, the
 /// visibility, the direction and the bound, but not that the pair is still integrated as it was
 /// at the expansion: separated beyond `SEPARATION` (`series::eligible` checks that at expansion
 /// only) and, with adaptive quadrature, on the same `PairContext::points_for` rule (pairs crossing
