@@ -12,6 +12,7 @@ pub mod anderson;
 pub mod coupling;
 pub mod gather;
 pub mod lobes;
+pub mod packed;
 pub mod pair_tree;
 pub mod refine;
 pub mod solve;
@@ -311,7 +312,11 @@ fn link_and_solve(
         state.add_sources(&hierarchy.tree, &lit.emission, lit.lights.as_ref());
         stats.link_seconds += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let solved = state.solve(&hierarchy.tree, &hierarchy.links, stop, hs, &cancel)?;
+        let (nodes, nb) = (hierarchy.tree.nodes.len(), hierarchy.tree.basis.len());
+        let links = &hierarchy.links;
+        packed::PackedLinks::update(&mut hierarchy.packed, nodes, links, nb, &mut hierarchy.changes)?;
+        let packed = hierarchy.packed.as_ref().expect("packed just now");
+        let solved = state.solve_packed(&hierarchy.tree, packed, stop, hs, &cancel)?;
         stats.sweeps += solved.sweeps;
         stats.solve_seconds += t.elapsed().as_secs_f64();
     }

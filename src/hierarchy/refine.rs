@@ -22,6 +22,7 @@ use crate::error::Result;
 /// What [`budget`]'s errors name.
 const LINKS: &str = "the hierarchy's links";
 const NODES: &str = "the hierarchy's nodes";
+use super::packed::{LinkChanges, PackedLinks};
 use super::pair_tree::Splits;
 use super::tree::{Kind, NodeId, Tree};
 
@@ -326,6 +327,11 @@ pub struct Hierarchy {
     /// in it). Tested whole, the relink rounds were a third of an updated frame of the full
     /// monastery.
     pub decided_at: Vec<f64>,
+    /// What changed in `links` since the solve last packed them, and that packing, kept from
+    /// solve to solve and frame to frame ([`super::packed`]). Every change to `links` is
+    /// recorded in `changes`.
+    pub changes: LinkChanges,
+    pub packed: Option<PackedLinks>,
 }
 
 /// Counts of one refinement.
@@ -345,7 +351,19 @@ pub struct RefineStats {
 impl Hierarchy {
     pub fn new(tree: Tree, oracle: Oracle, splits: Splits) -> Self {
         let (links, blocked, blocked_load, idle) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        Self { tree, links, blocked, blocked_load, idle, oracle, splits, decided_at: Vec::new() }
+        let (changes, packed) = (LinkChanges::default(), None);
+        Self {
+            tree,
+            links,
+            blocked,
+            blocked_load,
+            idle,
+            oracle,
+            splits,
+            decided_at: Vec::new(),
+            changes,
+            packed,
+        }
     }
 
     /// Records that every pair at every node was just decided at `radiosity` (or, for a node
@@ -400,13 +418,9 @@ impl Hierarchy {
     /// may have altered, and returns them (as pairs, to be linked again).
     pub fn take_touched(&mut self, touched: impl Fn(NodeId, NodeId) -> bool) -> Vec<(NodeId, NodeId)> {
         let mut out = Vec::new();
-        self.links.retain(|l| {
-            let hit = touched(l.a, l.b);
-            if hit {
-                out.push((l.a, l.b));
-            }
-            !hit
-        });
+        let keep: Vec<bool> = self.links.iter().map(|l| !touched(l.a, l.b)).collect();
+        self.changes.removing(&self.links, &keep);
+        keep_where(&mut self.links, &keep, |l| out.push((l.a, l.b)));
         let keep: Vec<bool> = self.blocked.iter().map(|&(a, b)| !touched(a, b)).collect();
         self.blocked_load.resize(self.blocked.len(), f32::INFINITY);
         keep_where(&mut self.blocked_load, &keep, |_| {});
@@ -486,6 +500,7 @@ impl Hierarchy {
                 kept
             })
             .collect();
+        self.changes.removing(&self.links, &verdicts);
         keep_where(&mut self.links, &verdicts, |l| work.push((l.a, l.b)));
         // Hidden pairs decided while their ends were dark (a first round knows only the
         // emitters' light) are split now if they may carry enough: kept whole, each would drop

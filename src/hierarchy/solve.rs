@@ -12,8 +12,9 @@
 use rayon::prelude::*;
 
 use super::anderson::Anderson;
-use super::coupling::{Coupling, Link};
+use super::coupling::Link;
 use super::lobes::{self, Lobes};
+use super::packed::{LinkChanges, PackedLinks};
 use super::tree::{Kind, NodeId, Tree};
 use super::two_scale::TwoScale;
 use crate::budget;
@@ -35,170 +36,6 @@ pub struct State {
     /// cluster links.
     lobes: Vec<Lobes>,
     two_scale: TwoScale,
-}
-
-/// Per node, the links it receives through: `(link, side)`, side 0 when it is the link's `a`.
-pub struct Incoming {
-    offsets: Vec<usize>,
-    entries: Vec<(u32, u8)>,
-}
-
-impl Incoming {
-    /// [`crate::Error::OutOfMemory`] when its lists cannot be had.
-    pub fn new(nodes: usize, links: &[Link]) -> Result<Self> {
-        let pairs: Vec<(NodeId, NodeId)> = budget::try_vec(links.len(), "the hierarchy's incoming links")?;
-        let mut pairs = pairs;
-        pairs.extend(links.iter().map(|l| (l.a, l.b)));
-        Self::of_pairs(nodes, &pairs)
-    }
-
-    /// Per node, the pairs `(a, b)` of `pairs` it is an end of: `(pair, side)`;
-    /// [`crate::Error::OutOfMemory`] when its lists cannot be had.
-    pub fn of_pairs(nodes: usize, pairs: &[(NodeId, NodeId)]) -> Result<Self> {
-        let what = "the hierarchy's incoming links";
-        let mut count = budget::try_filled(nodes + 1, 0usize, what)?;
-        for &(a, b) in pairs {
-            count[a as usize + 1] += 1;
-            count[b as usize + 1] += 1;
-        }
-        for i in 0..nodes {
-            count[i + 1] += count[i];
-        }
-        let mut fill = budget::try_vec(count.len(), what)?;
-        fill.extend_from_slice(&count);
-        let mut entries = budget::try_filled(2 * pairs.len(), (0u32, 0u8), what)?;
-        for (k, &(a, b)) in pairs.iter().enumerate() {
-            for (node, side) in [(a, 0u8), (b, 1u8)] {
-                entries[fill[node as usize]] = (k as u32, side);
-                fill[node as usize] += 1;
-            }
-        }
-        Ok(Self { offsets: count, entries })
-    }
-
-    pub(crate) fn of(&self, node: usize) -> &[(u32, u8)] {
-        &self.entries[self.offsets[node]..self.offsets[node + 1]]
-    }
-}
-
-/// Per receiving node, the blocks of its surface links (its side's `nb x nb`, row = its own
-/// function) packed one after the other, with each link's source, its constant links' `G^00`
-/// with theirs, and its cluster links' sources with their transmittance: a sweep reads them in
-/// order and never the links themselves.
-pub struct ReceivedBlocks {
-    /// `offsets[r]..offsets[r + 1]`: node `r`'s links in `sources` (and, times `nb^2`, in `blocks`).
-    offsets: Vec<usize>,
-    sources: Vec<NodeId>,
-    blocks: Vec<f32>,
-    /// `constant_offsets[r]..constant_offsets[r + 1]`: node `r`'s constant links in `constants`.
-    constant_offsets: Vec<usize>,
-    constants: Vec<(NodeId, f32)>,
-    /// `cluster_offsets[r]..cluster_offsets[r + 1]`: node `r`'s cluster links in `clusters`.
-    /// (Looked up in the links, every incoming entry cost a cache miss: with the couplings'
-    /// own passes, 15% of an updated frame of the full monastery.)
-    cluster_offsets: Vec<usize>,
-    clusters: Vec<(NodeId, f32)>,
-    nb: usize,
-}
-
-impl ReceivedBlocks {
-    /// The surface links' blocks by receiver, in [`Incoming`]'s order; [`crate::Error::OutOfMemory`]
-    /// when the copy cannot be had.
-    pub fn new(links: &[Link], incoming: &Incoming, nb: usize) -> Result<Self> {
-        let what = "the hierarchy's links packed for the solve";
-        let nodes = incoming.offsets.len() - 1;
-        let nb2 = nb * nb;
-        // In parallel, counts then copies, each run of receivers written by one thread: the
-        // links are read at random (a surface link's blocks are boxed), and done in turn this
-        // took a third of the full monastery's solve (5.0 of 14.7 s; 2.8 s on two threads).
-        let counts: Vec<[usize; 3]> = (0..nodes)
-            .into_par_iter()
-            .map(|r| {
-                incoming.of(r).iter().fold([0; 3], |[s, c, x], &(l, _)| match links[l as usize].coupling {
-                    Coupling::Surfaces(_) => [s + 1, c, x],
-                    Coupling::Constants { .. } => [s, c + 1, x],
-                    Coupling::Clusters { .. } => [s, c, x + 1],
-                })
-            })
-            .collect();
-        let mut offsets = budget::try_vec(nodes + 1, what)?;
-        let mut constant_offsets = budget::try_vec(nodes + 1, what)?;
-        let mut cluster_offsets = budget::try_vec(nodes + 1, what)?;
-        let (mut count, mut constant_count, mut cluster_count) = (0, 0, 0);
-        for &[s, c, x] in &counts {
-            offsets.push(count);
-            constant_offsets.push(constant_count);
-            cluster_offsets.push(cluster_count);
-            (count, constant_count, cluster_count) = (count + s, constant_count + c, cluster_count + x);
-        }
-        offsets.push(count);
-        constant_offsets.push(constant_count);
-        cluster_offsets.push(cluster_count);
-        let mut sources = budget::try_filled(count, 0 as NodeId, what)?;
-        let mut blocks = budget::try_filled(count.saturating_mul(nb2), 0.0f32, what)?;
-        let mut constants = budget::try_filled(constant_count, (0 as NodeId, 0.0f32), what)?;
-        let mut clusters = budget::try_filled(cluster_count, (0 as NodeId, 0.0f32), what)?;
-        // Receivers in runs of `RUN`, each run's part of the four outputs split off in order.
-        const RUN: usize = 4096;
-        let mut runs = Vec::with_capacity(nodes.div_ceil(RUN));
-        let (mut src, mut blk) = (&mut sources[..], &mut blocks[..]);
-        let (mut con, mut clu) = (&mut constants[..], &mut clusters[..]);
-        for r0 in (0..nodes).step_by(RUN) {
-            let r1 = (r0 + RUN).min(nodes);
-            let n = offsets[r1] - offsets[r0];
-            let m = constant_offsets[r1] - constant_offsets[r0];
-            let x = cluster_offsets[r1] - cluster_offsets[r0];
-            let (s_run, s_rest) = std::mem::take(&mut src).split_at_mut(n);
-            let (b_run, b_rest) = std::mem::take(&mut blk).split_at_mut(n * nb2);
-            let (c_run, c_rest) = std::mem::take(&mut con).split_at_mut(m);
-            let (x_run, x_rest) = std::mem::take(&mut clu).split_at_mut(x);
-            (src, blk, con, clu) = (s_rest, b_rest, c_rest, x_rest);
-            runs.push((r0..r1, s_run, b_run, c_run, x_run));
-        }
-        runs.into_par_iter().for_each(|(receivers, src, blk, con, clu)| {
-            let (mut k, mut j, mut i) = (0, 0, 0);
-            for r in receivers {
-                for &(l, side) in incoming.of(r) {
-                    let link = &links[l as usize];
-                    let source = if side == 0 { link.b } else { link.a };
-                    match &link.coupling {
-                        Coupling::Surfaces(both) => {
-                            let side = side as usize;
-                            src[k] = source;
-                            blk[k * nb2..(k + 1) * nb2].copy_from_slice(&both[side * nb2..(side + 1) * nb2]);
-                            k += 1;
-                        }
-                        Coupling::Constants { ab, ba } => {
-                            con[j] = (source, if side == 0 { *ab } else { *ba });
-                            j += 1;
-                        }
-                        Coupling::Clusters { transmittance } => {
-                            clu[i] = (source, *transmittance);
-                            i += 1;
-                        }
-                    }
-                }
-            }
-        });
-        Ok(Self { offsets, sources, blocks, constant_offsets, constants, cluster_offsets, clusters, nb })
-    }
-
-    /// Node `r`'s surface links: their sources and their blocks, `nb^2` each.
-    fn of(&self, r: usize) -> (&[NodeId], &[f32]) {
-        let (a, b) = (self.offsets[r], self.offsets[r + 1]);
-        let nb2 = self.nb * self.nb;
-        (&self.sources[a..b], &self.blocks[a * nb2..b * nb2])
-    }
-
-    /// Node `r`'s constant links: their sources and `G^00`.
-    fn constants_of(&self, r: usize) -> &[(NodeId, f32)] {
-        &self.constants[self.constant_offsets[r]..self.constant_offsets[r + 1]]
-    }
-
-    /// Node `r`'s cluster links: their sources and transmittance.
-    fn clusters_of(&self, r: usize) -> &[(NodeId, f32)] {
-        &self.clusters[self.cluster_offsets[r]..self.cluster_offsets[r + 1]]
-    }
 }
 
 /// Counts of one solve.
@@ -432,8 +269,19 @@ impl State {
         hs: &super::HierarchySettings,
         cancel: &(dyn Fn() -> bool + Sync),
     ) -> Result<SolveStats> {
-        // The links by receiver, read in order by every sweep; the lists that sorted them go.
-        let blocks = ReceivedBlocks::new(links, &Incoming::new(tree.nodes.len(), links)?, self.nb)?;
+        let packed = PackedLinks::new(tree.nodes.len(), links, self.nb, &mut LinkChanges::default())?;
+        self.solve_packed(tree, &packed, stop, hs, cancel)
+    }
+
+    /// [`State::solve`] on links packed already.
+    pub fn solve_packed(
+        &mut self,
+        tree: &Tree,
+        packed: &PackedLinks,
+        stop: f64,
+        hs: &super::HierarchySettings,
+        cancel: &(dyn Fn() -> bool + Sync),
+    ) -> Result<SolveStats> {
         let mut stats = SolveStats::default();
         let first = self.source_power(tree).max(1e-300);
         let mut leaves = Vec::new();
@@ -449,7 +297,7 @@ impl State {
             if let Some(a) = accelerated.as_mut() {
                 a.read(&self.b, &leaves, self.nb, Side::Before);
             }
-            let gathered = self.gather(tree, &blocks)?;
+            let gathered = self.gather(tree, packed)?;
             let change = self.push_pull(tree, &gathered);
             stats.sweeps = sweep + 1;
             stats.last_change = change;
@@ -470,74 +318,78 @@ impl State {
     }
 
     /// What every node receives through its own links from the current state.
-    fn gather(&self, tree: &Tree, blocks: &ReceivedBlocks) -> Result<Gathered> {
+    fn gather(&self, tree: &Tree, packed: &PackedLinks) -> Result<Gathered> {
         let (nb, n) = (self.nb, tree.nodes.len());
         let what = "the hierarchy's gathered light";
         let mut h = budget::try_filled(n * nb, [0.0; 3], what)?;
         let mut lobes_in = budget::try_filled(n, lobes::ZERO, what)?;
         h.par_chunks_mut(nb).zip(lobes_in.par_iter_mut()).enumerate().for_each(|(r, (hr, lr))| {
-            // Surface links: their blocks in this receiver's run of the packed copy, read in
-            // order (the per-link boxes are scattered over the heap, and reading them was most
-            // of a sweep's time).
-            let (sources, packed) = blocks.of(r);
-            for (&s, block) in sources.iter().zip(packed.chunks_exact(nb * nb)) {
-                let bs = &self.b[s as usize * nb..(s as usize + 1) * nb];
-                for (k, row) in block.chunks_exact(nb).enumerate() {
-                    let mut sum = [0.0f64; 3];
-                    for (&g, b) in row.iter().zip(bs) {
-                        let g = g as f64;
-                        sum[0] += g * b[0];
-                        sum[1] += g * b[1];
-                        sum[2] += g * b[2];
+            // The packings in turn: the links packed whole, then those made since.
+            for blocks in packed.parts() {
+                // Surface links: their blocks in this receiver's run of the packed copy, read in
+                // order (the per-link boxes are scattered over the heap, and reading them was most
+                // of a sweep's time).
+                let (sources, run) = blocks.of(r);
+                for (&s, block) in sources.iter().zip(run.chunks_exact(nb * nb)) {
+                    let bs = &self.b[s as usize * nb..(s as usize + 1) * nb];
+                    for (k, row) in block.chunks_exact(nb).enumerate() {
+                        let mut sum = [0.0f64; 3];
+                        for (&g, b) in row.iter().zip(bs) {
+                            let g = g as f64;
+                            sum[0] += g * b[0];
+                            sum[1] += g * b[1];
+                            sum[2] += g * b[2];
+                        }
+                        for c in 0..3 {
+                            hr[k][c] += sum[c];
+                        }
                     }
+                }
+                // Constant links: the receiver's constant term from the source's.
+                for &(s, g) in blocks.constants_of(r) {
+                    let b0 = &self.b[s as usize * nb];
+                    let g = g as f64;
                     for c in 0..3 {
-                        hr[k][c] += sum[c];
+                        hr[0][c] += g * b0[c];
                     }
                 }
-            }
-            // Constant links: the receiver's constant term from the source's.
-            for &(s, g) in blocks.constants_of(r) {
-                let b0 = &self.b[s as usize * nb];
-                let g = g as f64;
-                for c in 0..3 {
-                    hr[0][c] += g * b0[c];
-                }
-            }
-            for &(s, transmittance) in blocks.clusters_of(r) {
-                let s = s as usize;
-                let (nr, ns) = (&tree.nodes[r], &tree.nodes[s]);
-                let v = nr.centre - ns.centre;
-                let d2 = v.length_squared();
-                if d2 <= 0.0 {
-                    continue;
-                }
-                let w = v / d2.sqrt();
-                let intensity = match ns.plane_normal {
-                    Some(n) => {
-                        let f = ns.area * n.dot(w).max(0.0) / std::f64::consts::PI;
-                        self.mean[s].map(|m| m * f)
+                for &(s, transmittance) in blocks.clusters_of(r) {
+                    let s = s as usize;
+                    let (nr, ns) = (&tree.nodes[r], &tree.nodes[s]);
+                    let v = nr.centre - ns.centre;
+                    let d2 = v.length_squared();
+                    // (Zero: a link taken out, `PackedLinks`.)
+                    if d2 <= 0.0 {
+                        continue;
                     }
-                    None => lobes::eval(&self.lobes[s], w),
-                };
-                // Irradiance `I cos / d^2`, which `b = e + rho H` takes as it is (eq. 1).
-                let scale = transmittance as f64 / d2;
-                let arriving = intensity.map(|i| i * scale);
-                match (&nr.kind, nr.plane_normal) {
-                    (Kind::Surface(_), Some(n)) => {
-                        let cos = (-n.dot(w)).max(0.0);
-                        for c in 0..3 {
-                            hr[0][c] += arriving[c] * cos;
+                    let w = v / d2.sqrt();
+                    let intensity = match ns.plane_normal {
+                        Some(n) => {
+                            let f = ns.area * n.dot(w).max(0.0) / std::f64::consts::PI;
+                            self.mean[s].map(|m| m * f)
                         }
-                    }
-                    // A planar cluster holds its (constant) irradiance in `H^0`, which the push
-                    // hands to its faces unchanged.
-                    (Kind::Cluster { .. }, Some(n)) => {
-                        let cos = (-n.dot(w)).max(0.0);
-                        for c in 0..3 {
-                            hr[0][c] += arriving[c] * cos;
+                        None => lobes::eval(&self.lobes[s], w),
+                    };
+                    // Irradiance `I cos / d^2`, which `b = e + rho H` takes as it is (eq. 1).
+                    let scale = transmittance as f64 / d2;
+                    let arriving = intensity.map(|i| i * scale);
+                    match (&nr.kind, nr.plane_normal) {
+                        (Kind::Surface(_), Some(n)) => {
+                            let cos = (-n.dot(w)).max(0.0);
+                            for c in 0..3 {
+                                hr[0][c] += arriving[c] * cos;
+                            }
                         }
+                        // A planar cluster holds its (constant) irradiance in `H^0`, which the push
+                        // hands to its faces unchanged.
+                        (Kind::Cluster { .. }, Some(n)) => {
+                            let cos = (-n.dot(w)).max(0.0);
+                            for c in 0..3 {
+                                hr[0][c] += arriving[c] * cos;
+                            }
+                        }
+                        _ => lobes::add_lobe(lr, -w, arriving),
                     }
-                    _ => lobes::add_lobe(lr, -w, arriving),
                 }
             }
         });

@@ -95,6 +95,8 @@ pub fn update_frame(
         oracle,
         splits: std::mem::take(&mut previous.hierarchy.splits),
         decided_at,
+        changes: std::mem::take(&mut previous.hierarchy.changes),
+        packed: previous.hierarchy.packed.take(),
     };
     // Kept or not, the record follows the settings from here on.
     if hs.keep_pair_tree != hierarchy.splits.is_kept() {

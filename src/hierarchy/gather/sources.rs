@@ -18,7 +18,8 @@ use rayon::prelude::*;
 use crate::error::Result;
 use crate::hierarchy::coupling::{Coupling, Link};
 use crate::hierarchy::lobes::{self, Lobes};
-use crate::hierarchy::solve::{Incoming, State};
+use crate::hierarchy::packed::Incoming;
+use crate::hierarchy::solve::State;
 use crate::hierarchy::tree::{Kind, NodeId, Tree};
 
 /// A cluster's head holds its brightest sources until the rest bring at most this share of the

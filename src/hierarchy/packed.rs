@@ -1,0 +1,399 @@
+//! How the solve reads the links: packed by receiver, in the order a sweep reads them, and kept
+//! from solve to solve and frame to frame ([`PackedLinks`]) so that a frame packs only what it
+//! changed. Packing all 15M links of the full monastery took 1.2-1.3 s, twice an updated frame
+//! (one solve per link-and-solve round), as long as its five sweeps.
+
+use rayon::prelude::*;
+
+use super::coupling::{Coupling, Link};
+use super::tree::NodeId;
+use crate::budget;
+use crate::error::Result;
+
+/// Per node, the links it receives through: `(link, side)`, side 0 when it is the link's `a`.
+pub struct Incoming {
+    offsets: Vec<usize>,
+    entries: Vec<(u32, u8)>,
+}
+
+impl Incoming {
+    /// [`crate::Error::OutOfMemory`] when its lists cannot be had.
+    pub fn new(nodes: usize, links: &[Link]) -> Result<Self> {
+        let pairs: Vec<(NodeId, NodeId)> = budget::try_vec(links.len(), "the hierarchy's incoming links")?;
+        let mut pairs = pairs;
+        pairs.extend(links.iter().map(|l| (l.a, l.b)));
+        Self::of_pairs(nodes, &pairs)
+    }
+
+    /// Per node, the pairs `(a, b)` of `pairs` it is an end of: `(pair, side)`;
+    /// [`crate::Error::OutOfMemory`] when its lists cannot be had.
+    pub fn of_pairs(nodes: usize, pairs: &[(NodeId, NodeId)]) -> Result<Self> {
+        let what = "the hierarchy's incoming links";
+        let mut count = budget::try_filled(nodes + 1, 0usize, what)?;
+        for &(a, b) in pairs {
+            count[a as usize + 1] += 1;
+            count[b as usize + 1] += 1;
+        }
+        for i in 0..nodes {
+            count[i + 1] += count[i];
+        }
+        let mut fill = budget::try_vec(count.len(), what)?;
+        fill.extend_from_slice(&count);
+        let mut entries = budget::try_filled(2 * pairs.len(), (0u32, 0u8), what)?;
+        for (k, &(a, b)) in pairs.iter().enumerate() {
+            for (node, side) in [(a, 0u8), (b, 1u8)] {
+                entries[fill[node as usize]] = (k as u32, side);
+                fill[node as usize] += 1;
+            }
+        }
+        Ok(Self { offsets: count, entries })
+    }
+
+    pub(crate) fn of(&self, node: usize) -> &[(u32, u8)] {
+        &self.entries[self.offsets[node]..self.offsets[node + 1]]
+    }
+}
+
+/// Per receiving node, the blocks of its surface links (its side's `nb x nb`, row = its own
+/// function) packed one after the other, with each link's source, its constant links' `G^00`
+/// with theirs, and its cluster links' sources with their transmittance: a sweep reads them in
+/// order and never the links themselves.
+pub struct ReceivedBlocks {
+    /// `offsets[r]..offsets[r + 1]`: node `r`'s links in `sources` (and, times `nb^2`, in `blocks`).
+    offsets: Vec<usize>,
+    sources: Vec<NodeId>,
+    blocks: Vec<f32>,
+    /// `constant_offsets[r]..constant_offsets[r + 1]`: node `r`'s constant links in `constants`.
+    constant_offsets: Vec<usize>,
+    constants: Vec<(NodeId, f32)>,
+    /// `cluster_offsets[r]..cluster_offsets[r + 1]`: node `r`'s cluster links in `clusters`.
+    /// (Looked up in the links, every incoming entry cost a cache miss: with the couplings'
+    /// own passes, 15% of an updated frame of the full monastery.)
+    cluster_offsets: Vec<usize>,
+    clusters: Vec<(NodeId, f32)>,
+    nb: usize,
+}
+
+impl ReceivedBlocks {
+    /// The surface links' blocks by receiver, in [`Incoming`]'s order; [`crate::Error::OutOfMemory`]
+    /// when the copy cannot be had.
+    pub fn new(links: &[Link], incoming: &Incoming, nb: usize) -> Result<Self> {
+        let what = "the hierarchy's links packed for the solve";
+        let nodes = incoming.offsets.len() - 1;
+        let nb2 = nb * nb;
+        // In parallel, counts then copies, each run of receivers written by one thread: the
+        // links are read at random (a surface link's blocks are boxed), and done in turn this
+        // took a third of the full monastery's solve (5.0 of 14.7 s; 2.8 s on two threads).
+        let counts: Vec<[usize; 3]> = (0..nodes)
+            .into_par_iter()
+            .map(|r| {
+                incoming.of(r).iter().fold([0; 3], |[s, c, x], &(l, _)| match links[l as usize].coupling {
+                    Coupling::Surfaces(_) => [s + 1, c, x],
+                    Coupling::Constants { .. } => [s, c + 1, x],
+                    Coupling::Clusters { .. } => [s, c, x + 1],
+                })
+            })
+            .collect();
+        let mut offsets = budget::try_vec(nodes + 1, what)?;
+        let mut constant_offsets = budget::try_vec(nodes + 1, what)?;
+        let mut cluster_offsets = budget::try_vec(nodes + 1, what)?;
+        let (mut count, mut constant_count, mut cluster_count) = (0, 0, 0);
+        for &[s, c, x] in &counts {
+            offsets.push(count);
+            constant_offsets.push(constant_count);
+            cluster_offsets.push(cluster_count);
+            (count, constant_count, cluster_count) = (count + s, constant_count + c, cluster_count + x);
+        }
+        offsets.push(count);
+        constant_offsets.push(constant_count);
+        cluster_offsets.push(cluster_count);
+        let mut sources = budget::try_filled(count, 0 as NodeId, what)?;
+        let mut blocks = budget::try_filled(count.saturating_mul(nb2), 0.0f32, what)?;
+        let mut constants = budget::try_filled(constant_count, (0 as NodeId, 0.0f32), what)?;
+        let mut clusters = budget::try_filled(cluster_count, (0 as NodeId, 0.0f32), what)?;
+        // Receivers in runs of `RUN`, each run's part of the four outputs split off in order.
+        const RUN: usize = 4096;
+        let mut runs = Vec::with_capacity(nodes.div_ceil(RUN));
+        let (mut src, mut blk) = (&mut sources[..], &mut blocks[..]);
+        let (mut con, mut clu) = (&mut constants[..], &mut clusters[..]);
+        for r0 in (0..nodes).step_by(RUN) {
+            let r1 = (r0 + RUN).min(nodes);
+            let n = offsets[r1] - offsets[r0];
+            let m = constant_offsets[r1] - constant_offsets[r0];
+            let x = cluster_offsets[r1] - cluster_offsets[r0];
+            let (s_run, s_rest) = std::mem::take(&mut src).split_at_mut(n);
+            let (b_run, b_rest) = std::mem::take(&mut blk).split_at_mut(n * nb2);
+            let (c_run, c_rest) = std::mem::take(&mut con).split_at_mut(m);
+            let (x_run, x_rest) = std::mem::take(&mut clu).split_at_mut(x);
+            (src, blk, con, clu) = (s_rest, b_rest, c_rest, x_rest);
+            runs.push((r0..r1, s_run, b_run, c_run, x_run));
+        }
+        runs.into_par_iter().for_each(|(receivers, src, blk, con, clu)| {
+            let (mut k, mut j, mut i) = (0, 0, 0);
+            for r in receivers {
+                for &(l, side) in incoming.of(r) {
+                    let link = &links[l as usize];
+                    let source = if side == 0 { link.b } else { link.a };
+                    match &link.coupling {
+                        Coupling::Surfaces(both) => {
+                            let side = side as usize;
+                            src[k] = source;
+                            blk[k * nb2..(k + 1) * nb2].copy_from_slice(&both[side * nb2..(side + 1) * nb2]);
+                            k += 1;
+                        }
+                        Coupling::Constants { ab, ba } => {
+                            con[j] = (source, if side == 0 { *ab } else { *ba });
+                            j += 1;
+                        }
+                        Coupling::Clusters { transmittance } => {
+                            clu[i] = (source, *transmittance);
+                            i += 1;
+                        }
+                    }
+                }
+            }
+        });
+        Ok(Self { offsets, sources, blocks, constant_offsets, constants, cluster_offsets, clusters, nb })
+    }
+
+    /// Receivers it has runs for (nodes added since have none).
+    fn nodes(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    /// Entries it holds (one per link and side).
+    fn entries(&self) -> usize {
+        self.sources.len() + self.constants.len() + self.clusters.len()
+    }
+
+    /// Node `r`'s surface links: their sources and their blocks, `nb^2` each.
+    pub(crate) fn of(&self, r: usize) -> (&[NodeId], &[f32]) {
+        if r >= self.nodes() {
+            return (&[], &[]);
+        }
+        let (a, b) = (self.offsets[r], self.offsets[r + 1]);
+        let nb2 = self.nb * self.nb;
+        (&self.sources[a..b], &self.blocks[a * nb2..b * nb2])
+    }
+
+    /// Node `r`'s constant links: their sources and `G^00`.
+    pub(crate) fn constants_of(&self, r: usize) -> &[(NodeId, f32)] {
+        if r >= self.nodes() {
+            return &[];
+        }
+        &self.constants[self.constant_offsets[r]..self.constant_offsets[r + 1]]
+    }
+
+    /// Node `r`'s cluster links: their sources and transmittance.
+    pub(crate) fn clusters_of(&self, r: usize) -> &[(NodeId, f32)] {
+        if r >= self.nodes() {
+            return &[];
+        }
+        &self.clusters[self.cluster_offsets[r]..self.cluster_offsets[r + 1]]
+    }
+
+    /// Zeroes what receiver `r` gets from `s` (the link between them was taken out): `true` when
+    /// it held such an entry. The entry's source becomes `r` itself, which no link joins to
+    /// itself, so that a sweep reads a valid node and a later search for a source never finds it.
+    fn zero(&mut self, receiver: NodeId, s: NodeId) -> bool {
+        let r = receiver as usize;
+        if r >= self.nodes() {
+            return false;
+        }
+        let nb2 = self.nb * self.nb;
+        let (a, b) = (self.offsets[r], self.offsets[r + 1]);
+        if let Some(k) = self.sources[a..b].iter().position(|&x| x == s) {
+            self.blocks[(a + k) * nb2..(a + k + 1) * nb2].fill(0.0);
+            self.sources[a + k] = receiver;
+            return true;
+        }
+        let (a, b) = (self.constant_offsets[r], self.constant_offsets[r + 1]);
+        if let Some(e) = self.constants[a..b].iter_mut().find(|e| e.0 == s) {
+            *e = (receiver, 0.0);
+            return true;
+        }
+        let (a, b) = (self.cluster_offsets[r], self.cluster_offsets[r + 1]);
+        // (A cluster link from the receiver itself is skipped by the sweep: no distance.)
+        if let Some(e) = self.clusters[a..b].iter_mut().find(|e| e.0 == s) {
+            *e = (receiver, 0.0);
+            return true;
+        }
+        false
+    }
+}
+
+/// What changed in [`super::refine::Hierarchy::links`] since [`PackedLinks`] last packed them:
+/// every change to the links is recorded here by the hierarchy that makes it.
+#[derive(Default)]
+pub struct LinkChanges {
+    /// The pairs of packed links taken out since.
+    removed: Vec<(NodeId, NodeId)>,
+    /// `links[fresh..]` were made since (links are only appended, and taking some out keeps the
+    /// others' order).
+    fresh: usize,
+}
+
+impl LinkChanges {
+    /// Records that the links whose `keep` is false were taken out of `links` (not yet done).
+    pub fn removing(&mut self, links: &[Link], keep: &[bool]) {
+        let fresh = self.fresh.min(links.len());
+        let before = self.removed.len();
+        let packed = links[..fresh].iter().zip(keep);
+        self.removed.extend(packed.filter(|(_, k)| !**k).map(|(l, _)| (l.a, l.b)));
+        // The fresh ones now start where the packed ones left end.
+        self.fresh = fresh - (self.removed.len() - before);
+    }
+}
+
+/// The links as the sweeps read them: a packing of every link at some point (`main`), with the
+/// entries of links taken out since zeroed in place, and the links made since packed apart
+/// (`fresh`). Packed whole again once the changes reach a quarter of it.
+pub struct PackedLinks {
+    main: ReceivedBlocks,
+    fresh: Option<ReceivedBlocks>,
+    /// Entries of `main` zeroed.
+    zeroed: usize,
+}
+
+impl PackedLinks {
+    /// Every link of `links` packed anew; `changes` start from here.
+    pub fn new(nodes: usize, links: &[Link], nb: usize, changes: &mut LinkChanges) -> Result<Self> {
+        let main = ReceivedBlocks::new(links, &Incoming::new(nodes, links)?, nb)?;
+        *changes = LinkChanges { removed: Vec::new(), fresh: links.len() };
+        Ok(Self { main, fresh: None, zeroed: 0 })
+    }
+
+    /// Brings `packed` to `links` as `changes` say they changed, or packs them anew (none yet,
+    /// another basis, or changes past a quarter of it, or `links` not as the changes say);
+    /// [`crate::Error::OutOfMemory`] when a packing cannot be had.
+    pub fn update(
+        packed: &mut Option<Self>,
+        nodes: usize,
+        links: &[Link],
+        nb: usize,
+        changes: &mut LinkChanges,
+    ) -> Result<()> {
+        let current = packed.take().filter(|p| p.main.nb == nb);
+        let Some(mut p) = current else {
+            *packed = Some(Self::new(nodes, links, nb, changes)?);
+            return Ok(());
+        };
+        let fresh = links.len().saturating_sub(changes.fresh);
+        let zeroed = p.zeroed + 2 * changes.removed.len();
+        let live = p.main.entries() - zeroed;
+        // Each link is two entries (one per side); more than that changed: pack anew.
+        if changes.fresh > links.len()
+            || 2 * changes.fresh != live
+            || 4 * (zeroed + 2 * fresh) > p.main.entries()
+        {
+            *packed = Some(Self::new(nodes, links, nb, changes)?);
+            return Ok(());
+        }
+        for &(a, b) in &changes.removed {
+            let found = p.main.zero(a, b) & p.main.zero(b, a);
+            debug_assert!(found, "a packed link {a}-{b} taken out was not packed");
+        }
+        p.zeroed = zeroed;
+        changes.removed.clear();
+        let new = &links[changes.fresh..];
+        p.fresh = if new.is_empty() {
+            None
+        } else {
+            Some(ReceivedBlocks::new(new, &Incoming::new(nodes, new)?, nb)?)
+        };
+        *packed = Some(p);
+        Ok(())
+    }
+
+    /// The packings a sweep reads, each receiver's runs summed in this order.
+    pub(crate) fn parts(&self) -> impl Iterator<Item = &ReceivedBlocks> {
+        std::iter::once(&self.main).chain(self.fresh.as_ref())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A link between `a` and `b` of each kind in turn, its numbers made from its ends.
+    fn link(a: NodeId, b: NodeId, nb: usize) -> Link {
+        let x = (a * 1000 + b) as f32;
+        let coupling = match (a + b) % 3 {
+            0 => Coupling::Surfaces((0..2 * nb * nb).map(|k| x + k as f32).collect()),
+            1 => Coupling::Constants { ab: x, ba: -x },
+            _ => Coupling::Clusters { transmittance: x },
+        };
+        Link { a, b, coupling, load: 0.0 }
+    }
+
+    /// Per receiver, what it gets from each source, over every part, zeroed entries left out.
+    fn received(packed: &PackedLinks, nodes: usize) -> Vec<Vec<(NodeId, Vec<f32>)>> {
+        (0..nodes)
+            .map(|r| {
+                let mut out = Vec::new();
+                for p in packed.parts() {
+                    let (sources, run) = p.of(r);
+                    let nb2 = p.nb * p.nb;
+                    for (k, &s) in sources.iter().enumerate() {
+                        out.push((s, run[k * nb2..(k + 1) * nb2].to_vec()));
+                    }
+                    out.extend(p.constants_of(r).iter().map(|&(s, g)| (s, vec![g])));
+                    out.extend(p.clusters_of(r).iter().map(|&(s, t)| (s, vec![t, 0.5])));
+                }
+                out.retain(|(s, _)| *s as usize != r);
+                out.sort_by(|x, y| x.partial_cmp(y).unwrap());
+                out
+            })
+            .collect()
+    }
+
+    /// Links taken out and made, frame after frame, with nodes added: the packing kept up to
+    /// date by the changes holds what a packing of the links anew holds, receiver by receiver,
+    /// both before and after it packs itself anew.
+    #[test]
+    fn a_packing_kept_up_to_date_holds_the_links() {
+        let nb = 3;
+        let mut nodes = 40usize;
+        let mut links: Vec<Link> = Vec::new();
+        let mut seed = 7u64;
+        let mut random = move |n: usize| {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((seed >> 33) as usize) % n
+        };
+        let mut pairs = std::collections::HashSet::new();
+        let mut add = |links: &mut Vec<Link>, nodes: usize, count: usize, random: &mut dyn FnMut(usize) -> usize| {
+            while links.len() < count {
+                let (a, b) = (random(nodes) as NodeId, random(nodes) as NodeId);
+                if a != b && pairs.insert((a.min(b), a.max(b))) {
+                    links.push(link(a.min(b), a.max(b), nb));
+                }
+            }
+        };
+        add(&mut links, nodes, 200, &mut random);
+        let mut changes = LinkChanges::default();
+        let mut packed = None;
+        PackedLinks::update(&mut packed, nodes, &links, nb, &mut changes).unwrap();
+        let mut repacked = 0;
+        for round in 0..12 {
+            // Some taken out (as a relink or a move does), some made, sometimes on new nodes.
+            let keep: Vec<bool> = (0..links.len()).map(|_| random(10) != 0).collect();
+            changes.removing(&links, &keep);
+            let mut k = keep.iter();
+            links.retain(|_| *k.next().unwrap());
+            if round % 3 == 2 {
+                nodes += 5;
+            }
+            let count = links.len() + 15;
+            add(&mut links, nodes, count, &mut random);
+            let before = packed.as_ref().map(|p: &PackedLinks| p.main.entries());
+            PackedLinks::update(&mut packed, nodes, &links, nb, &mut changes).unwrap();
+            let p = packed.as_ref().unwrap();
+            if p.zeroed == 0 && p.fresh.is_none() && before.is_some() {
+                repacked += 1;
+            }
+            let fresh = PackedLinks::new(nodes, &links, nb, &mut LinkChanges::default()).unwrap();
+            assert_eq!(received(p, nodes), received(&fresh, nodes), "round {round}");
+        }
+        assert!(repacked >= 1, "the changes never reached a quarter of the packing");
+    }
+}
