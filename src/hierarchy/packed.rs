@@ -361,14 +361,15 @@ mod tests {
             ((seed >> 33) as usize) % n
         };
         let mut pairs = std::collections::HashSet::new();
-        let mut add = |links: &mut Vec<Link>, nodes: usize, count: usize, random: &mut dyn FnMut(usize) -> usize| {
-            while links.len() < count {
-                let (a, b) = (random(nodes) as NodeId, random(nodes) as NodeId);
-                if a != b && pairs.insert((a.min(b), a.max(b))) {
-                    links.push(link(a.min(b), a.max(b), nb));
+        let mut add =
+            |links: &mut Vec<Link>, nodes: usize, count: usize, random: &mut dyn FnMut(usize) -> usize| {
+                while links.len() < count {
+                    let (a, b) = (random(nodes) as NodeId, random(nodes) as NodeId);
+                    if a != b && pairs.insert((a.min(b), a.max(b))) {
+                        links.push(link(a.min(b), a.max(b), nb));
+                    }
                 }
-            }
-        };
+            };
         add(&mut links, nodes, 200, &mut random);
         let mut changes = LinkChanges::default();
         let mut packed = None;
