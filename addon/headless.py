@@ -78,6 +78,8 @@ def parse(argv):
     p.add_argument("--no-shadows", action="store_true", help="no visibility tests")
     p.add_argument("--no-corner-gather", action="store_true",
                    help="corners from the face polynomials (faster, softer contact shadows)")
+    p.add_argument("--reflecting-backs", action="store_true",
+                   help="open surfaces reflect light from both sides (Two-Sided Open Surfaces)")
     p.add_argument("--clear", action="store_true", help="clear the bake instead of baking")
     p.add_argument("--save", help="save the result to this .blend (default: nothing is saved)")
     p.add_argument("--checkpoint", type=int, default=DEFAULT_CHECKPOINT, metavar="N",
@@ -226,6 +228,8 @@ def _main(args, bpy, pkg):
         p.visibility = False
     if args.no_corner_gather:
         p.corner_gather = False
+    if args.reflecting_backs:
+        p.reflecting_backs = True
     view_layer = scene.view_layers[0] if bpy.context.scene != scene else bpy.context.view_layer
     lines = None
     with bpy.context.temp_override(scene=scene, view_layer=view_layer):

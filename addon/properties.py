@@ -85,6 +85,14 @@ class RadiositySceneSettings(bpy.types.PropertyGroup):
                     "Scenes (Hierarchy) every frame gathers anew and it is most of the frame (a "
                     "9,600-face room: about 15 s a frame instead of 2-4 s). Off: faster, vertices "
                     "take the smooth light of the face (or its piece). Technical: corner gather")
+    reflecting_backs: BoolProperty(
+        name="Two-Sided Open Surfaces", default=False,
+        description="Open surfaces (a ground plane, a sheet, a wall without thickness, a mesh with "
+                    "holes) reflect light from both sides, as Cycles' diffuse surfaces do; closed "
+                    "meshes are the same either way. Off: an open surface reflects only from the "
+                    "side its normals face, and light reaching its back is lost (the ground plane "
+                    "under a model: 7% off Cycles one-sided, 2% two-sided). Costs a second element "
+                    "per open face. Technical: the backs of open surfaces")
     threads: IntProperty(name="Threads", default=0, min=0, max=1024,
                          description="CPU threads for the bake (0: all cores)")
     memory_limit_mb: IntProperty(

@@ -29,6 +29,7 @@ class RENDER_PT_radiosity(bpy.types.Panel):
         col = layout.column(heading="Light")
         col.prop(p, "visibility")
         col.prop(p, "corner_gather")
+        col.prop(p, "reflecting_backs")
         col = layout.column()
         col.prop(p, "method")
         if p.method == "HIERARCHICAL":

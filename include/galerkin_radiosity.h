@@ -221,6 +221,13 @@ typedef struct GrSettings {
    * version 3: read only when `struct_size` covers it.)
    */
   double accuracy;
+  /**
+   * 1: open surfaces (a sheet, a ground plane, a mesh with holes) reflect light from both
+   * sides, as Blender's diffuse surfaces do; 0: only from their front (the side their
+   * normal faces). Closed meshes are the same either way. Other values are invalid.
+   * Default 0. (Read only when `struct_size` covers it.)
+   */
+  uint32_t reflecting_backs;
 } GrSettings;
 
 /**

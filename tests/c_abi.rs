@@ -421,7 +421,7 @@ fn the_scene_builder_builds_what_gr_session_new_builds() {
     newer.struct_size += 8;
     let (st, m) = room.build(&newer, None).unwrap_err();
     assert_eq!(st, GrStatus::InvalidArgument);
-    assert!(m.contains("settings.struct_size is 64 but this library's struct has 56 bytes"), "{m}");
+    assert!(m.contains("settings.struct_size is 72 but this library's struct has 64 bytes"), "{m}");
     let mut older = settings;
     older.struct_size = 40;
     let (st, m) = room.new_session(&older).unwrap_err();
@@ -478,6 +478,58 @@ fn the_scene_builder_builds_what_gr_session_new_builds() {
     assert_eq!(unsafe { gr_session_object_count(out, &mut n) }, GrStatus::Ok);
     assert_eq!(n, 0);
     unsafe { gr_session_free(out) };
+}
+
+/// `reflecting_backs` (issue 19): a lamp facing up under a grey sheet whose front faces up too,
+/// away from it. With backs the sheet's back returns the lamp's light, as two facing squares a
+/// side apart do (Howell C-11, `F = 0.199825`): the lamp's radiosity is `E / (1 - rho^2 F^2)`
+/// for constant radiosities, 1.0101; without, the lamp shows its own exitance exactly. The
+/// sheet's front (what is read back) sees nothing either way. 2 is refused, and a host built
+/// against the header before the field (56 bytes) gets the default, off.
+#[test]
+fn reflecting_backs_through_the_c_abi() {
+    let scene = Flat {
+        reflectance: vec![0.5, 0.5, 0.5, 0.5, 0.5, 0.5],
+        emission: vec![1.0, 1.0, 1.0, 0.0, 0.0, 0.0],
+        vertex_counts: vec![4, 4],
+        vertices: vec![
+            0., 0., 0., 1., 0., 0., 1., 1., 0., 0., 1., 0., //
+            0., 0., 1., 1., 0., 1., 1., 1., 1., 0., 1., 1.,
+        ],
+        face_counts: vec![1, 1],
+        face_vertex_counts: vec![4, 4],
+        face_indices: vec![0, 1, 2, 3, 0, 1, 2, 3],
+        face_materials: vec![0, 1],
+        matrices: Vec::new(),
+    };
+    let solved = |settings: &GrSettings| {
+        let s = scene.new_session(settings).unwrap();
+        assert_eq!(
+            unsafe { gr_session_solve_frame(s, 1.0, None, null_mut()) },
+            GrStatus::Ok,
+            "{}",
+            last_error()
+        );
+        let out = (face_radiosity(s, 0).unwrap()[0] as f64, face_radiosity(s, 1).unwrap()[0] as f64);
+        unsafe { gr_session_free(s) };
+        out
+    };
+    assert_eq!(defaults().reflecting_backs, 0, "backs are off by default");
+    let (lamp, sheet) = solved(&defaults());
+    assert!((lamp - 1.0).abs() < 1e-6 && sheet.abs() < 1e-6, "one-sided: lamp {lamp}, sheet {sheet}");
+    let backs = GrSettings { reflecting_backs: 1, ..defaults() };
+    let (lamp, sheet) = solved(&backs);
+    let f2 = (0.5f64 * 0.199825).powi(2);
+    let want = f2 / (1.0 - f2);
+    assert!(((lamp - 1.0) - want).abs() < 0.1 * want, "two-sided: lamp gains {}, want {want}", lamp - 1.0);
+    assert!(sheet.abs() < 1e-6, "two-sided: the sheet's front reads {sheet}");
+    let bad = GrSettings { reflecting_backs: 2, ..defaults() };
+    let (st, m) = scene.new_session(&bad).unwrap_err();
+    assert_eq!(st, GrStatus::InvalidArgument);
+    assert!(m.contains("settings.reflecting_backs 2 is neither 0 nor 1"), "{m}");
+    let older = GrSettings { struct_size: 56, reflecting_backs: 1, ..defaults() };
+    let (lamp, _) = solved(&older);
+    assert!((lamp - 1.0).abs() < 1e-6, "a 56-byte GrSettings read a field past its size: lamp {lamp}");
 }
 
 #[test]

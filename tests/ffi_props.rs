@@ -37,6 +37,7 @@ struct RawSettings {
     tolerance: f64,
     memory_budget_mb: u64,
     accuracy: f64,
+    reflecting_backs: u32,
 }
 
 const _: () = assert!(size_of::<RawSettings>() == size_of::<GrSettings>());
@@ -119,8 +120,8 @@ fn settings() -> impl Strategy<Value = RawSettings> {
         (0u32..=3, 1u32..=6, prop::sample::select(vec![1e-4, 1e-2, 0.5]), 0u32..=1, 1u32..=2, 0u32..=2);
     // Mostly a rule with more points than the basis order (fewer is rejected at validation).
     let enough_points = prop_oneof![7 => Just(true), 1 => Just(false)];
-    (numbers, 0u32..=2, 0u32..=1, enough_points).prop_map(|((b, q, t, v, vs, th), m, g, enough)| {
-        RawSettings {
+    (numbers, 0u32..=2, 0u32..=1, enough_points, 0u32..=1).prop_map(
+        |((b, q, t, v, vs, th), m, g, enough, backs)| RawSettings {
             struct_size: size_of::<GrSettings>() as u32,
             basis_order: b,
             quadrature_order: if enough && q <= b { b + q } else { q },
@@ -132,8 +133,9 @@ fn settings() -> impl Strategy<Value = RawSettings> {
             corner_gather: g,
             memory_budget_mb: 0,
             accuracy: 1e-3,
-        }
-    })
+            reflecting_backs: backs,
+        },
+    )
 }
 
 /// One thing wrong with the call to `gr_session_new` (besides what the scene itself may get
@@ -153,7 +155,7 @@ enum Fault {
 
 fn fault() -> impl Strategy<Value = Fault> {
     let setting = prop_oneof![
-        (0usize..9, prop_oneof![Just(0u64), 3u64..20, Just(u64::from(u32::MAX))]),
+        (0usize..10, prop_oneof![Just(0u64), 3u64..20, Just(u64::from(u32::MAX))]),
         Just(2usize).prop_flat_map(|k| {
             (
                 Just(k),
@@ -336,6 +338,7 @@ fn run(c: &Case) -> Result<(), TestCaseError> {
                 5 => settings.threads = v32,
                 6 => settings.corner_gather = v32,
                 8 => settings.memory_budget_mb = v,
+                9 => settings.reflecting_backs = v32,
                 _ => settings.method = v32,
             }
         }

@@ -675,6 +675,7 @@ def settings_from_scene(scene) -> BakeSettings:
         apply_to_materials=p.apply_to_materials,
         memory_limit_mb=p.memory_limit_mb,
         hierarchy_accuracy=p.hierarchy_accuracy,
+        reflecting_backs=p.reflecting_backs,
     )
 
 

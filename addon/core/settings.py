@@ -61,6 +61,7 @@ class BakeSettings:
     apply_to_materials: bool = False  # insert the "Radiosity Light" node group (light_nodes.py)
     memory_limit_mb: int = 0  # 0: automatic (80% of the memory available when the bake starts)
     hierarchy_accuracy: float = DEFAULT_HIERARCHY_ACCURACY  # Refinement Threshold: hierarchy only
+    reflecting_backs: bool = False  # Two-Sided Open Surfaces
 
     def validate(self) -> BakeSettings:
         if not 0 <= self.basis_order <= 3:
@@ -117,6 +118,10 @@ class BakeSettings:
         # flat bake's re-bake solve everything again.
         if self.method == "hierarchical":
             native["accuracy"] = self.hierarchy_accuracy
+        # Left out when off (the library's default), so that bakes made before the option
+        # existed keep their solve signature.
+        if self.reflecting_backs:
+            native["reflecting_backs"] = True
         return native
 
     def solve_signature(self) -> dict:

@@ -87,6 +87,7 @@ class _Settings(Structure):
         ("tolerance", c_double),
         ("memory_budget_mb", c_uint64),
         ("accuracy", c_double),
+        ("reflecting_backs", c_uint32),
     ]
 
 
@@ -329,7 +330,7 @@ def _settings(lib: ctypes.CDLL, settings: dict) -> _Settings:
             s.method = METHODS[value]
         elif key in ("tolerance", "accuracy"):
             setattr(s, key, float(value))
-        elif key in ("visibility", "corner_gather"):
+        elif key in ("visibility", "corner_gather", "reflecting_backs"):
             setattr(s, key, _u32(value, f"settings.{key}"))  # True/False or 1/0
         elif key in ("basis_order", "quadrature_order", "visibility_samples", "threads"):
             setattr(s, key, _u32(value, f"settings.{key}"))
@@ -347,7 +348,8 @@ class Session:
 
     ``settings``: optional keys basis_order, quadrature_order, tolerance, visibility,
     visibility_samples, threads, method ('incremental' | 'exact' | 'full' | 'hierarchical'),
-    accuracy (the hierarchical method's), corner_gather,
+    accuracy (the hierarchical method's), corner_gather, reflecting_backs (open surfaces reflect
+    from both sides),
     memory_budget_mb (0: 80% of the available memory; a scene estimated over it is refused).
     ``reflectance``, ``emission``: (M, 3) per material. ``objects``: dicts with ``vertices``
     (N, 3), ``face_sizes`` (F,) of 3 or 4, ``face_indices`` (sum of face_sizes,) local to the

@@ -65,6 +65,11 @@ pub struct GrSettings {
     /// carry unrefined, in (0,1); smaller is finer and slower. Default 1e-3. (Since ABI
     /// version 3: read only when `struct_size` covers it.)
     pub accuracy: f64,
+    /// 1: open surfaces (a sheet, a ground plane, a mesh with holes) reflect light from both
+    /// sides, as Blender's diffuse surfaces do; 0: only from their front (the side their
+    /// normal faces). Closed meshes are the same either way. Other values are invalid.
+    /// Default 0. (Read only when `struct_size` covers it.)
+    pub reflecting_backs: u32,
 }
 
 impl GrSettings {
@@ -83,6 +88,7 @@ impl GrSettings {
             corner_gather: u32::from(d.corner_gather),
             memory_budget_mb: d.memory_budget_mb,
             accuracy: d.accuracy,
+            reflecting_backs: u32::from(d.reflecting_backs),
         }
     }
 }
@@ -94,7 +100,7 @@ impl Default for GrSettings {
 }
 
 /// `sizeof(GrSettings)` of ABI version 2, the first with `struct_size`: every field since is
-/// read only when `struct_size` covers it (`accuracy`, version 3).
+/// read only when `struct_size` covers it (`accuracy`, version 3; `reflecting_backs`).
 const SETTINGS_V2_SIZE: usize = 48;
 const _: () = assert!(std::mem::offset_of!(GrSettings, accuracy) == SETTINGS_V2_SIZE);
 
@@ -144,6 +150,12 @@ pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Me
     } else {
         Settings::default().accuracy
     };
+    // SAFETY: as above, for `reflecting_backs`.
+    let backs = if size as usize >= std::mem::offset_of!(GrSettings, reflecting_backs) + size_of::<u32>() {
+        unsafe { (&raw const (*p).reflecting_backs).read() }
+    } else {
+        u32::from(Settings::default().reflecting_backs)
+    };
     let method = match method {
         0 => Method::Incremental,
         1 => Method::Exact,
@@ -167,6 +179,13 @@ pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Me
             return Err(Failure::invalid(format!("settings.corner_gather {v} is neither 0 nor 1")));
         }
     };
+    let reflecting_backs = match backs {
+        0 => false,
+        1 => true,
+        v => {
+            return Err(Failure::invalid(format!("settings.reflecting_backs {v} is neither 0 nor 1")));
+        }
+    };
     let settings = Settings {
         basis_order: basis_order as usize,
         quadrature_order: quadrature_order as usize,
@@ -177,6 +196,7 @@ pub(crate) unsafe fn read_settings(p: *const GrSettings) -> Result<(Settings, Me
         corner_gather,
         memory_budget_mb: budget,
         accuracy,
+        reflecting_backs,
         // Settings the C struct does not carry keep the library's defaults.
         ..Settings::default()
     };

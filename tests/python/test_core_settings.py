@@ -17,6 +17,16 @@ def test_native_settings_follow_quality():
     assert "threads" not in s.solve_signature()
 
 
+def test_two_sided_open_surfaces_reach_the_library_only_when_on():
+    # Off is the library's default and stays out of the signature, so that bakes made before the
+    # option keep theirs; on, it is passed and changes the signature (a re-bake solves again).
+    off = BakeSettings().validate()
+    on = BakeSettings(reflecting_backs=True).validate()
+    assert "reflecting_backs" not in off.native()
+    assert on.native()["reflecting_backs"] is True
+    assert on.solve_signature() != off.solve_signature()
+
+
 @pytest.mark.parametrize("order, points", [(0, 2), (1, 2), (2, 3), (3, 4)])
 def test_draft_quality_keeps_enough_points_for_the_basis(order, points):
     n = BakeSettings(basis_order=order, quality="DRAFT").validate().native()
