@@ -88,11 +88,43 @@ fn on_hull(elements: &[Patch], planes: &[Option<(DVec3, f64)>], eps: f64) -> Vec
         unique.entry(quantize(*p)).or_insert(*p);
     }
     let keys: Vec<_> = unique.into_iter().collect();
+    // A plane inside the scene has some corner behind it, most often one of the scene's extreme
+    // corners: those are tried first, and only a plane with all of them in front scans every
+    // corner (the scans were most of an updated frame's set-up on a 30k-triangle model).
+    let corners = || elements.iter().flat_map(|p| p.corners.iter().copied());
+    let extreme = extremes(corners());
     let verdict: HashMap<Key, bool> = keys
         .par_iter()
-        .map(|(k, (n, d))| (*k, elements.iter().all(|p| p.corners.iter().all(|c| n.dot(*c) - d >= -eps))))
+        .map(|(k, (n, d))| {
+            let in_front = |c: DVec3| n.dot(c) - d >= -eps;
+            (*k, extreme.iter().all(|&c| in_front(c)) && corners().all(in_front))
+        })
         .collect();
     planes.iter().map(|p| p.map(|p| verdict[&quantize(p)]).unwrap_or(false)).collect()
+}
+
+/// Directions the scans of [`on_hull`] and the culling planes try first: a cube's 6 faces, 12
+/// edges and 8 corners seen from its centre.
+fn probe_directions() -> impl Iterator<Item = DVec3> {
+    (-1..=1)
+        .flat_map(|x| {
+            (-1..=1).flat_map(move |y| (-1..=1).map(move |z| DVec3::new(x as f64, y as f64, z as f64)))
+        })
+        .filter(|u| *u != DVec3::ZERO)
+}
+
+/// Per probe direction `u`, the point of `points` lowest along `u` (none for no points).
+fn extremes(points: impl Iterator<Item = DVec3> + Clone) -> Vec<DVec3> {
+    probe_directions().filter_map(|u| points.clone().min_by(|a, b| u.dot(*a).total_cmp(&u.dot(*b)))).collect()
+}
+
+/// Per probe direction `u`, the triangle whose highest vertex along `u` is lowest: the likeliest
+/// to lie wholly behind a plane facing `-u`.
+fn extreme_triangles(tris: &[Triangle]) -> Vec<[DVec3; 3]> {
+    let top = |u: DVec3, t: &Triangle| t.v.iter().map(|v| u.dot(*v)).fold(f64::NEG_INFINITY, f64::max);
+    probe_directions()
+        .filter_map(|u| tris.iter().min_by(|a, b| top(u, a).total_cmp(&top(u, b))).map(|t| t.v))
+        .collect()
 }
 
 /// All occluders of one frame: the triangles of every element, and each element's plane.
@@ -158,9 +190,16 @@ impl Occluders {
         let culling_planes = {
             use rayon::prelude::*;
             let tris = bvh.triangles();
+            // The likeliest triangles first, as `on_hull` tries the extreme corners.
+            let likely = extreme_triangles(tris);
             planes
                 .par_iter()
-                .map(|p| p.filter(|(n, d)| tris.iter().any(|t| t.v.iter().all(|v| n.dot(*v) - d <= eps))))
+                .map(|p| {
+                    p.filter(|(n, d)| {
+                        let behind = |v: &[DVec3; 3]| v.iter().all(|v| n.dot(*v) - d <= eps);
+                        likely.iter().any(behind) || tris.iter().any(|t| behind(&t.v))
+                    })
+                })
                 .collect()
         };
         let cells = samples_per_axis * samples_per_axis;
@@ -244,6 +283,53 @@ fn triangle_edges(v: [DVec3; 3]) -> [DVec3; 3] {
 mod tests {
     use super::batch::{CandidateTriangles, Segments, segments_hit};
     use super::*;
+
+    /// The scans that try the extreme corners and triangles first decide as the plain scans do:
+    /// random triangles and quads in a box with a floor and two walls (on the hull) and faces
+    /// inside it, in several orders.
+    #[test]
+    fn hull_and_culling_planes_as_by_the_plain_scans() {
+        for round in 0..6 {
+            let mut patches = vec![
+                Patch::from_corners(&[DVec3::ZERO, DVec3::X * 4.0, DVec3::new(4., 4., 0.), DVec3::Y * 4.0]),
+                Patch::from_corners(&[DVec3::ZERO, DVec3::Z * 4.0, DVec3::new(4., 0., 4.), DVec3::X * 4.0]),
+                Patch::from_corners(&[DVec3::ZERO, DVec3::Y * 4.0, DVec3::new(0., 4., 4.), DVec3::Z * 4.0]),
+            ];
+            for k in 0..40 {
+                let p = |j: usize| {
+                    let i = 100 * round + 7 * k + j;
+                    DVec3::new(grid(i, 12.9898), grid(i, 78.233), grid(i, 37.719)) * 0.9 + DVec3::splat(0.2)
+                };
+                let c = [p(0), p(1), p(2)];
+                if (c[1] - c[0]).cross(c[2] - c[0]).length() > 1e-6 {
+                    patches.push(Patch::from_corners(&c));
+                }
+            }
+            if round % 2 == 1 {
+                patches.reverse();
+            }
+            let occ = Occluders::new(&patches, 2);
+            let eps = 1e-9 * occ.scale;
+            let tris = occ.bvh.triangles();
+            for (e, p) in patches.iter().enumerate() {
+                let plane = (p.non_planarity() < 1e-9).then(|| {
+                    let n = p.centre_normal();
+                    (n, n.dot(p.point(0.5, 0.5)))
+                });
+                let plain_hull = plane.is_some_and(|(n, d)| {
+                    patches.iter().all(|q| q.corners.iter().all(|c| n.dot(*c) - d >= -eps))
+                });
+                assert_eq!(occ.on_hull(e), plain_hull, "round {round}, element {e}: on the hull");
+                let plain_culling =
+                    plane.filter(|(n, d)| tris.iter().any(|t| t.v.iter().all(|v| n.dot(*v) - d <= eps)));
+                assert_eq!(occ.culling_planes[e], plain_culling, "round {round}, element {e}: culling plane");
+            }
+            assert!(
+                (0..patches.len()).filter(|&e| occ.on_hull(e)).count() >= 3,
+                "round {round}: the box's walls"
+            );
+        }
+    }
 
     /// A pseudo-random coordinate on a coarse binary grid (multiples of 1/4), so that segments
     /// run through vertices and along edges.
