@@ -161,3 +161,33 @@ fn unbounded_work_and_bad_outputs_are_refused_before_baking() {
     assert_eq!(code, 0, "{err}");
     assert!(std::fs::read_to_string(out).unwrap().starts_with('{'));
 }
+
+/// An output that is not a regular file (`/dev/null`, a pipe) is written to as it is: the rename
+/// that keeps a failed bake from touching a regular output would replace the pipe, or `/dev/null`
+/// itself, with a file (it did, baking to `-o /dev/null` as root). Checked with a named pipe, read
+/// while the bake writes it.
+#[cfg(unix)]
+#[test]
+fn a_pipe_as_output_stays_a_pipe() {
+    use std::os::unix::fs::FileTypeExt;
+    let dir = std::env::temp_dir().join(format!("gr-pipe-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = dir.join("scene.json");
+    std::fs::write(&input, scene_with(QUAD, MAT)).unwrap();
+    let pipe = dir.join("out.json");
+    let _ = std::fs::remove_file(&pipe);
+    let made = Command::new("mkfifo").arg(&pipe).status().expect("mkfifo runs");
+    assert!(made.success());
+    let reader = {
+        let pipe = pipe.clone();
+        std::thread::spawn(move || std::fs::read_to_string(pipe).unwrap())
+    };
+    let (code, err) = run(&["bake", input.to_str().unwrap(), "-o", pipe.to_str().unwrap(), "--quiet"]);
+    assert_eq!(code, 0, "{err}");
+    // Before the reader is joined: with the pipe replaced, it would wait on it for ever.
+    assert!(std::fs::metadata(&pipe).unwrap().file_type().is_fifo(), "the pipe was replaced");
+    let text = reader.join().unwrap();
+    assert!(text.starts_with('{') && text.contains("\"frames\""), "{text}");
+    assert!(!dir.join("out.json.partial").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -119,18 +119,25 @@ fn bake(args: &[String]) -> Result<(), CliError> {
     let result = bake_into(
         input,
         &out,
-        &partial,
+        partial.as_deref(),
         (frames, threads, budget, accuracy),
         (method, quiet, no_gather, backs),
     );
-    let _ = std::fs::remove_file(&partial);
+    if let Some(partial) = &partial {
+        let _ = std::fs::remove_file(partial);
+    }
     result
 }
 
 /// The file a bake writes before renaming it to `out` (so a failed bake leaves `out` as it was),
 /// created now: a missing folder or one that cannot be written to is an error before any work.
-fn writable_output(out: &str) -> Result<PathBuf, CliError> {
+/// `None` when `out` exists and is not a regular file (`/dev/null`, a pipe): it is written to
+/// directly, since a rename would replace the device or pipe with a file.
+fn writable_output(out: &str) -> Result<Option<PathBuf>, CliError> {
     let path = Path::new(out);
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+        return Ok(None);
+    }
     let folder = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
@@ -143,13 +150,13 @@ fn writable_output(out: &str) -> Result<PathBuf, CliError> {
     let partial = folder.join(name);
     std::fs::File::create(&partial)
         .map_err(|e| CliError::Failed(format!("{out}: cannot write there: {e}")))?;
-    Ok(partial)
+    Ok(Some(partial))
 }
 
 fn bake_into(
     input: &str,
     out: &str,
-    partial: &Path,
+    partial: Option<&Path>,
     (frames, threads, budget, accuracy): (Option<String>, Option<String>, Option<u64>, Option<f64>),
     (method, quiet, no_gather, backs): (Method, bool, bool, bool),
 ) -> Result<(), CliError> {
@@ -268,8 +275,14 @@ fn bake_into(
     };
     let text =
         serde_json::to_string(&result).map_err(|e| CliError::Failed(format!("writing result: {e}")))?;
-    std::fs::write(partial, text).map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
-    std::fs::rename(partial, out).map_err(|e| CliError::Failed(format!("{out}: {e}")))?;
+    let failed = |e: std::io::Error| CliError::Failed(format!("{out}: {e}"));
+    match partial {
+        Some(partial) => {
+            std::fs::write(partial, text).map_err(failed)?;
+            std::fs::rename(partial, out).map_err(failed)?;
+        }
+        None => std::fs::write(out, text).map_err(failed)?,
+    }
     if !quiet {
         eprintln!("wrote {out}: {total} frame(s) in {:.2} s", start.elapsed().as_secs_f64());
     }
