@@ -28,6 +28,7 @@ use crate::geometry::{Aabb, Patch, Rect};
 use crate::quadrature::GaussLegendre;
 use crate::scene::placement::front_order;
 use crate::scene::{Object, Scene};
+use crate::solids::{find, union};
 use crate::system::{Element, element};
 
 /// Per object, per face: whether the face gets a back. Empty when the scene's settings turn
@@ -109,21 +110,6 @@ fn welded(vertices: &[DVec3]) -> Vec<u32> {
         cells.entry(c).or_default().push(k as u32);
     }
     id
-}
-
-fn find(parent: &mut [u32], mut x: u32) -> u32 {
-    while parent[x as usize] != x {
-        parent[x as usize] = parent[parent[x as usize] as usize];
-        x = parent[x as usize];
-    }
-    x
-}
-
-fn union(parent: &mut [u32], a: u32, b: u32) {
-    let (a, b) = (find(parent, a), find(parent, b));
-    if a != b {
-        parent[a.max(b) as usize] = a.min(b);
-    }
 }
 
 /// `elements` (sorted by object and face, the fronts) with a back inserted after the last

@@ -116,19 +116,9 @@ fn closed_components(elements: &[Element], members: &[usize], weld: f64) -> Vec<
         .collect();
     // Union-find over the welded points, joining each face's.
     let mut parent: Vec<u32> = (0..ids.len() as u32).collect();
-    fn find(parent: &mut [u32], v: u32) -> u32 {
-        let mut r = v;
-        while parent[r as usize] != r {
-            r = parent[r as usize];
-        }
-        parent[v as usize] = r;
-        r
-    }
     for face in &faces {
-        let a = find(&mut parent, face[0]);
         for &v in &face[1..] {
-            let b = find(&mut parent, v);
-            parent[b as usize] = a;
+            union(&mut parent, face[0], v);
         }
     }
     let mut groups: HashMap<u32, Vec<usize>> = HashMap::new();
@@ -181,6 +171,25 @@ fn winding_number(triangles: &[[DVec3; 3]], p: DVec3) -> f64 {
         sum += 2.0 * det.atan2(div);
     }
     sum / (4.0 * std::f64::consts::PI)
+}
+
+/// Union-find over ids `0..parent.len()` (each `parent[x] == x` to start): the root of `x`'s
+/// set, halving the path on the way. Used for the solids' welded points and for the open pieces
+/// of `crate::backs`.
+pub(crate) fn find(parent: &mut [u32], mut x: u32) -> u32 {
+    while parent[x as usize] != x {
+        parent[x as usize] = parent[parent[x as usize] as usize];
+        x = parent[x as usize];
+    }
+    x
+}
+
+/// Joins the sets of `a` and `b` (the smaller root becomes the root).
+pub(crate) fn union(parent: &mut [u32], a: u32, b: u32) {
+    let (a, b) = (find(parent, a), find(parent, b));
+    if a != b {
+        parent[a.max(b) as usize] = a.min(b);
+    }
 }
 
 #[cfg(test)]

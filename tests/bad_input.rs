@@ -106,6 +106,16 @@ fn zero_area_faces_are_skipped_with_a_warning() {
     assert!(err.contains("1 zero-area face(s) skipped (first: object \"Floor\" face 1)"), "{err}");
 }
 
+/// A folder of its own for a test named `tag`, holding a valid one-quad scene file: the folder
+/// and the file.
+fn scene_in_temp_dir(tag: &str) -> (std::path::PathBuf, std::path::PathBuf) {
+    let dir = std::env::temp_dir().join(format!("gr-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = dir.join("scene.json");
+    std::fs::write(&input, scene_with(QUAD, MAT)).unwrap();
+    (dir, input)
+}
+
 /// Runs the CLI with `args`: exit code and stderr.
 fn run(args: &[&str]) -> (i32, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_galerkin-radiosity")).args(args).output().unwrap();
@@ -118,10 +128,7 @@ fn run(args: &[&str]) -> (i32, String) {
 /// was.
 #[test]
 fn unbounded_work_and_bad_outputs_are_refused_before_baking() {
-    let dir = std::env::temp_dir().join(format!("gr-limits-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let input = dir.join("scene.json");
-    std::fs::write(&input, scene_with(QUAD, MAT)).unwrap();
+    let (dir, input) = scene_in_temp_dir("limits");
     let (input, out) = (input.to_str().unwrap().to_owned(), dir.join("out.json"));
     let out = out.to_str().unwrap();
     let cases: Vec<(Vec<&str>, i32, &str)> = vec![
@@ -170,10 +177,7 @@ fn unbounded_work_and_bad_outputs_are_refused_before_baking() {
 #[test]
 fn a_pipe_as_output_stays_a_pipe() {
     use std::os::unix::fs::FileTypeExt;
-    let dir = std::env::temp_dir().join(format!("gr-pipe-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let input = dir.join("scene.json");
-    std::fs::write(&input, scene_with(QUAD, MAT)).unwrap();
+    let (dir, input) = scene_in_temp_dir("pipe");
     let pipe = dir.join("out.json");
     let _ = std::fs::remove_file(&pipe);
     let made = Command::new("mkfifo").arg(&pipe).status().expect("mkfifo runs");

@@ -488,19 +488,15 @@ fn the_scene_builder_builds_what_gr_session_new_builds() {
 /// against the header before the field (56 bytes) gets the default, off.
 #[test]
 fn reflecting_backs_through_the_c_abi() {
+    // The two patches, the first a reflecting lamp, the second turned to face up.
     let scene = Flat {
         reflectance: vec![0.5, 0.5, 0.5, 0.5, 0.5, 0.5],
         emission: vec![1.0, 1.0, 1.0, 0.0, 0.0, 0.0],
-        vertex_counts: vec![4, 4],
         vertices: vec![
             0., 0., 0., 1., 0., 0., 1., 1., 0., 0., 1., 0., //
             0., 0., 1., 1., 0., 1., 1., 1., 1., 0., 1., 1.,
         ],
-        face_counts: vec![1, 1],
-        face_vertex_counts: vec![4, 4],
-        face_indices: vec![0, 1, 2, 3, 0, 1, 2, 3],
-        face_materials: vec![0, 1],
-        matrices: Vec::new(),
+        ..Flat::two_patches()
     };
     let solved = |settings: &GrSettings| {
         let s = scene.new_session(settings).unwrap();

@@ -280,10 +280,11 @@ impl PackedLinks {
         };
         let fresh = links.len().saturating_sub(changes.fresh);
         let zeroed = p.zeroed + 2 * changes.removed.len();
-        let live = p.main.entries() - zeroed;
-        // Each link is two entries (one per side); more than that changed: pack anew.
+        let live = p.main.entries().checked_sub(zeroed);
+        // Each link is two entries (one per side); `links` not as the changes say, or more than
+        // a quarter changed: pack anew.
         if changes.fresh > links.len()
-            || 2 * changes.fresh != live
+            || live != Some(2 * changes.fresh)
             || 4 * (zeroed + 2 * fresh) > p.main.entries()
         {
             *packed = Some(Self::new(nodes, links, nb, changes)?);
