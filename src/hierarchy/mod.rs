@@ -313,8 +313,16 @@ fn link_and_solve(
         stats.link_seconds += t.elapsed().as_secs_f64();
         let t = Instant::now();
         let (nodes, nb) = (hierarchy.tree.nodes.len(), hierarchy.tree.basis.len());
-        let links = &hierarchy.links;
-        packed::PackedLinks::update(&mut hierarchy.packed, nodes, links, nb, &mut hierarchy.changes)?;
+        let (links, tree) = (&hierarchy.links, &hierarchy.tree);
+        let geometry = |r, s, t| solve::cluster_entry(tree, r, s, t);
+        packed::PackedLinks::update(
+            &mut hierarchy.packed,
+            nodes,
+            links,
+            nb,
+            &mut hierarchy.changes,
+            &geometry,
+        )?;
         let packed = hierarchy.packed.as_ref().expect("packed just now");
         let solved = state.solve_packed(&hierarchy.tree, packed, stop, hs, &cancel)?;
         stats.sweeps += solved.sweeps;

@@ -9,12 +9,13 @@
 //! sum of its faces'). On a fixed set of leaves with links only between leaves this is the flat
 //! system's Jacobi iteration, so it converges to the flat solution of those elements.
 
+use glam::DVec3;
 use rayon::prelude::*;
 
 use super::anderson::Anderson;
 use super::coupling::Link;
 use super::lobes::{self, Lobes};
-use super::packed::{LinkChanges, PackedLinks};
+use super::packed::{ClusterEntry, LinkChanges, PackedLinks};
 use super::tree::{Kind, NodeId, Tree};
 use super::two_scale::TwoScale;
 use crate::budget;
@@ -269,7 +270,9 @@ impl State {
         hs: &super::HierarchySettings,
         cancel: &(dyn Fn() -> bool + Sync),
     ) -> Result<SolveStats> {
-        let packed = PackedLinks::new(tree.nodes.len(), links, self.nb, &mut LinkChanges::default())?;
+        let geometry = |r, s, t| cluster_entry(tree, r, s, t);
+        let packed =
+            PackedLinks::new(tree.nodes.len(), links, self.nb, &mut LinkChanges::default(), &geometry)?;
         self.solve_packed(tree, &packed, stop, hs, cancel)
     }
 
@@ -290,6 +293,9 @@ impl State {
         let depth = hs.anderson_depth;
         let mut accelerated =
             (depth > 0).then(|| Accelerated::new(tree, &leaves, self.nb, depth).ok()).flatten();
+        // One buffer for every sweep's gathered light: made anew each sweep (190 MB on the full
+        // monastery), its pages' first touches were a twentieth of an updated frame.
+        let mut gathered = Gathered { h: Vec::new(), lobes: Vec::new() };
         for sweep in 0..hs.max_sweeps {
             if cancel() {
                 return Err(Error::Cancelled);
@@ -297,7 +303,7 @@ impl State {
             if let Some(a) = accelerated.as_mut() {
                 a.read(&self.b, &leaves, self.nb, Side::Before);
             }
-            let gathered = self.gather(tree, packed)?;
+            self.gather(tree, packed, &mut gathered)?;
             let change = self.push_pull(tree, &gathered);
             stats.sweeps = sweep + 1;
             stats.last_change = change;
@@ -317,13 +323,19 @@ impl State {
         Ok(stats)
     }
 
-    /// What every node receives through its own links from the current state.
-    fn gather(&self, tree: &Tree, packed: &PackedLinks) -> Result<Gathered> {
+    /// What every node receives through its own links from the current state, into `out`
+    /// (grown to the tree on the first sweep).
+    fn gather(&self, tree: &Tree, packed: &PackedLinks, out: &mut Gathered) -> Result<()> {
         let (nb, n) = (self.nb, tree.nodes.len());
-        let what = "the hierarchy's gathered light";
-        let mut h = budget::try_filled(n * nb, [0.0; 3], what)?;
-        let mut lobes_in = budget::try_filled(n, lobes::ZERO, what)?;
-        h.par_chunks_mut(nb).zip(lobes_in.par_iter_mut()).enumerate().for_each(|(r, (hr, lr))| {
+        if out.h.len() != n * nb || out.lobes.len() != n {
+            let what = "the hierarchy's gathered light";
+            *out = Gathered { h: Vec::new(), lobes: Vec::new() };
+            out.h = budget::try_filled(n * nb, [0.0; 3], what)?;
+            out.lobes = budget::try_filled(n, lobes::ZERO, what)?;
+        }
+        out.h.par_chunks_mut(nb).zip(out.lobes.par_iter_mut()).enumerate().for_each(|(r, (hr, lr))| {
+            hr.fill([0.0; 3]);
+            *lr = lobes::ZERO;
             // The packings in turn: the links packed whole, then those made since.
             for blocks in packed.parts() {
                 // Surface links: their blocks in this receiver's run of the packed copy, read in
@@ -353,47 +365,36 @@ impl State {
                         hr[0][c] += g * b0[c];
                     }
                 }
-                for &(s, transmittance) in blocks.clusters_of(r) {
-                    let s = s as usize;
-                    let (nr, ns) = (&tree.nodes[r], &tree.nodes[s]);
-                    let v = nr.centre - ns.centre;
-                    let d2 = v.length_squared();
-                    // (Zero: a link taken out, `PackedLinks`.)
-                    if d2 <= 0.0 {
+                // Cluster links (their geometry worked out when packed, [`cluster_entry`]); a
+                // planar receiver holds its (constant) irradiance in `H^0`, which the push hands
+                // to its faces unchanged.
+                let planar = tree.nodes[r].plane_normal.is_some();
+                for e in blocks.clusters_of(r) {
+                    // (Zero: a link taken out, `PackedLinks`, or facing away.)
+                    if e.scale == 0.0 {
                         continue;
                     }
-                    let w = v / d2.sqrt();
-                    let intensity = match ns.plane_normal {
-                        Some(n) => {
-                            let f = ns.area * n.dot(w).max(0.0) / std::f64::consts::PI;
-                            self.mean[s].map(|m| m * f)
-                        }
-                        None => lobes::eval(&self.lobes[s], w),
+                    let s = e.source as usize;
+                    let w = DVec3::new(e.w[0] as f64, e.w[1] as f64, e.w[2] as f64);
+                    let intensity = if e.emit >= 0.0 {
+                        let f = e.emit as f64;
+                        self.mean[s].map(|m| m * f)
+                    } else {
+                        lobes::eval(&self.lobes[s], w)
                     };
-                    // Irradiance `I cos / d^2`, which `b = e + rho H` takes as it is (eq. 1).
-                    let scale = transmittance as f64 / d2;
+                    let scale = e.scale as f64;
                     let arriving = intensity.map(|i| i * scale);
-                    match (&nr.kind, nr.plane_normal) {
-                        (Kind::Surface(_), Some(n)) => {
-                            let cos = (-n.dot(w)).max(0.0);
-                            for c in 0..3 {
-                                hr[0][c] += arriving[c] * cos;
-                            }
+                    if planar {
+                        for c in 0..3 {
+                            hr[0][c] += arriving[c];
                         }
-                        // A planar cluster holds its (constant) irradiance in `H^0`, which the push
-                        // hands to its faces unchanged.
-                        (Kind::Cluster { .. }, Some(n)) => {
-                            let cos = (-n.dot(w)).max(0.0);
-                            for c in 0..3 {
-                                hr[0][c] += arriving[c] * cos;
-                            }
-                        }
-                        _ => lobes::add_lobe(lr, -w, arriving),
+                    } else {
+                        lobes::add_lobe(lr, -w, arriving);
                     }
                 }
             }
         });
-        Ok(Gathered { h, lobes: lobes_in })
+        Ok(())
     }
 
     /// Pushes `gathered` to the leaves, sets `b = e + rho H` there and pulls; returns the leaves'
@@ -497,6 +498,28 @@ impl State {
     pub fn coefficients(&self, id: NodeId) -> &[[f64; 3]] {
         &self.b[id as usize * self.nb..(id as usize + 1) * self.nb]
     }
+}
+
+/// The cluster link from `s` to `r` with this transmittance as a sweep reads it: the source's
+/// intensity towards the receiver (a planar source's mean radiosity times its projected area over
+/// pi, else its lobes, [`super::lobes`]) becomes the irradiance `I cos / d^2` times the
+/// transmittance, which `b = e + rho H` takes as it is (eq. 1); a receiver that is not planar
+/// gathers it as a lobe from the direction it comes from.
+pub(super) fn cluster_entry(tree: &Tree, r: NodeId, s: NodeId, transmittance: f32) -> ClusterEntry {
+    let (nr, ns) = (&tree.nodes[r as usize], &tree.nodes[s as usize]);
+    let v = nr.centre - ns.centre;
+    let d2 = v.length_squared();
+    if d2 <= 0.0 {
+        return ClusterEntry { source: s, w: [0.0; 3], emit: 0.0, scale: 0.0 };
+    }
+    let w = v / d2.sqrt();
+    let emit = match ns.plane_normal {
+        Some(n) => ns.area * n.dot(w).max(0.0) / std::f64::consts::PI,
+        None => -1.0,
+    };
+    let cos = nr.plane_normal.map_or(1.0, |n| (-n.dot(w)).max(0.0));
+    let scale = transmittance as f64 / d2 * cos;
+    ClusterEntry { source: s, w: w.as_vec3().to_array(), emit: emit as f32, scale: scale as f32 }
 }
 
 /// How many steps the solve's Anderson mixer keeps by default. On the animation bench's three scenes
