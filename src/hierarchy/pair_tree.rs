@@ -148,18 +148,19 @@ impl Splits {
 
     /// Where an update refines again from ([the module's comment](self)), each recorded split
     /// at or below them forgotten: the tops of the largest subtrees that are *redone*, that is
-    /// all of whose stored leaves are in `touched` (at least one), or which hold a touched leaf
+    /// all of whose stored leaves are `touched` (at least one), or which hold a touched leaf
     /// and which the oracle would now link whole (`links_whole`: a shadow the move took away is
     /// linked coarse again), or whose children are all redone. Pairs that exchange nothing by
     /// construction (`neutral`: a node with itself, two parts of one face) count as touched.
-    /// Also returns the stored leaves below the tops that are not in `touched`, which the update
-    /// must take out of the stores too. The walk skips the subtrees where `may_touch` says no
-    /// leaf is touched ([`super::touch::Touch::may_below`]), so that its cost follows the move.
-    /// `None` when nothing is kept.
+    /// Also returns the touched leaves (what [`super::touch::by_walk`] finds, found on the same
+    /// walk) and the stored leaves below the tops that are not touched, which the update must
+    /// take out of the stores too. The walk skips the subtrees where `may_touch` says no leaf is
+    /// touched ([`super::touch::Touch::may_below`]), so that its cost follows the move. `None`
+    /// when nothing is kept.
     pub fn coarsest_touched(
         &mut self,
         tree: &Tree,
-        touched: &PairSet,
+        touched: impl Fn(NodeId, NodeId) -> bool,
         may_touch: impl Fn(NodeId, NodeId) -> bool,
         neutral: impl Fn(NodeId, NodeId) -> bool,
         links_whole: impl Fn(NodeId, NodeId) -> bool,
@@ -167,8 +168,9 @@ impl Splits {
         let map = self.map.as_mut()?;
         let mut redo = Redo::default();
         let root = tree.root;
-        let rules = Rules { touched, may_touch: &may_touch, neutral: &neutral, links_whole: &links_whole };
-        let top = visit(map, tree, &rules, (root, root), &mut redo.tops);
+        let rules =
+            Rules { touched: &touched, may_touch: &may_touch, neutral: &neutral, links_whole: &links_whole };
+        let top = visit(map, tree, &rules, (root, root), &mut redo.tops, &mut redo.touched);
         if top.all && top.any {
             redo.tops.clear();
             redo.tops.push((root, root));
@@ -187,11 +189,13 @@ pub struct Redo {
     pub tops: Vec<(NodeId, NodeId)>,
     /// Stored pairs below them that the move did not touch, redone with them.
     pub untouched: Vec<(NodeId, NodeId)>,
+    /// The stored pairs the move touched.
+    pub touched: Vec<(NodeId, NodeId)>,
 }
 
 /// The tests [`visit`] applies.
-struct Rules<'a, M, N, W> {
-    touched: &'a PairSet,
+struct Rules<'a, T, M, N, W> {
+    touched: &'a T,
     may_touch: &'a M,
     neutral: &'a N,
     links_whole: &'a W,
@@ -220,15 +224,17 @@ impl Splits {
 }
 
 /// The pair `p`'s subtree: whether it is redone whole (`all`) and holds a touched leaf (`any`).
-/// The tops inside a pair not redone whole go to `tops`.
-fn visit<M, N, W>(
+/// The tops inside a pair not redone whole go to `tops`, the touched leaves to `touched`.
+fn visit<T, M, N, W>(
     map: &PairMap<NodeId>,
     tree: &Tree,
-    rules: &Rules<M, N, W>,
+    rules: &Rules<T, M, N, W>,
     (a, b): (NodeId, NodeId),
     tops: &mut Vec<(NodeId, NodeId)>,
+    touched: &mut Vec<(NodeId, NodeId)>,
 ) -> Subtree
 where
+    T: Fn(NodeId, NodeId) -> bool,
     M: Fn(NodeId, NodeId) -> bool,
     N: Fn(NodeId, NodeId) -> bool,
     W: Fn(NodeId, NodeId) -> bool,
@@ -239,17 +245,18 @@ where
         return Subtree { all: false, any: false };
     }
     let Some(&s) = map.get(&key(a, b)) else {
-        return if rules.touched.contains(&key(a, b)) {
-            Subtree { all: true, any: true }
-        } else if (rules.neutral)(a, b) {
+        return if (rules.neutral)(a, b) {
             Subtree { all: true, any: false }
+        } else if (rules.touched)(a, b) {
+            touched.push((a, b));
+            Subtree { all: true, any: true }
         } else {
             Subtree { all: false, any: false }
         };
     };
     let kids = children(tree, a, b, s);
     let first_top = tops.len();
-    let below: Vec<Subtree> = kids.iter().map(|&p| visit(map, tree, rules, p, tops)).collect();
+    let below: Vec<Subtree> = kids.iter().map(|&p| visit(map, tree, rules, p, tops, touched)).collect();
     let all = below.iter().all(|t| t.all);
     let any = below.iter().any(|t| t.any);
     if any && (all || (rules.links_whole)(a, b)) {
@@ -267,21 +274,22 @@ where
 
 /// Forgets the records of `(a, b)` and of every inner pair below it; its stored leaves that are
 /// not touched go to `untouched`.
-fn forget_below<M, N, W>(
+fn forget_below<T, M, N, W>(
     map: &mut PairMap<NodeId>,
     tree: &Tree,
     a: NodeId,
     b: NodeId,
-    rules: &Rules<M, N, W>,
+    rules: &Rules<T, M, N, W>,
     untouched: &mut Vec<(NodeId, NodeId)>,
 ) where
+    T: Fn(NodeId, NodeId) -> bool,
     N: Fn(NodeId, NodeId) -> bool,
 {
     let mut stack = vec![(a, b)];
     while let Some((x, y)) = stack.pop() {
         match map.remove(&key(x, y)) {
             Some(s) => stack.extend(children(tree, x, y, s)),
-            None if !rules.touched.contains(&key(x, y)) && !(rules.neutral)(x, y) => untouched.push((x, y)),
+            None if !(rules.neutral)(x, y) && !(rules.touched)(x, y) => untouched.push((x, y)),
             None => {}
         }
     }

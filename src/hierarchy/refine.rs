@@ -312,7 +312,11 @@ pub struct Hierarchy {
     /// Pairs of different faces that exchange nothing as they stand: one behind the other's
     /// plane, facing away, or no sample between them arriving. Kept so that a later frame in
     /// which they move can link them ([`super::update`]): with `links` and `blocked` they
-    /// partition every pair of leaves of different faces.
+    /// partition every pair of leaves of different faces ([`Hierarchy::idle_pairs`]). Stored
+    /// only without the pair tree: with it, they are its leaves that are neither links nor
+    /// blocked, and an update finds them there ([`super::touch::by_walk`]). (Stored, the full
+    /// monastery's 53M idle pairs took 0.4 GB, and taking a move's out of them a tenth of an
+    /// updated frame.)
     pub idle: Vec<(NodeId, NodeId)>,
     pub oracle: Oracle,
     /// The inner pairs of the refinement and where each was split, when kept for an animation's
@@ -415,24 +419,43 @@ impl Hierarchy {
     }
 
     /// Takes out of the links, the blocked and the idle pairs every pair `touched` says a change
-    /// may have altered, and returns them (as pairs, to be linked again).
-    pub fn take_touched(&mut self, touched: impl Fn(NodeId, NodeId) -> bool) -> Vec<(NodeId, NodeId)> {
+    /// may have altered, and returns them (as pairs, to be linked again), links first, each
+    /// store in its order. The verdicts are taken in parallel: the stores hold tens of millions
+    /// of pairs on a large model, and an update takes out a few thousand of them.
+    pub fn take_touched(&mut self, touched: impl Fn(NodeId, NodeId) -> bool + Sync) -> Vec<(NodeId, NodeId)> {
         let mut out = Vec::new();
-        let keep: Vec<bool> = self.links.iter().map(|l| !touched(l.a, l.b)).collect();
+        let keep: Vec<bool> = self.links.par_iter().map(|l| !touched(l.a, l.b)).collect();
         self.changes.removing(&self.links, &keep);
         keep_where(&mut self.links, &keep, |l| out.push((l.a, l.b)));
-        let keep: Vec<bool> = self.blocked.iter().map(|&(a, b)| !touched(a, b)).collect();
+        let keep: Vec<bool> = self.blocked.par_iter().map(|&(a, b)| !touched(a, b)).collect();
         self.blocked_load.resize(self.blocked.len(), f32::INFINITY);
         keep_where(&mut self.blocked_load, &keep, |_| {});
         keep_where(&mut self.blocked, &keep, |&p| out.push(p));
-        self.idle.retain(|&(a, b)| {
-            let hit = touched(a, b);
-            if hit {
-                out.push((a, b));
-            }
-            !hit
-        });
+        let keep: Vec<bool> = self.idle.par_iter().map(|&(a, b)| !touched(a, b)).collect();
+        keep_where(&mut self.idle, &keep, |&p| out.push(p));
         out
+    }
+
+    /// Whether idle pairs are stored ([`Hierarchy::idle`]): only without the pair tree.
+    fn stores_idle(&self) -> bool {
+        !self.splits.is_kept()
+    }
+
+    /// The idle pairs ([`Hierarchy::idle`]): as stored, or with the pair tree kept, its leaves
+    /// that are neither links nor blocked.
+    pub fn idle_pairs(&self) -> Vec<(NodeId, NodeId)> {
+        use super::pair_tree::{PairSet, key};
+        let Some(leaves) = self.splits.leaves(&self.tree, |a, b| super::touch::neutral(&self.tree, a, b))
+        else {
+            return self.idle.clone();
+        };
+        let stored: PairSet = self
+            .links
+            .iter()
+            .map(|l| key(l.a, l.b))
+            .chain(self.blocked.iter().map(|&(a, b)| key(a, b)))
+            .collect();
+        leaves.into_iter().filter(|&(a, b)| !stored.contains(&key(a, b))).collect()
     }
 
     fn same_face(&self, a: NodeId, b: NodeId) -> bool {
@@ -478,16 +501,21 @@ impl Hierarchy {
         // the estimates are only read); a light link that may now carry more than a light link
         // may is computed again in full. Every kept link's load is brought to the brightness
         // now, which `decided_at` records below: scaled by its ends' growth where untested (a
-        // bound still), computed again where tested.
+        // bound still), computed again where tested. A link whose ends both grew no brighter
+        // keeps its load as it was, a bound still: most links are untested, and writing every
+        // one of them (15M on the full monastery) was most of a relink pass.
         let tested = std::sync::atomic::AtomicUsize::new(0);
         let verdicts: Vec<bool> = self
             .links
             .par_iter_mut()
             .map(|l| {
                 // (A NaN, an unknown end's growth times no load, is tested.)
-                let bound = l.load as f64 * grown(l.a, l.b);
+                let growth = grown(l.a, l.b);
+                let bound = l.load as f64 * growth;
                 if bound <= 1.0 {
-                    l.load = (bound * (1.0 + 1e-6)) as f32;
+                    if growth > 1.0 {
+                        l.load = (bound * (1.0 + 1e-6)) as f32;
+                    }
                     return true;
                 }
                 tested.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -500,8 +528,11 @@ impl Hierarchy {
                 kept
             })
             .collect();
-        self.changes.removing(&self.links, &verdicts);
-        keep_where(&mut self.links, &verdicts, |l| work.push((l.a, l.b)));
+        // (Most relinks take out none: then no pass over the links.)
+        if verdicts.contains(&false) {
+            self.changes.removing(&self.links, &verdicts);
+            keep_where(&mut self.links, &verdicts, |l| work.push((l.a, l.b)));
+        }
         // Hidden pairs decided while their ends were dark (a first round knows only the
         // emitters' light) are split now if they may carry enough: kept whole, each would drop
         // all its light from the solve, always the same way (the Cornell box's faces came out
@@ -513,9 +544,12 @@ impl Hierarchy {
             .par_iter()
             .zip(self.blocked_load.par_iter_mut())
             .map(|(&(a, b), load)| {
-                let bound = *load as f64 * grown(a, b);
+                let growth = grown(a, b);
+                let bound = *load as f64 * growth;
                 if bound <= 1.0 {
-                    *load = (bound * (1.0 + 1e-6)) as f32;
+                    if growth > 1.0 {
+                        *load = (bound * (1.0 + 1e-6)) as f32;
+                    }
                     return true;
                 }
                 tested.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -526,8 +560,10 @@ impl Hierarchy {
                 kept
             })
             .collect();
-        keep_where(&mut self.blocked_load, &verdicts, |_| {});
-        keep_where(&mut self.blocked, &verdicts, |&p| work.push(p));
+        if verdicts.contains(&false) {
+            keep_where(&mut self.blocked_load, &verdicts, |_| {});
+            keep_where(&mut self.blocked, &verdicts, |&p| work.push(p));
+        }
         stats.relinked = work.len();
         stats.tested = tested.into_inner();
         self.refine_pairs(ctx, radiosity, work, &mut stats, progress)?;
@@ -592,7 +628,7 @@ impl Hierarchy {
                     match verdict {
                         Verdict::Skip => {
                             settled += space.faces_between(&self.tree, a, b);
-                            if !self.same_face(a, b) {
+                            if self.stores_idle() && !self.same_face(a, b) {
                                 budget::try_reserve(&mut self.idle, 1, LINKS)?;
                                 self.idle.push((a, b));
                             }
@@ -618,7 +654,9 @@ impl Hierarchy {
                 // Reserved first: the allocator's refusal of the large vectors is an error (a
                 // full link's own blocks are small allocations).
                 budget::try_reserve(&mut self.links, part.len(), LINKS)?;
-                budget::try_reserve(&mut self.idle, part.len(), LINKS)?;
+                if self.stores_idle() {
+                    budget::try_reserve(&mut self.idle, part.len(), LINKS)?;
+                }
                 budget::try_reserve(&mut self.blocked, part.len(), LINKS)?;
                 budget::try_reserve(&mut self.blocked_load, part.len(), LINKS)?;
                 for (&(a, b, _), c) in chunk.iter().zip(part.drain(..)) {
@@ -663,7 +701,7 @@ impl Hierarchy {
                 self.blocked_load.push(self.oracle.blocked_load(&self.tree, radiosity, a, b));
                 self.blocked.push((a, b));
             }
-            None if !self.same_face(a, b) => self.idle.push((a, b)),
+            None if self.stores_idle() && !self.same_face(a, b) => self.idle.push((a, b)),
             None => {}
         }
         Ok(true)

@@ -10,7 +10,7 @@
 //! a moved face if a node below it does. So it reaches every touched leaf, and its cost grows
 //! with the pairs near the move rather than with the scene.
 
-use super::pair_tree::{self, PairSet, Splits};
+use super::pair_tree::{self, Splits};
 use super::refine::Hierarchy;
 use super::tree::{NodeId, Tree};
 use crate::geometry::Aabb;
@@ -100,10 +100,11 @@ impl<'a> Touch<'a> {
     }
 }
 
-/// The stored pairs (links, blocked, idle) `touch` says may have changed, by a scan of them all.
-pub fn by_scan(hierarchy: &Hierarchy, touch: &Touch) -> Vec<(NodeId, NodeId)> {
+/// The pairs (links, blocked, and `idle`: [`Hierarchy::idle_pairs`]) `touch` says may have
+/// changed, by a scan of them all.
+pub fn by_scan(hierarchy: &Hierarchy, idle: &[(NodeId, NodeId)], touch: &Touch) -> Vec<(NodeId, NodeId)> {
     let links = hierarchy.links.iter().map(|l| (l.a, l.b));
-    let others = hierarchy.blocked.iter().chain(&hierarchy.idle).copied();
+    let others = hierarchy.blocked.iter().chain(idle).copied();
     links.chain(others).filter(|&(a, b)| touch.pair(a, b)).collect()
 }
 
@@ -133,28 +134,4 @@ pub fn by_walk(hierarchy: &Hierarchy, touch: &Touch) -> Option<Vec<(NodeId, Node
 pub fn neutral(tree: &Tree, a: NodeId, b: NodeId) -> bool {
     a == b
         || matches!((tree.node(a).surface(), tree.node(b).surface()), (Some(x), Some(y)) if x.face == y.face)
-}
-
-/// Takes out of `hierarchy` every stored pair `touch` says a move may have changed and returns
-/// them: found by the walk when the pair tree is kept, else by the scan.
-pub fn take_touched(hierarchy: &mut Hierarchy, touch: &Touch) -> Vec<(NodeId, NodeId)> {
-    match by_walk(hierarchy, touch) {
-        Some(found) => {
-            let set: PairSet = found.iter().map(|&(a, b)| pair_tree::key(a, b)).collect();
-            // A pair can be found only if both its ends are ends of found pairs: a look at two
-            // flags spares most stored pairs the hash lookup (which took a tenth of an updated
-            // frame of a 30k-triangle model).
-            let mut end = vec![false; hierarchy.tree.nodes.len()];
-            for &(a, b) in &found {
-                end[a as usize] = true;
-                end[b as usize] = true;
-            }
-            // Still a pass over the stored pairs, but no shaft test; and the pairs come back in
-            // the scan's order, so both ways refine the same work.
-            hierarchy.take_touched(|a, b| {
-                end[a as usize] && end[b as usize] && set.contains(&pair_tree::key(a, b))
-            })
-        }
-        None => hierarchy.take_touched(|a, b| touch.pair(a, b)),
-    }
 }

@@ -55,13 +55,13 @@ pub fn check_pairs(
             "frame {frame}: blocked pair {a}-{b} is not blocked now"
         );
     }
-    for &(a, b) in &h.hierarchy.idle {
+    for &(a, b) in &h.hierarchy.idle_pairs() {
         assert!(
             under_either(a, b, &|c| c.coupling.is_none()),
             "frame {frame}: idle pair {a}-{b} carries light now"
         );
     }
-    (h.hierarchy.links.len(), h.hierarchy.blocked.len(), h.hierarchy.idle.len())
+    (h.hierarchy.links.len(), h.hierarchy.blocked.len(), h.hierarchy.idle_pairs().len())
 }
 
 /// Links, blocked and idle pairs together cover every pair of leaves of different faces exactly
@@ -80,7 +80,7 @@ pub fn check_partition(h: &HierarchicalFrame) {
     let mut count = vec![0u8; n * n];
     let pairs = h.hierarchy.links.iter().map(|l| (l.a, l.b)).chain(h.hierarchy.blocked.iter().copied());
     let (mut below_a, mut below_b) = (Vec::new(), Vec::new());
-    for (a, b) in pairs.chain(h.hierarchy.idle.iter().copied()) {
+    for (a, b) in pairs.chain(h.hierarchy.idle_pairs()) {
         below_a.clear();
         below_b.clear();
         tree.leaves_below(a, &mut below_a);
@@ -114,7 +114,7 @@ pub fn check_pair_tree(h: &HierarchicalFrame) {
     let Some(mut leaves) = h.hierarchy.splits.leaves(tree, |a, b| touch::neutral(tree, a, b)) else { return };
     let mut stored: Vec<(NodeId, NodeId)> = h.hierarchy.links.iter().map(|l| (l.a, l.b)).collect();
     stored.extend(&h.hierarchy.blocked);
-    stored.extend(&h.hierarchy.idle);
+    stored.extend(&h.hierarchy.idle_pairs());
     leaves.sort_unstable();
     stored.sort_unstable();
     assert!(!leaves.is_empty(), "an empty pair tree");

@@ -219,7 +219,7 @@ fn relinking_tests_only_what_may_fail() {
         let pairs = |h: &HierarchicalFrame| {
             let mut p: Vec<_> = h.hierarchy.links.iter().map(|l| (l.a, l.b)).collect();
             p.sort_unstable();
-            (p, h.hierarchy.blocked.len(), h.hierarchy.idle.len())
+            (p, h.hierarchy.blocked.len(), h.hierarchy.idle_pairs().len())
         };
         assert_eq!(pairs(&a), pairs(&b), "frame {frame}: the links differ");
         assert_eq!(face_means(&a), face_means(&b), "frame {frame}: the solutions differ");
@@ -268,7 +268,8 @@ fn the_pair_tree_walk_finds_what_the_scan_finds() {
         let h = update_frame(&mut first, &scene, 2.0, &hs, &no_progress).unwrap();
         let hierarchy = &h.hierarchy;
         let tree = &hierarchy.tree;
-        let stored = hierarchy.links.len() + hierarchy.blocked.len() + hierarchy.idle.len();
+        let idle = hierarchy.idle_pairs();
+        let stored = hierarchy.links.len() + hierarchy.blocked.len() + idle.len();
         let scene_box = tree.bounds(tree.root);
         let size = scene_box.diagonal();
         let (mut partial, mut none) = (0, 0);
@@ -284,7 +285,7 @@ fn the_pair_tree_walk_finds_what_the_scan_finds() {
                 .collect();
             let moves = Moves { faces, swept };
             let touch = Touch::new(tree, &moves);
-            let mut scan = touch::by_scan(hierarchy, &touch);
+            let mut scan = touch::by_scan(hierarchy, &idle, &touch);
             let mut walk = touch::by_walk(hierarchy, &touch).expect("the pair tree is kept");
             scan.sort_unstable();
             walk.sort_unstable();
