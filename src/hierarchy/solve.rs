@@ -401,8 +401,8 @@ impl State {
     /// area-weighted change of mean radiosity.
     fn push_pull(&mut self, tree: &Tree, gathered: &Gathered) -> f64 {
         let mut change = 0.0;
-        let zero = vec![[0.0; 3]; self.nb];
-        self.visit(tree, tree.root, &lobes::ZERO, &zero, gathered, &mut change);
+        let zero = [[0.0; 3]; crate::basis::MAX_LEN];
+        self.visit(tree, tree.root, &lobes::ZERO, &zero[..self.nb], gathered, &mut change);
         change
     }
 
@@ -425,19 +425,25 @@ impl State {
                 if let Some(own) = gathered.lobes.get(i) {
                     lobes::add(&mut l, own);
                 }
-                // What a planar cluster gathered is a constant irradiance of all its faces.
-                let mut flat = pushed.to_vec();
+                // What a planar cluster gathered is a constant irradiance of all its faces. (On
+                // the stack, as the surfaces' below: a heap vector per node and sweep was a
+                // tenth of the push-pull.)
+                let mut flat = [[0.0; 3]; crate::basis::MAX_LEN];
+                let flat = &mut flat[..nb];
+                flat.copy_from_slice(pushed);
                 if let Some(own) = gathered.h.get(i * nb) {
                     for c in 0..3 {
                         flat[0][c] += own[c];
                     }
                 }
                 for &c in children {
-                    self.visit(tree, c, &l, &flat, gathered, change);
+                    self.visit(tree, c, &l, flat, gathered, change);
                 }
             }
             Kind::Surface(s) => {
-                let mut h: Vec<[f64; 3]> = pushed.to_vec();
+                let mut h = [[0.0; 3]; crate::basis::MAX_LEN];
+                let h = &mut h[..nb];
+                h.copy_from_slice(pushed);
                 if let Some(own) = gathered.h.get(i * nb..(i + 1) * nb) {
                     for k in 0..nb {
                         for c in 0..3 {
@@ -466,9 +472,9 @@ impl State {
                     }
                     Some(children) => {
                         for (q, &c) in children.iter().enumerate() {
-                            let mut hq = vec![[0.0; 3]; nb];
-                            self.two_scale.push_add(q, &h, &mut hq);
-                            self.visit(tree, c, &lobes::ZERO, &hq, gathered, change);
+                            let mut hq = [[0.0; 3]; crate::basis::MAX_LEN];
+                            self.two_scale.push_add(q, h, &mut hq[..nb]);
+                            self.visit(tree, c, &lobes::ZERO, &hq[..nb], gathered, change);
                         }
                     }
                 }
