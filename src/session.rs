@@ -548,8 +548,10 @@ impl Session {
         let mut settings = crate::hierarchy::HierarchySettings::of(&placed.settings);
         // A preview reads the leaves, as the flat path's preview skips its gather.
         settings.corner_gather &= !preview;
-        // An animation's updates coarsen where a move has passed (`hierarchy::pair_tree`).
+        // An animation's updates coarsen where a move has passed (`hierarchy::pair_tree`); a still
+        // scene's hierarchy need not keep what only a move could change.
         settings.keep_pair_tree = placed.is_animation();
+        settings.moves = placed.is_animation();
         // A later frame starts from the last one's hierarchy and solution, unless an update
         // failed on its way (it took the links) or the surfaces were replaced since.
         let previous = self.hierarchical.as_mut().filter(|_| !self.stale);

@@ -77,6 +77,11 @@ pub struct HierarchySettings {
     /// next frame's update can coarsen where a move no longer needs fine links; off, updates
     /// only refine. [`crate::session::Session`] keeps it for scenes of more than one frame.
     pub keep_pair_tree: bool,
+    /// Something may move in a later frame, which an update must then relink: off for a scene
+    /// without keys ([`crate::session::Session`]), whose hierarchy then does not store its idle
+    /// pairs ([`refine::Hierarchy::idle`]; 53M, 0.4 GB, on the full monastery), and an update
+    /// that finds something moved after all solves afresh.
+    pub moves: bool,
 }
 
 impl HierarchySettings {
@@ -101,6 +106,7 @@ impl Default for HierarchySettings {
             light_links: true,
             corner_gather: false,
             keep_pair_tree: false,
+            moves: true,
         }
     }
 }
@@ -188,6 +194,7 @@ pub fn solve_frame(
     state.start_from_sources(&tree);
     let oracle = Oracle::of(hs, state.source_power(&tree), total_area);
     let mut hierarchy = Hierarchy::new(tree, oracle, splits_for(hs));
+    hierarchy.stores_idle = hs.moves && !hierarchy.splits.is_kept();
     let mut stats = HierarchyStats { faces: hierarchy.tree.faces.len(), ..Default::default() };
     let rule = GaussLegendre::new(scene.settings.quadrature_order);
     let ctx = link_context(scene, hs, &rule, lit.occluders.as_ref());

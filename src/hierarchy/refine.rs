@@ -316,8 +316,10 @@ pub struct Hierarchy {
     /// only without the pair tree: with it, they are its leaves that are neither links nor
     /// blocked, and an update finds them there ([`super::touch::by_walk`]). (Stored, the full
     /// monastery's 53M idle pairs took 0.4 GB, and taking a move's out of them a tenth of an
-    /// updated frame.)
+    /// updated frame.) Nor for a scene in which nothing moves ([`super::HierarchySettings::moves`]).
     pub idle: Vec<(NodeId, NodeId)>,
+    /// Whether `idle` is filled: neither with the pair tree kept nor in a still scene.
+    pub stores_idle: bool,
     pub oracle: Oracle,
     /// The inner pairs of the refinement and where each was split, when kept for an animation's
     /// coarsening ([`super::pair_tree`]).
@@ -361,6 +363,7 @@ impl Hierarchy {
             links,
             blocked,
             blocked_load,
+            stores_idle: !splits.is_kept(),
             idle,
             oracle,
             splits,
@@ -436,13 +439,9 @@ impl Hierarchy {
         out
     }
 
-    /// Whether idle pairs are stored ([`Hierarchy::idle`]): only without the pair tree.
-    fn stores_idle(&self) -> bool {
-        !self.splits.is_kept()
-    }
-
     /// The idle pairs ([`Hierarchy::idle`]): as stored, or with the pair tree kept, its leaves
-    /// that are neither links nor blocked.
+    /// that are neither links nor blocked; none for a still scene's hierarchy, which keeps
+    /// neither.
     pub fn idle_pairs(&self) -> Vec<(NodeId, NodeId)> {
         use super::pair_tree::{PairSet, key};
         let Some(leaves) = self.splits.leaves(&self.tree, |a, b| super::touch::neutral(&self.tree, a, b))
@@ -628,7 +627,7 @@ impl Hierarchy {
                     match verdict {
                         Verdict::Skip => {
                             settled += space.faces_between(&self.tree, a, b);
-                            if self.stores_idle() && !self.same_face(a, b) {
+                            if self.stores_idle && !self.same_face(a, b) {
                                 budget::try_reserve(&mut self.idle, 1, LINKS)?;
                                 self.idle.push((a, b));
                             }
@@ -654,7 +653,7 @@ impl Hierarchy {
                 // Reserved first: the allocator's refusal of the large vectors is an error (a
                 // full link's own blocks are small allocations).
                 budget::try_reserve(&mut self.links, part.len(), LINKS)?;
-                if self.stores_idle() {
+                if self.stores_idle {
                     budget::try_reserve(&mut self.idle, part.len(), LINKS)?;
                 }
                 budget::try_reserve(&mut self.blocked, part.len(), LINKS)?;
@@ -701,7 +700,7 @@ impl Hierarchy {
                 self.blocked_load.push(self.oracle.blocked_load(&self.tree, radiosity, a, b));
                 self.blocked.push((a, b));
             }
-            None if self.stores_idle() && !self.same_face(a, b) => self.idle.push((a, b)),
+            None if self.stores_idle && !self.same_face(a, b) => self.idle.push((a, b)),
             None => {}
         }
         Ok(true)

@@ -68,6 +68,14 @@ pub fn update_frame(
     }
     let t = std::time::Instant::now();
     let swept = Moves::swept_bounds(&old.faces, &faces);
+    // The pairs a move touched are found in the pair tree or among the stored idle pairs; a
+    // hierarchy that keeps neither (a still scene's), or whose pair tree the settings now add or
+    // drop, is solved afresh.
+    let h = &previous.hierarchy;
+    let finds_touched = h.splits.is_kept() || h.stores_idle || swept.is_empty();
+    if !finds_touched || hs.keep_pair_tree != h.splits.is_kept() {
+        return super::solve_frame(scene, frame, hs, progress);
+    }
     let reflectance = super::face_reflectance(scene, &faces);
     let lit = Lighting::new(scene, frame, &faces);
     let total_area: f64 = faces.iter().map(|e| e.area).sum();
@@ -93,15 +101,12 @@ pub fn update_frame(
         blocked_load: std::mem::take(&mut previous.hierarchy.blocked_load),
         idle: std::mem::take(&mut previous.hierarchy.idle),
         oracle,
+        stores_idle: previous.hierarchy.stores_idle,
         splits: std::mem::take(&mut previous.hierarchy.splits),
         decided_at,
         changes: std::mem::take(&mut previous.hierarchy.changes),
         packed: previous.hierarchy.packed.take(),
     };
-    // Kept or not, the record follows the settings from here on.
-    if hs.keep_pair_tree != hierarchy.splits.is_kept() {
-        hierarchy.splits = super::splits_for(hs);
-    }
     // Nothing moved (an emission change alone): no pair is touched.
     let (touched, work) = if moves.swept.is_empty() {
         (0, Vec::new())

@@ -57,6 +57,24 @@ fn an_updated_frame_holds_the_links_of_its_own_geometry() {
     }
 }
 
+/// A still scene's hierarchy (`HierarchySettings::moves` off, as `Session` solves a scene of one
+/// frame) stores no idle pairs and is otherwise the same; an update that finds something moved
+/// all the same cannot find the idle pairs the move touched, so it solves the frame afresh.
+#[test]
+fn a_still_scenes_hierarchy_solves_a_move_afresh() {
+    let scene = animated();
+    let still = HierarchySettings { moves: false, ..Default::default() };
+    let mut h = solve_frame(&scene, 1.0, &still, &no_progress).unwrap();
+    let moving = solve_frame(&scene, 1.0, &HierarchySettings::default(), &no_progress).unwrap();
+    assert!(h.hierarchy.idle.is_empty() && !h.hierarchy.stores_idle);
+    assert!(!moving.hierarchy.idle.is_empty() && moving.hierarchy.stores_idle);
+    assert_eq!(face_means(&h), face_means(&moving), "the idle pairs changed the solution");
+    let next = update_frame(&mut h, &scene, 2.0, &still, &no_progress).unwrap();
+    assert!(!next.stats.updated, "a move on a hierarchy without its idle pairs was updated");
+    let fresh = solve_frame(&scene, 2.0, &still, &no_progress).unwrap();
+    assert_eq!(face_means(&next), face_means(&fresh));
+}
+
 /// Refined again from where they stood, touched pairs only get finer, and the links of wherever
 /// the moving block and light passed pile up. With the pair tree kept, an update refines a
 /// subtree touched everywhere, or touched and now linked whole by the oracle, from its top and
