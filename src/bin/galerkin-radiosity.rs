@@ -210,6 +210,10 @@ fn bake_into(
         galerkin_radiosity::budget::check(&scene, (last - first + 1) as u64)?;
     }
     let mut session = Session::new(scene, method)?;
+    // One frame baked: nothing moves after it.
+    if first == last {
+        session.set_still();
+    }
     let start = Instant::now();
     let mut frames_out = Vec::new();
     let total = (last - first + 1) as usize;

@@ -77,10 +77,11 @@ pub struct HierarchySettings {
     /// next frame's update can coarsen where a move no longer needs fine links; off, updates
     /// only refine. [`crate::session::Session`] keeps it for scenes of more than one frame.
     pub keep_pair_tree: bool,
-    /// Something may move in a later frame, which an update must then relink: off for a scene
-    /// without keys ([`crate::session::Session`]), whose hierarchy then does not store its idle
-    /// pairs ([`refine::Hierarchy::idle`]; 53M, 0.4 GB, on the full monastery), and an update
-    /// that finds something moved after all solves afresh.
+    /// Something may move in a later frame, which an update must then relink: off for a scene of
+    /// one frame promised still ([`crate::session::Session::set_still`], as the CLI bakes one
+    /// frame), whose hierarchy then does not store its idle pairs ([`refine::Hierarchy::idle`];
+    /// 53M, 0.4 GB, on the full monastery), and an update that finds something moved after all
+    /// solves afresh.
     pub moves: bool,
 }
 

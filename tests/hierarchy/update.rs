@@ -75,6 +75,30 @@ fn a_still_scenes_hierarchy_solves_a_move_afresh() {
     assert_eq!(face_means(&next), face_means(&fresh));
 }
 
+/// A session on a scene of one frame whose object the caller moves (`set_object_matrix`, as the
+/// add-on moves objects frame by frame) keeps what an update needs, so the frame after the move
+/// is updated; promised still (`set_still`, as the CLI bakes one frame), its hierarchy keeps no
+/// idle pairs, and the frame after a move is solved afresh.
+#[test]
+fn a_session_updates_a_moved_object_unless_promised_still() {
+    let mut scene = animated();
+    scene.frames = (1, 1);
+    let o = scene.objects.iter().position(|o| o.is_animated()).expect("a moving object");
+    let moved = scene.objects[o].world_from_object(3.0);
+    for still in [false, true] {
+        let mut session = Session::new(scene.clone(), Method::Hierarchical).unwrap();
+        if still {
+            session.set_still();
+        }
+        assert!(session.solve_frame(1.0, &no_progress).unwrap().full_rebuild);
+        session.set_object_matrix(o, moved).unwrap();
+        let stats = session.solve_frame(1.0, &no_progress).unwrap();
+        assert_eq!(stats.full_rebuild, still, "promised still: {still}");
+        let again = session.solve_frame(1.0, &no_progress).unwrap();
+        assert!(!again.full_rebuild, "promised still: {still}: a moved session is updated after");
+    }
+}
+
 /// Refined again from where they stood, touched pairs only get finer, and the links of wherever
 /// the moving block and light passed pile up. With the pair tree kept, an update refines a
 /// subtree touched everywhere, or touched and now linked whole by the oracle, from its top and
