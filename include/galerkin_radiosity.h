@@ -596,6 +596,19 @@ GrStatus gr_session_solve_frame(struct GrSession *s,
 GrStatus gr_session_set_preview(struct GrSession *s, uint32_t on);
 
 /**
+ * Says whether frames will follow the next one (non-zero `on`): a host that bakes an animation,
+ * or previews while the timeline is scrubbed, moving objects with
+ * `gr_session_set_object_matrix`. With `GR_METHOD_HIERARCHICAL` the hierarchy then keeps the
+ * record of its refinement (about 14 bytes per stored pair), so that a frame's update links
+ * coarser again where a moving object has passed instead of only finer. Set it before the first
+ * frame: a change after it solves the next frame afresh. Starts at 0; other methods ignore it.
+ *
+ * # Safety
+ * `s` is NULL or a live session.
+ */
+GrStatus gr_session_set_animated(struct GrSession *s, uint32_t on);
+
+/**
  * Brings the last solved frame from a preview (see `gr_session_set_preview`) to what a solve
  * without previews gives: continues its solve down to the settings' tolerance, then gathers its
  * corners (with `corner_gather` on), reusing the last gather made where nothing that decides a

@@ -162,6 +162,8 @@ pub struct Session {
     unrefined: bool,
     /// No object will be moved by [`Session::set_object_matrix`] ([`Session::set_still`]).
     still: bool,
+    /// Frames will follow, whatever the scene's own frames ([`Session::set_animated`]).
+    animated: bool,
 }
 
 impl Session {
@@ -196,7 +198,18 @@ impl Session {
             preview: false,
             unrefined: false,
             still: false,
+            animated: false,
         })
+    }
+
+    /// Says that frames will follow the next one, moved by the scene's keys or by
+    /// [`Session::set_object_matrix`] (a host that bakes an animation, or previews while the
+    /// timeline is scrubbed, from a scene of one frame): the hierarchy then keeps its pair tree,
+    /// so that its updates link coarser again where a move has passed
+    /// ([`crate::hierarchy::pair_tree`]), as it does for a scene whose own frames span more
+    /// than one. Set before the first frame: a change after it solves the next frame afresh.
+    pub fn set_animated(&mut self, on: bool) {
+        self.animated = on;
     }
 
     /// Promises that no object will be moved by [`Session::set_object_matrix`] (a bake of a scene
@@ -562,8 +575,8 @@ impl Session {
         settings.corner_gather &= !preview;
         // An animation's updates coarsen where a move has passed (`hierarchy::pair_tree`); a still
         // scene's hierarchy need not keep what only a move could change.
-        settings.keep_pair_tree = placed.is_animation();
-        settings.moves = placed.is_animation() || !self.still;
+        settings.keep_pair_tree = placed.is_animation() || self.animated;
+        settings.moves = placed.is_animation() || self.animated || !self.still;
         // A later frame starts from the last one's hierarchy and solution, unless an update
         // failed on its way (it took the links) or the surfaces were replaced since.
         let previous = self.hierarchical.as_mut().filter(|_| !self.stale);

@@ -100,7 +100,11 @@ def session_key(settings: BakeSettings, exp) -> str:
     return exp.scene_key(settings.session_signature())
 
 
-def new_session(settings: BakeSettings, exp, state: FrameState, scene_key: str) -> Held:
+def new_session(
+    settings: BakeSettings, exp, state: FrameState, scene_key: str, animated: bool = False
+) -> Held:
+    """A session of the exported scene; ``animated``: frames will follow the first (an animation's
+    bake, the live preview), so that the hierarchy keeps what lets its updates coarsen."""
     b = binding()
     rho, emission = exp.materials.arrays()
     objects = [o.data.native() for o in exp.objects]
@@ -109,6 +113,7 @@ def new_session(settings: BakeSettings, exp, state: FrameState, scene_key: str) 
         if exp.lights:
             session.set_lights(exp.lights)
         world.apply(session, exp.world, exp.two_sided)
+        session.set_animated(animated)
     except b.RadiosityError as e:
         fits = None
         if str(e).startswith("over the memory budget") and settings.method != "hierarchical":
@@ -367,7 +372,7 @@ class BakeJob:
         h = held(self.scene)
         if h is None or h.scene_key != self.session_key:
             drop_held(self.scene)
-            h = new_session(s, rest, self._state_at(self.frames[0]), self.session_key)
+            h = new_session(s, rest, self._state_at(self.frames[0]), self.session_key, len(self.frames) > 1)
             _held[scene_id(self.scene)] = h
         self.held = h
 

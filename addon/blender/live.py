@@ -103,7 +103,7 @@ def _update(scene) -> bool:
                 raise bake.BakeError("no emitters in the scene (no emissive material, Light or World)")
             bake.drop_held(scene)
             smp = sample(dg, rest, sel.objects)
-            h = bake.new_session(bake.settings_from_scene(scene), rest, smp.state(rest), key)
+            h = bake.new_session(bake.settings_from_scene(scene), rest, smp.state(rest), key, animated=True)
             bake._held[bake.scene_id(scene)] = h
             h.frame = None
         else:
@@ -113,7 +113,8 @@ def _update(scene) -> bool:
     if state.geometry != h.state.geometry:
         rest = export(dg, sel.objects, sel.light_objects, rest=rest)
         h.close()
-        h = bake.new_session(bake.settings_from_scene(scene), rest, state, _scene_key(scene, rest))
+        key = _scene_key(scene, rest)
+        h = bake.new_session(bake.settings_from_scene(scene), rest, state, key, animated=True)
         bake._held[bake.scene_id(scene)] = h
     frame = float(scene.frame_current)
     if h.frame == frame and state == h.state:

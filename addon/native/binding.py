@@ -188,6 +188,7 @@ def _declare(lib: ctypes.CDLL) -> None:
         "gr_session_set_object_face_emission": ([_SESSION, c_uint32, _F32, c_size_t], c_uint32),
         "gr_session_solve_frame": ([_SESSION, c_double, _PROGRESS, c_void_p], c_uint32),
         "gr_session_set_preview": ([_SESSION, c_uint32], c_uint32),
+        "gr_session_set_animated": ([_SESSION, c_uint32], c_uint32),
         "gr_session_refine": ([_SESSION, _PROGRESS, c_void_p, _U32], c_uint32),
         "gr_session_cancel": ([_SESSION], c_uint32),
         "gr_session_frame_stats_json": ([_SESSION, c_char_p, c_size_t, POINTER(c_size_t)], c_uint32),
@@ -563,6 +564,13 @@ class Session:
         polynomials'), until ``refine``. For a preview while the timeline is scrubbed."""
         with self._use() as p:
             _check(self._lib, self._lib.gr_session_set_preview(p, 1 if on else 0))
+
+    def set_animated(self, on: bool) -> None:
+        """Says that frames will follow the next one (an animation's bake, a scrubbed preview): the
+        hierarchy then keeps its refinement's record, so that updates link coarser again where a
+        move has passed. Set before the first frame."""
+        with self._use() as p:
+            _check(self._lib, self._lib.gr_session_set_animated(p, 1 if on else 0))
 
     def refine(self, progress: Callable[[float, str], bool | None] | None = None) -> dict | None:
         """Brings a preview frame to what a solve without previews gives (the rest of its solve,

@@ -99,6 +99,30 @@ fn a_session_updates_a_moved_object_unless_promised_still() {
     }
 }
 
+/// A session told that frames follow (`set_animated`, as the add-on says for an animation's bake
+/// and its live preview, whose scenes are of one frame) keeps the pair tree, as for a scene whose
+/// own frames span more: over the demo animation its updates link coarser again where the block
+/// and light have passed, so its last frame holds fewer links than a session not told.
+#[test]
+fn a_session_told_frames_follow_coarsens_its_updates() {
+    let mut scene = cornell_box_animated(2, 16, settings());
+    scene.frames = (0, 0);
+    let last_links = |animated: bool| {
+        let mut session = Session::new(scene.clone(), Method::Hierarchical).unwrap();
+        session.set_animated(animated);
+        let mut links = 0;
+        for f in 0..=16 {
+            let stats = session.solve_frame(f as f64, &no_progress).unwrap();
+            assert_eq!(stats.full_rebuild, f == 0, "frame {f}, told frames follow: {animated}");
+            links = stats.pairs;
+        }
+        links
+    };
+    let (told, not_told) = (last_links(true), last_links(false));
+    println!("last frame's links: {told} told frames follow, {not_told} not");
+    assert!(told < not_told, "{told} links told frames follow, {not_told} not");
+}
+
 /// Refined again from where they stood, touched pairs only get finer, and the links of wherever
 /// the moving block and light passed pile up. With the pair tree kept, an update refines a
 /// subtree touched everywhere, or touched and now linked whole by the oracle, from its top and
