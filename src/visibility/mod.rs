@@ -114,17 +114,33 @@ fn probe_directions() -> impl Iterator<Item = DVec3> {
 }
 
 /// Per probe direction `u`, the point of `points` lowest along `u` (none for no points).
-fn extremes(points: impl Iterator<Item = DVec3> + Clone) -> Vec<DVec3> {
-    probe_directions().filter_map(|u| points.clone().min_by(|a, b| u.dot(*a).total_cmp(&u.dot(*b)))).collect()
+fn extremes(points: impl Iterator<Item = DVec3>) -> Vec<DVec3> {
+    least_along(points, |u, p| u.dot(p))
+}
+
+/// Per probe direction `u`, the item of `items` whose `key(u, item)` is least, the first of
+/// equals (as `min_by`), in one pass over the items: a pass per direction, each recomputing the
+/// key on both sides of every comparison, made the hull's scan most of the occluders' set-up.
+fn least_along<T: Copy>(items: impl Iterator<Item = T>, key: impl Fn(DVec3, T) -> f64) -> Vec<T> {
+    let directions: Vec<DVec3> = probe_directions().collect();
+    let mut least: Vec<Option<(f64, T)>> = vec![None; directions.len()];
+    for x in items {
+        for (&u, best) in directions.iter().zip(&mut least) {
+            let k = key(u, x);
+            match best {
+                Some((b, _)) if !k.total_cmp(b).is_lt() => {}
+                _ => *best = Some((k, x)),
+            }
+        }
+    }
+    least.into_iter().flatten().map(|(_, x)| x).collect()
 }
 
 /// Per probe direction `u`, the triangle whose highest vertex along `u` is lowest: the likeliest
 /// to lie wholly behind a plane facing `-u`.
 fn extreme_triangles(tris: &[Triangle]) -> Vec<[DVec3; 3]> {
     let top = |u: DVec3, t: &Triangle| t.v.iter().map(|v| u.dot(*v)).fold(f64::NEG_INFINITY, f64::max);
-    probe_directions()
-        .filter_map(|u| tris.iter().min_by(|a, b| top(u, a).total_cmp(&top(u, b))).map(|t| t.v))
-        .collect()
+    least_along(tris.iter(), top).into_iter().map(|t| t.v).collect()
 }
 
 /// All occluders of one frame: the triangles of every element, and each element's plane.
