@@ -194,8 +194,7 @@ pub fn solve_frame(
     state.add_sources(&tree, &lit.emission, lit.lights.as_ref());
     state.start_from_sources(&tree);
     let oracle = Oracle::of(hs, state.source_power(&tree), total_area);
-    let mut hierarchy = Hierarchy::new(tree, oracle, splits_for(hs));
-    hierarchy.stores_idle = hs.moves && !hierarchy.splits.is_kept();
+    let mut hierarchy = Hierarchy::new(tree, oracle, splits_for(hs), hs.moves);
     let mut stats = HierarchyStats { faces: hierarchy.tree.faces.len(), ..Default::default() };
     let rule = GaussLegendre::new(scene.settings.quadrature_order);
     let ctx = link_context(scene, hs, &rule, lit.occluders.as_ref());

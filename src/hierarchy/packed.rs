@@ -28,6 +28,13 @@ pub struct ClusterEntry {
     pub scale: f32,
 }
 
+impl ClusterEntry {
+    /// An entry that delivers nothing (a link taken out, or ends at one place), from `source`.
+    pub fn none(source: NodeId) -> Self {
+        Self { source, w: [0.0; 3], emit: 0.0, scale: 0.0 }
+    }
+}
+
 /// How a packing works out a [`ClusterEntry`]: `(receiver, source, transmittance)`.
 pub type ClusterGeometry<'a> = &'a (dyn Fn(NodeId, NodeId, f32) -> ClusterEntry + Sync);
 
@@ -131,8 +138,7 @@ impl ReceivedBlocks {
         let mut sources = budget::try_filled(count, 0 as NodeId, what)?;
         let mut blocks = budget::try_filled(count.saturating_mul(nb2), 0.0f32, what)?;
         let mut constants = budget::try_filled(constant_count, (0 as NodeId, 0.0f32), what)?;
-        let taken_out = ClusterEntry { source: 0, w: [0.0; 3], emit: 0.0, scale: 0.0 };
-        let mut clusters = budget::try_filled(cluster_count, taken_out, what)?;
+        let mut clusters = budget::try_filled(cluster_count, ClusterEntry::none(0), what)?;
         // Receivers in runs of `RUN`, each run's part of the four outputs split off in order.
         const RUN: usize = 4096;
         let mut runs = Vec::with_capacity(nodes.div_ceil(RUN));
@@ -237,7 +243,7 @@ impl ReceivedBlocks {
         let (a, b) = (self.cluster_offsets[r], self.cluster_offsets[r + 1]);
         // (A cluster link from the receiver itself is skipped by the sweep: no distance.)
         if let Some(e) = self.clusters[a..b].iter_mut().find(|e| e.source == s) {
-            *e = ClusterEntry { source: receiver, w: [0.0; 3], emit: 0.0, scale: 0.0 };
+            *e = ClusterEntry::none(receiver);
             return true;
         }
         false

@@ -355,7 +355,9 @@ pub struct RefineStats {
 }
 
 impl Hierarchy {
-    pub fn new(tree: Tree, oracle: Oracle, splits: Splits) -> Self {
+    /// `moves`: something may move in a later frame ([`super::HierarchySettings::moves`]), so
+    /// that the idle pairs must be known ([`Hierarchy::stores_idle`]).
+    pub fn new(tree: Tree, oracle: Oracle, splits: Splits, moves: bool) -> Self {
         let (links, blocked, blocked_load, idle) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let (changes, packed) = (LinkChanges::default(), None);
         Self {
@@ -363,7 +365,7 @@ impl Hierarchy {
             links,
             blocked,
             blocked_load,
-            stores_idle: !splits.is_kept(),
+            stores_idle: moves && !splits.is_kept(),
             idle,
             oracle,
             splits,

@@ -375,12 +375,14 @@ impl State {
                         continue;
                     }
                     let s = e.source as usize;
-                    let w = DVec3::new(e.w[0] as f64, e.w[1] as f64, e.w[2] as f64);
+                    // (The direction only for lobes: a planar source's or receiver's cosine is in
+                    // the entry.)
+                    let w = || DVec3::new(e.w[0] as f64, e.w[1] as f64, e.w[2] as f64);
                     let intensity = if e.emit >= 0.0 {
                         let f = e.emit as f64;
                         self.mean[s].map(|m| m * f)
                     } else {
-                        lobes::eval(&self.lobes[s], w)
+                        lobes::eval(&self.lobes[s], w())
                     };
                     let scale = e.scale as f64;
                     let arriving = intensity.map(|i| i * scale);
@@ -389,7 +391,7 @@ impl State {
                             hr[0][c] += arriving[c];
                         }
                     } else {
-                        lobes::add_lobe(lr, -w, arriving);
+                        lobes::add_lobe(lr, -w(), arriving);
                     }
                 }
             }
@@ -516,7 +518,7 @@ pub(super) fn cluster_entry(tree: &Tree, r: NodeId, s: NodeId, transmittance: f3
     let v = nr.centre - ns.centre;
     let d2 = v.length_squared();
     if d2 <= 0.0 {
-        return ClusterEntry { source: s, w: [0.0; 3], emit: 0.0, scale: 0.0 };
+        return ClusterEntry::none(s);
     }
     let w = v / d2.sqrt();
     let emit = match ns.plane_normal {

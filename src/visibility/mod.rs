@@ -92,7 +92,7 @@ fn on_hull(elements: &[Patch], planes: &[Option<(DVec3, f64)>], eps: f64) -> Vec
     // corners: those are tried first, and only a plane with all of them in front scans every
     // corner (the scans were most of an updated frame's set-up on a 30k-triangle model).
     let corners = || elements.iter().flat_map(|p| p.corners.iter().copied());
-    let extreme = extremes(corners());
+    let extreme = least_along(corners(), |u, p| u.dot(p));
     let verdict: HashMap<Key, bool> = keys
         .par_iter()
         .map(|(k, (n, d))| {
@@ -111,11 +111,6 @@ fn probe_directions() -> impl Iterator<Item = DVec3> {
             (-1..=1).flat_map(move |y| (-1..=1).map(move |z| DVec3::new(x as f64, y as f64, z as f64)))
         })
         .filter(|u| *u != DVec3::ZERO)
-}
-
-/// Per probe direction `u`, the point of `points` lowest along `u` (none for no points).
-fn extremes(points: impl Iterator<Item = DVec3>) -> Vec<DVec3> {
-    least_along(points, |u, p| u.dot(p))
 }
 
 /// Per probe direction `u`, the item of `items` whose `key(u, item)` is least, the first of
