@@ -20,9 +20,12 @@ pub const ZERO: Lobes = [[0.0; 3]; 9];
 
 const A: [f64; 3] = [std::f64::consts::PI, 2.0 * std::f64::consts::PI / 3.0, std::f64::consts::PI / 4.0];
 
+/// The nine real spherical harmonics at a direction.
+pub type Harmonics = [f64; 9];
+
 /// The nine real spherical harmonics `Y_lm` at the unit vector `w`, ordered `l = 0; l = 1 (y, z,
 /// x); l = 2 (xy, yz, 3z^2 - 1, xz, x^2 - y^2)`.
-fn harmonics(w: DVec3) -> [f64; 9] {
+pub fn harmonics(w: DVec3) -> Harmonics {
     let (x, y, z) = (w.x, w.y, w.z);
     [
         0.282_094_791_773_878_1,
@@ -40,11 +43,25 @@ fn harmonics(w: DVec3) -> [f64; 9] {
 /// The band `l` of harmonic `k`.
 const BAND: [usize; 9] = [0, 1, 1, 1, 2, 2, 2, 2, 2];
 
+/// The harmonics at `-w` from those at `w`: the odd band (`l = 1`) changes sign.
+pub fn opposite(y: &Harmonics) -> Harmonics {
+    let mut out = *y;
+    for v in &mut out[1..4] {
+        *v = -*v;
+    }
+    out
+}
+
 /// Adds `weight x max(0, axis . w)` (as a function of `w`) to `lobes`; `axis` unit.
 pub fn add_lobe(lobes: &mut Lobes, axis: DVec3, weight: [f64; 3]) {
-    let y = harmonics(axis);
+    add_lobe_at(lobes, &harmonics(axis), weight);
+}
+
+/// [`add_lobe`] with the axis given by its harmonics ([`harmonics`]): a receiver that takes a
+/// lobe from the direction it evaluates a source's lobes in works the harmonics out once.
+pub fn add_lobe_at(lobes: &mut Lobes, axis: &Harmonics, weight: [f64; 3]) {
     for k in 0..9 {
-        let f = A[BAND[k]] * y[k];
+        let f = A[BAND[k]] * axis[k];
         for c in 0..3 {
             lobes[k][c] += f * weight[c];
         }
@@ -53,7 +70,11 @@ pub fn add_lobe(lobes: &mut Lobes, axis: DVec3, weight: [f64; 3]) {
 
 /// The lobes' value in the direction `w` (unit), clamped at zero (the truncation rings below it).
 pub fn eval(lobes: &Lobes, w: DVec3) -> [f64; 3] {
-    let y = harmonics(w);
+    eval_at(lobes, &harmonics(w))
+}
+
+/// [`eval`] in the direction whose harmonics are `y`.
+pub fn eval_at(lobes: &Lobes, y: &Harmonics) -> [f64; 3] {
     let mut out = [0.0; 3];
     for k in 0..9 {
         for c in 0..3 {
@@ -87,6 +108,13 @@ mod tests {
                 DVec3::new(r * phi.cos(), r * phi.sin(), z)
             })
             .collect()
+    }
+
+    #[test]
+    fn the_opposite_harmonics_are_those_of_the_opposite_direction() {
+        for w in directions(50) {
+            assert_eq!(opposite(&harmonics(w)), harmonics(-w));
+        }
     }
 
     #[test]
