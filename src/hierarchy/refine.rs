@@ -286,6 +286,15 @@ impl Oracle {
     }
 }
 
+/// Verdicts "keep" for `n` entries but those at `failed`.
+fn kept_but(n: usize, failed: &[usize]) -> Vec<bool> {
+    let mut keep = vec![true; n];
+    for &i in failed {
+        keep[i] = false;
+    }
+    keep
+}
+
 /// Keeps the entries of `list` whose `keep` is true, in order, and hands the others to
 /// `removed`.
 fn keep_where<T>(list: &mut Vec<T>, keep: &[bool], mut removed: impl FnMut(&T)) {
@@ -495,6 +504,18 @@ impl Hierarchy {
         // Only a pair with an end brighter than when it was decided can fail now, and a link
         // only if its load grew past 1 (`Oracle::load`: linear in each end's brightness).
         let growth = self.growth(radiosity);
+        // The nodes grown brighter, a bit each: a pair with a known load of at most 1 and neither
+        // end brighter passes as it is, and most pairs are such (a bit set a sixty-fourth of the
+        // growths' size, looked at instead of both ends' growths).
+        let mut brighter = vec![0u64; growth.len().div_ceil(64)];
+        for (i, &g) in growth.iter().enumerate() {
+            // (NaN counts as brighter.)
+            if g > 1.0 || g.is_nan() {
+                brighter[i / 64] |= 1 << (i % 64);
+            }
+        }
+        let bright = |a: NodeId| brighter[a as usize / 64] >> (a % 64) & 1 != 0;
+        let settled = |a: NodeId, b: NodeId, load: f32| load <= 1.0 && !bright(a) && !bright(b);
         let grown = |a: NodeId, b: NodeId| growth[a as usize].max(growth[b as usize]);
         let tree = &self.tree;
         let oracle = &self.oracle;
@@ -506,10 +527,15 @@ impl Hierarchy {
         // keeps its load as it was, a bound still: most links are untested, and writing every
         // one of them (15M on the full monastery) was most of a relink pass.
         let tested = std::sync::atomic::AtomicUsize::new(0);
-        let verdicts: Vec<bool> = self
+        // The links that fail, by index: most relinks have none.
+        let failed: Vec<usize> = self
             .links
             .par_iter_mut()
-            .map(|l| {
+            .enumerate()
+            .filter_map(|(i, l)| {
+                if settled(l.a, l.b, l.load) {
+                    return None;
+                }
                 // (A NaN, an unknown end's growth times no load, is tested.)
                 let growth = grown(l.a, l.b);
                 let bound = l.load as f64 * growth;
@@ -517,7 +543,7 @@ impl Hierarchy {
                     if growth > 1.0 {
                         l.load = (bound * (1.0 + 1e-6)) as f32;
                     }
-                    return true;
+                    return None;
                 }
                 tested.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 let light = matches!(l.coupling, coupling::Coupling::Constants { .. });
@@ -526,11 +552,11 @@ impl Hierarchy {
                 if kept {
                     l.load = oracle.load(tree, radiosity, l.a, l.b, light);
                 }
-                kept
+                (!kept).then_some(i)
             })
             .collect();
-        // (Most relinks take out none: then no pass over the links.)
-        if verdicts.contains(&false) {
+        if !failed.is_empty() {
+            let verdicts = kept_but(self.links.len(), &failed);
             self.changes.removing(&self.links, &verdicts);
             keep_where(&mut self.links, &verdicts, |l| work.push((l.a, l.b)));
         }
@@ -538,30 +564,35 @@ impl Hierarchy {
         // emitters' light) are split now if they may carry enough: kept whole, each would drop
         // all its light from the solve, always the same way (the Cornell box's faces came out
         // 1-5% too dark).
-        // (Their loads as the links' above.)
+        // (Their loads as the links' above; an unknown load is infinite, and tested.)
         self.blocked_load.resize(self.blocked.len(), f32::INFINITY);
-        let verdicts: Vec<bool> = self
+        let failed: Vec<usize> = self
             .blocked
             .par_iter()
             .zip(self.blocked_load.par_iter_mut())
-            .map(|(&(a, b), load)| {
+            .enumerate()
+            .filter_map(|(i, (&(a, b), load))| {
+                if settled(a, b, *load) {
+                    return None;
+                }
                 let growth = grown(a, b);
                 let bound = *load as f64 * growth;
                 if bound <= 1.0 {
                     if growth > 1.0 {
                         *load = (bound * (1.0 + 1e-6)) as f32;
                     }
-                    return true;
+                    return None;
                 }
                 tested.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 let kept = !oracle.may_carry_much(tree, radiosity, a, b);
                 if kept {
                     *load = oracle.blocked_load(tree, radiosity, a, b);
                 }
-                kept
+                (!kept).then_some(i)
             })
             .collect();
-        if verdicts.contains(&false) {
+        if !failed.is_empty() {
+            let verdicts = kept_but(self.blocked.len(), &failed);
             keep_where(&mut self.blocked_load, &verdicts, |_| {});
             keep_where(&mut self.blocked, &verdicts, |&p| work.push(p));
         }
