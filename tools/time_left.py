@@ -2,7 +2,7 @@
 left, and the longest wait between two lines (issue 24: a line at least every 2 s).
 
     python3 -m tools.time_left [SCENE.json] [--hierarchy] [--frames A:B] [--threads N]
-                               [--at 0.1,0.25,...] [--stage links]
+                               [--at 0.1,0.25,...] [--stage links] [--cli PATH]
 
 Runs ``target/release/galerkin-radiosity bake`` on the scene (default: the decimated monastery of
 tests/data/real, one frame whose corner gather is nearly all of it) and stamps each line of its
@@ -54,10 +54,10 @@ def said(text: str) -> str:
     return "?" if x is None else f"{x:.1f} s"
 
 
-def run(scene: Path, extra: list[str]) -> tuple[list[tuple[float, str]], float]:
+def run(scene: Path, extra: list[str], cli: Path = CLI) -> tuple[list[tuple[float, str]], float]:
     """The CLI's stderr lines, each with its arrival time from the start, and the wall time."""
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [str(CLI), "bake", str(scene), "-o", str(Path(tmp) / "out.json"), *extra]
+        cmd = [str(cli), "bake", str(scene), "-o", str(Path(tmp) / "out.json"), *extra]
         print("run:", " ".join(cmd), file=sys.stderr)
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
@@ -124,14 +124,15 @@ def main(argv=None) -> int:
     p.add_argument("--threads")
     p.add_argument("--at", help="comma-separated shares of the wall time (of --stage's lines)")
     p.add_argument("--stage", help="take the shares of this stage's first stretch of lines")
+    p.add_argument("--cli", type=Path, default=CLI, help="the CLI to run (another build's)")
     args = p.parse_args(argv)
     shares = tuple(float(x) for x in args.at.split(",")) if args.at else SHARES
-    if not CLI.exists():
-        raise SystemExit(f"time_left: {CLI} is missing: run cargo build --release first")
+    if not args.cli.exists():
+        raise SystemExit(f"time_left: {args.cli} is missing: run cargo build --release first")
     extra = ["--hierarchy"] if args.hierarchy else []
     extra += ["--frames", args.frames] if args.frames else []
     extra += ["--threads", args.threads] if args.threads else []
-    lines, wall = run(args.scene, extra)
+    lines, wall = run(args.scene, extra, args.cli)
     name = args.scene.relative_to(ROOT) if args.scene.is_relative_to(ROOT) else args.scene
     rows, waits = table(lines, wall, shares, args.stage)
     flags = " ".join(extra)
