@@ -56,9 +56,23 @@ const BATCH: usize = 1 << 20;
 /// Pairs taken off the work stack and decided at once, in parallel.
 const DECIDE_CHUNK: usize = 1 << 14;
 
-/// How many pairs of distinct faces a pair of nodes stands for: the refinement's progress is the
-/// share of its work's pairs of faces settled (monotone, and 1 at the end, though a dense corner
-/// of a scene costs more per pair than an open one).
+/// How much work a pair of nodes stands for: the refinement's progress is the share of its
+/// work's estimated links settled (linked, blocked or idle). A pair's estimate only divides its
+/// parent's share among the pairs a split makes of it ([`PairSpace::divide`]), so the shares add
+/// up to the work's total: the progress grows and ends at 1 whatever the estimates are, and
+/// better estimates only make it more even in time.
+///
+/// The links are what the time goes into, and they grow about linearly in the faces, not as
+/// their pairs: a cluster's own pair of `n` faces is taken to make `n (log2 2n)^(1/4)` of them; a
+/// pair of two nodes one link when far, up to `n_a + n_b` (each end's faces that lie before the
+/// other's plane, when it is a surface) when their spheres touch, falling as the sixth power of
+/// their radii-sum over their distance; a pair the oracle will skip (one face, or wholly behind
+/// a surface) a decision, [`SKIPPED`]. (The powers were fitted on the monastery's parts.)
+/// Counted in pairs of faces, the high, far pairs between a cluster's children, half the pairs of
+/// faces and one link each, moved the progress as much as all the links below them: the
+/// 30k-triangle monastery's first link round said 47% at a tenth of its time and 80% at half;
+/// now 11-12% and 55-58% (docs/benchmarks.md, "Progress: the time left"; tests/link_progress.rs).
+/// Only the progress: the stack's order, the verdicts and the links are as they were.
 struct PairSpace {
     /// Faces below each cluster present when the refinement starts (the nodes it adds are
     /// surfaces).
@@ -73,34 +87,77 @@ impl PairSpace {
         for (id, node) in tree.nodes.iter().enumerate() {
             faces[id] = match &node.kind {
                 Kind::Cluster { children } => children.iter().map(|&c| faces[c as usize]).sum(),
-                Kind::Surface(s) => 0.25f64.powi(s.depth as i32),
+                Kind::Surface(_) => 1.0,
             };
         }
         Self { faces }
     }
 
-    /// Faces (or shares of a face) below node `id`.
-    fn below(&self, tree: &Tree, id: NodeId) -> f64 {
-        match (self.faces.get(id as usize), &tree.node(id).kind) {
-            (_, Kind::Surface(s)) => 0.25f64.powi(s.depth as i32),
-            (Some(&n), Kind::Cluster { .. }) => n,
-            (None, Kind::Cluster { .. }) => unreachable!("the refinement adds no clusters"),
+    /// The links the pair `(a, b)` is expected to make (the node's own when `a == b`).
+    fn links(&self, tree: &Tree, a: NodeId, b: NodeId) -> f64 {
+        let (x, y) = (tree.node(a), tree.node(b));
+        let faces = |id: NodeId, node: &super::tree::Node| match node.kind {
+            Kind::Surface(_) => 1.0,
+            Kind::Cluster { .. } => self.faces.get(id as usize).map_or(1.0, |&n| n.max(1.0)),
+        };
+        let (na, nb) = (faces(a, x), faces(b, y));
+        if a == b {
+            return na * (2.0 * na).log2().sqrt().sqrt();
         }
+        // A surface sees only what lies before its plane: of the other node's sphere, this
+        // share (the oracle skips a pair wholly behind, or of one face: a decision, no link).
+        let before = |s: &super::tree::Node, o: &super::tree::Node| match &s.kind {
+            Kind::Surface(f) if o.radius > 0.0 => {
+                ((f.normal.dot(o.centre - s.centre) + o.radius) / (2.0 * o.radius)).clamp(0.0, 1.0)
+            }
+            _ => 1.0,
+        };
+        let (fa, fb) = (before(y, x), before(x, y));
+        let one_face = matches!((x.surface(), y.surface()), (Some(p), Some(q)) if p.face == q.face);
+        if one_face || fa == 0.0 || fb == 0.0 {
+            return SKIPPED;
+        }
+        // (Two surfaces, the most of the pairs: one link or a split's few.)
+        if na * nb <= 1.0 {
+            return 1.0;
+        }
+        let reach = x.radius + y.radius;
+        let d2 = x.centre.distance_squared(y.centre);
+        let near = if d2 > reach * reach { (reach * reach / d2).powi(3) } else { 1.0 };
+        (1.0 + (na * fa + nb * fb) * near).min(na * nb)
     }
 
-    /// Pairs of distinct faces between `a` and `b` (within `a` when they are the same node);
-    /// 0 for two parts of one face.
-    fn faces_between(&self, tree: &Tree, a: NodeId, b: NodeId) -> f64 {
-        let (na, nb) = (tree.node(a), tree.node(b));
-        if let (Some(x), Some(y)) = (na.surface(), nb.surface())
-            && x.face == y.face
-        {
-            return 0.0;
+    /// Divides the share `of` of the pair `parent` among the pairs `new` a split made of it, by
+    /// their expected links: equally when the parent is two surfaces (its parts are alike, about
+    /// a link each, and their nodes need not be read).
+    fn divide(
+        &self,
+        tree: &Tree,
+        of: f64,
+        (a, b): (NodeId, NodeId),
+        new: &[(NodeId, NodeId)],
+        shares: &mut Vec<f64>,
+    ) -> Result<()> {
+        budget::try_reserve(shares, new.len(), NODES)?;
+        let start = shares.len();
+        if !tree.node(a).is_cluster() && !tree.node(b).is_cluster() {
+            shares.resize(start + new.len(), of / new.len() as f64);
+            return Ok(());
         }
-        let n = self.below(tree, a);
-        if a == b { 0.5 * n * (n - 1.0).max(0.0) } else { n * self.below(tree, b) }
+        shares.extend(new.iter().map(|&(a, b)| self.links(tree, a, b)));
+        let sum: f64 = shares[start..].iter().sum();
+        if sum > 0.0 && sum.is_finite() {
+            shares[start..].iter_mut().for_each(|x| *x *= of / sum);
+        } else {
+            shares[start..].iter_mut().for_each(|x| *x = of / new.len() as f64);
+        }
+        Ok(())
     }
 }
+
+/// What a pair the oracle skips costs (a decision) in links computed ([`PairSpace::links`]): a
+/// decision took about a twentieth of a link's time on the monastery's parts.
+const SKIPPED: f64 = 0.05;
 
 /// Partially visible links, and pairs whose sampled rays were all blocked, are split while they
 /// can carry more than this share of the threshold.
@@ -608,7 +665,7 @@ impl Hierarchy {
     /// accepted links in parallel, and send partially visible ones that carry enough back.
     /// Decisions are made in batches of at most [`BATCH`] accepted pairs, each computed before
     /// the next is decided (a first frame of the full monastery accepts about 100M pairs).
-    /// `progress` hears the share of `work`'s pairs of faces settled so far (linked, blocked or
+    /// `progress` hears the share of `work`'s estimated links settled so far (linked, blocked or
     /// idle: [`PairSpace`]), and may cancel between chunks of computed links.
     fn refine_pairs(
         &mut self,
@@ -620,17 +677,24 @@ impl Hierarchy {
     ) -> Result<()> {
         let bar = self.oracle.threshold;
         let space = PairSpace::new(&self.tree);
-        let total: f64 = work.iter().map(|&(a, b)| space.faces_between(&self.tree, a, b)).sum();
+        // Per pair on `work`, and per accepted pair, its share of the work ([`PairSpace`]).
+        let mut shares: Vec<f64> = Vec::new();
+        budget::try_reserve(&mut shares, work.len(), LINKS)?;
+        shares.extend(work.iter().map(|&(a, b)| space.links(&self.tree, a, b)));
+        let total: f64 = shares.iter().sum();
         let mut settled = 0.0;
         let mut accepted = Vec::new();
+        let mut accepted_shares = Vec::new();
         let mut part = Vec::new();
         while !work.is_empty() {
             accepted.clear();
+            accepted_shares.clear();
             while accepted.len() < BATCH && !work.is_empty() {
                 // The top of the stack decided in parallel (the tree and the estimates are only
                 // read), then filed in order (splits add nodes): the same verdicts as one at a
                 // time, for every thread count.
                 let top = work.split_off(work.len().saturating_sub(DECIDE_CHUNK));
+                let top_shares = shares.split_off(shares.len() - top.len());
                 let tree = &self.tree;
                 let oracle = &self.oracle;
                 let verdicts: Vec<Option<(Verdict, Weight)>> = top
@@ -642,7 +706,8 @@ impl Hierarchy {
                         })
                     })
                     .collect();
-                for (&(a, b), verdict) in top.iter().zip(verdicts).rev() {
+                for ((&(a, b), verdict), &share) in top.iter().zip(verdicts).zip(&top_shares).rev() {
+                    let pushed = work.len();
                     let Some((verdict, weight)) = verdict else {
                         // A cluster's light among its own parts; a surface does not light itself
                         // (its parts are one face: nothing to record).
@@ -655,24 +720,34 @@ impl Hierarchy {
                                 work.push((x, y));
                             }
                         }
+                        if work.len() == pushed {
+                            settled += share;
+                        }
+                        space.divide(&self.tree, share, (a, b), &work[pushed..], &mut shares)?;
                         continue;
                     };
                     match verdict {
                         Verdict::Skip => {
-                            settled += space.faces_between(&self.tree, a, b);
+                            settled += share;
                             if self.stores_idle && !self.same_face(a, b) {
                                 budget::try_reserve(&mut self.idle, 1, LINKS)?;
                                 self.idle.push((a, b));
                             }
                         }
-                        Verdict::Link => accepted.push((a, b, weight)),
-                        Verdict::Split(s) => self.split_pair((a, b), s, radiosity, &mut work)?,
+                        Verdict::Link => {
+                            accepted.push((a, b, weight));
+                            accepted_shares.push(share);
+                        }
+                        Verdict::Split(s) => {
+                            self.split_pair((a, b), s, radiosity, &mut work)?;
+                            space.divide(&self.tree, share, (a, b), &work[pushed..], &mut shares)?;
+                        }
                     }
                 }
             }
             // In chunks, so that the batch reports its progress and can be cancelled, and so
             // that what a chunk computed becomes links before the next is computed.
-            for chunk in accepted.chunks(LINK_CHUNK) {
+            for (chunk, chunk_shares) in accepted.chunks(LINK_CHUNK).zip(accepted_shares.chunks(LINK_CHUNK)) {
                 if !progress((settled / total).min(1.0)) {
                     return Err(crate::Error::Cancelled);
                 }
@@ -691,9 +766,12 @@ impl Hierarchy {
                 }
                 budget::try_reserve(&mut self.blocked, part.len(), LINKS)?;
                 budget::try_reserve(&mut self.blocked_load, part.len(), LINKS)?;
-                for (&(a, b, _), c) in chunk.iter().zip(part.drain(..)) {
+                for ((&(a, b, _), c), &share) in chunk.iter().zip(part.drain(..)).zip(chunk_shares) {
+                    let pushed = work.len();
                     if self.take_computed(a, b, c, radiosity, &mut work, stats)? {
-                        settled += space.faces_between(&self.tree, a, b);
+                        settled += share;
+                    } else {
+                        space.divide(&self.tree, share, (a, b), &work[pushed..], &mut shares)?;
                     }
                 }
             }
