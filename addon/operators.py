@@ -18,12 +18,12 @@ def _show_progress(context, job) -> None:
     the bake was started from: frame, stage, the frame's and the bake's percentage, the time spent
     and an estimate of the time left. The job's raw (fraction, stage) falls back at every stage
     and frame; the meter maps it onto the bake, monotone."""
-    from .core.progress import Meter, status_text
+    from .core.progress import Meter, job_gathers, status_text
 
     now = time.perf_counter()
     meter = _meters.get(job)
     if meter is None:
-        meter = _meters[job] = Meter(job.total, now)
+        meter = _meters[job] = Meter(job.total, now, gathers=job_gathers(job))
     while meter.done < job.done:
         meter.frame_done(now)
     # After the last commit the job's fraction is the finished frame's: nothing more to report.

@@ -25,16 +25,23 @@ import time
 from dataclasses import dataclass
 
 
-def share(stage: str) -> tuple[float, float]:
+def share(stage: str, gathers: bool = True) -> tuple[float, float]:
     """Where ``stage`` starts in a frame and how much of it it spans before a frame of its kind
-    was timed (``src/progress.rs``); "links" and "hierarchy" are the hierarchy's stages."""
+    was timed, with a corner gather to come or without (``src/progress.rs``); "links" and
+    "hierarchy" are the hierarchy's stages."""
     if stage in ("kernel", "kernel update", "links"):
-        return 0.0, 0.45
+        return 0.0, 0.45 if gathers else 0.9
     if stage in ("solve", "hierarchy"):
-        return 0.45, 0.1
+        return (0.45, 0.1) if gathers else (0.9, 0.1)
     if stage == "corner gather":
         return 0.55, 0.45
     return 0.0, 1.0
+
+
+def job_gathers(job) -> bool:
+    """Whether ``job``'s frames end in a corner gather (its settings' Sharp Corners; True when
+    it does not say)."""
+    return bool(getattr(getattr(job, "settings", None), "corner_gather", True))
 
 
 @dataclass
@@ -49,8 +56,9 @@ class Reading:
 class Meter:
     """The progress of a bake of ``frames`` frames (times in seconds of ``time.perf_counter``)."""
 
-    def __init__(self, frames: int, now: float | None = None):
+    def __init__(self, frames: int, now: float | None = None, gathers: bool = True):
         now = time.perf_counter() if now is None else now
+        self.gathers = gathers   # whether a frame ends in a corner gather (the first frame's shares)
         self.frames = max(int(frames), 1)
         self.done = 0
         self.start = self.frame_start = now
@@ -99,7 +107,7 @@ class Meter:
 
     def _share(self, stage: str) -> tuple[float, float]:
         kind = next(iter(self.stage_times), stage)
-        return self.learned.get(kind, {}).get(stage) or share(stage)
+        return self.learned.get(kind, {}).get(stage) or share(stage, self.gathers)
 
     def _frame_left(self, now: float, in_frame: float) -> float | None:
         """Seconds left of the frame: the running stage's rest at its own rate plus the stages
@@ -204,6 +212,7 @@ class Lines:
         if not self._job_seen:
             self._job_seen = True
             self.meter.frames = max(self.meter.done + int(self.job.total) + self.beyond, 1)
+            self.meter.gathers = job_gathers(self.job)
             if self.kept is None:
                 self.kept = int(self.job.kept)
 

@@ -209,6 +209,7 @@ fn bake_into(
     } else {
         galerkin_radiosity::budget::check(&scene, (last - first + 1) as u64)?;
     }
+    let gathers = scene.settings.corner_gather;
     let mut session = Session::new(scene, method)?;
     // One frame baked: nothing moves after it.
     if first == last {
@@ -220,7 +221,7 @@ fn bake_into(
     // A line a second (galerkin_radiosity::progress: monotone, with the time spent and left):
     // from the session's callbacks, which come every few ms, and from a heartbeat thread that
     // repeats the line while they are silent (one slow link or corner of a 125k-face scene).
-    let lines = Mutex::new(Lines::new(total, Duration::from_secs(1)));
+    let lines = Mutex::new(Lines::new(total, Duration::from_secs(1)).gathering(gathers));
     let done = AtomicBool::new(false);
     std::thread::scope(|scope| -> Result<(), CliError> {
         if !quiet {

@@ -47,6 +47,20 @@ def test_the_shares_are_the_cli_ones_and_cover_a_frame():
     assert share("kernel update") == share("kernel")
 
 
+def test_a_frame_without_a_gather_is_mostly_its_links():
+    # As src/progress.rs's a_frame_without_a_gather_is_mostly_its_links.
+    for stages in (["kernel", "solve"], ["links", "hierarchy"]):
+        ends = [sum(share(s, gathers=False)) for s in stages]
+        assert [share(s, gathers=False)[0] for s in stages] == [0.0] + ends[:-1]
+        assert ends[-1] == pytest.approx(1.0)
+    m = Meter(1, now=0.0, gathers=False)
+    m.report(0.0, "links", 0.0)
+    r = m.report(0.5, "links", 10.0)
+    assert r.frame_fraction == pytest.approx(0.45)
+    assert r.frame_left == pytest.approx(10.0 + 0.1 * 10.0 / 0.45)
+    assert Meter(1, now=0.0).report(0.5, "links", 10.0).frame_fraction == pytest.approx(0.225)
+
+
 def test_time_left_follows_the_rate_then_the_finished_frames():
     m = Meter(3, now=0.0)
     assert m.report(0.0, "kernel", 0.0).bake_left is None
