@@ -14,6 +14,7 @@ pub mod gather;
 pub mod lobes;
 pub mod packed;
 pub mod pair_tree;
+mod push_pull;
 pub mod refine;
 pub mod solve;
 pub mod touch;

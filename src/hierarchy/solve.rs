@@ -16,7 +16,8 @@ use super::anderson::Anderson;
 use super::coupling::Link;
 use super::lobes::{self, Lobes};
 use super::packed::{ClusterEntry, LinkChanges, PackedLinks};
-use super::tree::{Kind, NodeId, Tree};
+use super::push_pull::{Nodes, Received, Walk};
+use super::tree::{NodeId, Tree};
 use super::two_scale::TwoScale;
 use crate::budget;
 use crate::error::{Error, Result};
@@ -177,73 +178,17 @@ impl State {
     /// faces moved, so that the next sweep shoots from their new normals and areas. A later
     /// frame's solve starts here, from the last frame's solution.
     pub fn refresh(&mut self, tree: &Tree) {
-        self.pull(tree, tree.root);
+        self.walk(tree).pull(tree.root, 0);
     }
 
-    /// Sets every node above the leaves from its children (the pull half of
-    /// [`State::push_pull`], without its pushes).
-    fn pull(&mut self, tree: &Tree, id: NodeId) {
-        let children: &[NodeId] = match &tree.nodes[id as usize].kind {
-            Kind::Cluster { children } => children,
-            Kind::Surface(s) => s.children.as_ref().map_or(&[], |c| c),
-        };
-        for &c in children {
-            self.pull(tree, c);
-        }
-        self.pull_node(tree, id);
-    }
-
-    /// Sets node `id` from its children, which are set: a surface's polynomial as its
-    /// quadrants' projection and its mean from theirs (a leaf's from its own polynomial), a
-    /// face's intensity lobe from its mean, a cluster's mean and lobes as its children's sum.
-    fn pull_node(&mut self, tree: &Tree, id: NodeId) {
-        let nb = self.nb;
-        let i = id as usize;
-        let node = &tree.nodes[i];
-        let children: &[NodeId] = match &node.kind {
-            Kind::Cluster { children } => children,
-            Kind::Surface(s) => s.children.as_ref().map_or(&[], |c| c),
-        };
-        let mut power = [0.0; 3];
-        for &c in children {
-            let a = tree.nodes[c as usize].area;
-            for ch in 0..3 {
-                power[ch] += self.mean[c as usize][ch] * a;
-            }
-        }
-        let from_children = power.map(|p| if node.area > 0.0 { p / node.area } else { 0.0 });
-        match &node.kind {
-            Kind::Cluster { children } => {
-                let mut out = lobes::ZERO;
-                for &c in children {
-                    lobes::add(&mut out, &self.lobes[c as usize]);
-                }
-                self.lobes[i] = out;
-                self.mean[i] = from_children;
-            }
-            Kind::Surface(s) => {
-                // The mean from the leaves (area-weighted), which a pulled polynomial keeps only
-                // where the area element is polynomial of the basis order.
-                self.mean[i] = match s.children {
-                    None => self.mean_of(s, i),
-                    Some(children) => {
-                        let part = |q: usize| {
-                            let c = children[q] as usize;
-                            &self.b[c * nb..(c + 1) * nb]
-                        };
-                        let mut pulled = [[0.0; 3]; crate::basis::MAX_LEN];
-                        self.two_scale.pull([part(0), part(1), part(2), part(3)], &mut pulled[..nb]);
-                        self.b[i * nb..(i + 1) * nb].copy_from_slice(&pulled[..nb]);
-                        from_children
-                    }
-                };
-                if s.depth == 0 {
-                    let mut l = lobes::ZERO;
-                    let f = node.area / std::f64::consts::PI;
-                    lobes::add_lobe(&mut l, s.normal, self.mean[i].map(|m| m * f));
-                    self.lobes[i] = l;
-                }
-            }
+    /// A walk over the tree that writes this state's nodes ([`push_pull`]).
+    fn walk<'a>(&'a mut self, tree: &'a Tree) -> Walk<'a> {
+        Walk {
+            tree,
+            nodes: Nodes::new(&mut self.b, &mut self.mean, &mut self.lobes, self.nb),
+            sources: &self.sources,
+            two_scale: &self.two_scale,
+            nb: self.nb,
         }
     }
 
@@ -423,99 +368,10 @@ impl State {
     /// Pushes `gathered` to the leaves, sets `b = e + rho H` there and pulls; returns the leaves'
     /// area-weighted change of mean radiosity.
     fn push_pull(&mut self, tree: &Tree, gathered: &Gathered) -> f64 {
-        let mut change = 0.0;
         let zero = [[0.0; 3]; crate::basis::MAX_LEN];
-        self.visit(tree, tree.root, &lobes::ZERO, &zero[..self.nb], gathered, &mut change);
-        change
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn visit(
-        &mut self,
-        tree: &Tree,
-        id: NodeId,
-        inherited: &Lobes,
-        pushed: &[[f64; 3]],
-        gathered: &Gathered,
-        change: &mut f64,
-    ) {
         let nb = self.nb;
-        let i = id as usize;
-        let node = &tree.nodes[i];
-        match &node.kind {
-            Kind::Cluster { children } => {
-                let mut l = *inherited;
-                if let Some(own) = gathered.lobes.get(i) {
-                    lobes::add(&mut l, own);
-                }
-                // What a planar cluster gathered is a constant irradiance of all its faces. (On
-                // the stack, as the surfaces' below: a heap vector per node and sweep was a
-                // tenth of the push-pull.)
-                let mut flat = [[0.0; 3]; crate::basis::MAX_LEN];
-                let flat = &mut flat[..nb];
-                flat.copy_from_slice(pushed);
-                if let Some(own) = gathered.h.get(i * nb) {
-                    for c in 0..3 {
-                        flat[0][c] += own[c];
-                    }
-                }
-                for &c in children {
-                    self.visit(tree, c, &l, flat, gathered, change);
-                }
-            }
-            Kind::Surface(s) => {
-                let mut h = [[0.0; 3]; crate::basis::MAX_LEN];
-                let h = &mut h[..nb];
-                h.copy_from_slice(pushed);
-                if let Some(own) = gathered.h.get(i * nb..(i + 1) * nb) {
-                    for k in 0..nb {
-                        for c in 0..3 {
-                            h[k][c] += own[k][c];
-                        }
-                    }
-                }
-                if s.depth == 0 {
-                    let e = lobes::eval(inherited, s.normal);
-                    for c in 0..3 {
-                        h[0][c] += e[c];
-                    }
-                }
-                match s.children {
-                    None => {
-                        let rho = tree.reflectance[s.face as usize];
-                        let before = self.mean[i];
-                        for k in 0..nb {
-                            for c in 0..3 {
-                                self.b[i * nb + k][c] = self.sources[i * nb + k][c] + rho[c] * h[k][c];
-                            }
-                        }
-                        let after = self.mean_of(s, i);
-                        *change +=
-                            node.area * (0..3).map(|c| (after[c] - before[c]).abs()).fold(0.0, f64::max);
-                    }
-                    Some(children) => {
-                        for (q, &c) in children.iter().enumerate() {
-                            let mut hq = [[0.0; 3]; crate::basis::MAX_LEN];
-                            self.two_scale.push_add(q, h, &mut hq[..nb]);
-                            self.visit(tree, c, &lobes::ZERO, &hq[..nb], gathered, change);
-                        }
-                    }
-                }
-            }
-        }
-        self.pull_node(tree, id);
-    }
-
-    fn mean_of(&self, s: &super::tree::Surface, i: usize) -> [f64; 3] {
-        let nb = self.nb;
-        let area: f64 = s.moments[0];
-        let mut out = [0.0; 3];
-        for k in 0..nb {
-            for c in 0..3 {
-                out[c] += s.moments[k] * self.b[i * nb + k][c];
-            }
-        }
-        out.map(|x| if area > 0.0 { x / area } else { 0.0 })
+        let got = Received { h: &gathered.h, lobes: &gathered.lobes };
+        self.walk(tree).push_pull(tree.root, &lobes::ZERO, &zero[..nb], &got, 0)
     }
 
     /// The intensity lobes node `id` shoots through cluster links (W/sr by direction).
