@@ -316,7 +316,8 @@ fn a_cancelled_update_keeps_the_last_frame() {
     assert!(!stats.full_rebuild, "and the one after updated again");
 }
 
-/// The walk down the pair tree finds exactly the stored pairs a scan of them all finds, for
+/// The walks down the pair tree (`touch::by_walk`, and the one an update makes,
+/// `Splits::coarsest_touched`) find exactly the stored pairs a scan of them all finds, for
 /// random moves (random faces moved, random swept boxes in and around the scene) on the
 /// hierarchies of the demo animation and of the seed's room, each after an update.
 #[test]
@@ -353,9 +354,24 @@ fn the_pair_tree_walk_finds_what_the_scan_finds() {
             let touch = Touch::new(tree, &moves);
             let mut scan = touch::by_scan(hierarchy, &idle, &touch);
             let mut walk = touch::by_walk(hierarchy, &touch).expect("the pair tree is kept");
+            // The walk an update makes (`update::take_changed`): the touched leaves it finds on
+            // the way to the subtrees it redoes (on a copy: it forgets what it redoes).
+            let mut splits = hierarchy.splits.clone();
+            let mut update_walk = splits
+                .coarsest_touched(
+                    tree,
+                    |a, b| touch.pair(a, b),
+                    |a, b| touch.may_below(a, b),
+                    |a, b| touch::neutral(tree, a, b),
+                    |_, _| false,
+                )
+                .expect("the pair tree is kept")
+                .touched;
             scan.sort_unstable();
             walk.sort_unstable();
+            update_walk.sort_unstable();
             assert_eq!(walk, scan, "case {case}: the walk and the scan disagree");
+            assert_eq!(update_walk, scan, "case {case}: the update's walk and the scan disagree");
             match scan.len() {
                 0 => none += 1,
                 n if n < stored => partial += 1,
