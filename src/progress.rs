@@ -316,7 +316,6 @@ mod tests {
         assert_eq!(lines.line(at(9.0), None), None, "no frame runs: nothing to repeat");
     }
 
-    /// The running stage's own rate: a gather guessed at 45% of the frame that is all of it.
     /// Without a corner gather a first frame is nearly all links: half of them done is most of
     /// the frame, and the time left is about the time spent (at 45%, 2.1x as much).
     #[test]
@@ -336,6 +335,7 @@ mod tests {
         assert!((m.report(0.5, "links", at(10.0)).frame_fraction - 0.225).abs() < 1e-12);
     }
 
+    /// The running stage's own rate: a gather guessed at 45% of the frame that is all of it.
     #[test]
     fn the_time_left_follows_the_running_stage_at_its_own_rate() {
         let t0 = Instant::now();

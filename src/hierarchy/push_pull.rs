@@ -9,6 +9,7 @@ use std::marker::PhantomData;
 use rayon::prelude::*;
 
 use super::lobes::{self, Lobes};
+use super::solve::Gathered;
 use super::tree::{Kind, NodeId, Surface, Tree};
 use super::two_scale::TwoScale;
 
@@ -83,13 +84,6 @@ impl<'a> Nodes<'a> {
     }
 }
 
-/// What a sweep gathered, per node: `H^k` (`nodes x nb`) and a cluster's irradiance lobes;
-/// either may be empty (nothing gathered).
-pub(super) struct Received<'a> {
-    pub h: &'a [[f64; 3]],
-    pub lobes: &'a [Lobes],
-}
-
 /// One walk over the tree.
 pub(super) struct Walk<'a> {
     pub tree: &'a Tree,
@@ -110,7 +104,7 @@ impl Walk<'_> {
         id: NodeId,
         inherited: &Lobes,
         pushed: &[[f64; 3]],
-        got: &Received,
+        got: &Gathered,
         level: usize,
     ) -> f64 {
         let nb = self.nb;

@@ -129,7 +129,8 @@ impl PairSpace {
 
     /// Divides the share `of` of the pair `parent` among the pairs `new` a split made of it, by
     /// their expected links: equally when the parent is two surfaces (its parts are alike, about
-    /// a link each, and their nodes need not be read).
+    /// a link each, and their nodes need not be read). Returns the share settled: all of it
+    /// when the split made no pairs.
     fn divide(
         &self,
         tree: &Tree,
@@ -137,12 +138,15 @@ impl PairSpace {
         (a, b): (NodeId, NodeId),
         new: &[(NodeId, NodeId)],
         shares: &mut Vec<f64>,
-    ) -> Result<()> {
+    ) -> Result<f64> {
+        if new.is_empty() {
+            return Ok(of);
+        }
         budget::try_reserve(shares, new.len(), NODES)?;
         let start = shares.len();
         if !tree.node(a).is_cluster() && !tree.node(b).is_cluster() {
             shares.resize(start + new.len(), of / new.len() as f64);
-            return Ok(());
+            return Ok(0.0);
         }
         shares.extend(new.iter().map(|&(a, b)| self.links(tree, a, b)));
         let sum: f64 = shares[start..].iter().sum();
@@ -151,7 +155,7 @@ impl PairSpace {
         } else {
             shares[start..].iter_mut().for_each(|x| *x = of / new.len() as f64);
         }
-        Ok(())
+        Ok(0.0)
     }
 }
 
@@ -720,10 +724,7 @@ impl Hierarchy {
                                 work.push((x, y));
                             }
                         }
-                        if work.len() == pushed {
-                            settled += share;
-                        }
-                        space.divide(&self.tree, share, (a, b), &work[pushed..], &mut shares)?;
+                        settled += space.divide(&self.tree, share, (a, b), &work[pushed..], &mut shares)?;
                         continue;
                     };
                     match verdict {
@@ -740,7 +741,8 @@ impl Hierarchy {
                         }
                         Verdict::Split(s) => {
                             self.split_pair((a, b), s, radiosity, &mut work)?;
-                            space.divide(&self.tree, share, (a, b), &work[pushed..], &mut shares)?;
+                            settled +=
+                                space.divide(&self.tree, share, (a, b), &work[pushed..], &mut shares)?;
                         }
                     }
                 }
@@ -771,7 +773,7 @@ impl Hierarchy {
                     if self.take_computed(a, b, c, radiosity, &mut work, stats)? {
                         settled += share;
                     } else {
-                        space.divide(&self.tree, share, (a, b), &work[pushed..], &mut shares)?;
+                        settled += space.divide(&self.tree, share, (a, b), &work[pushed..], &mut shares)?;
                     }
                 }
             }

@@ -16,7 +16,7 @@ use super::anderson::Anderson;
 use super::coupling::Link;
 use super::lobes::{self, Lobes};
 use super::packed::{ClusterEntry, LinkChanges, PackedLinks};
-use super::push_pull::{Nodes, Received, Walk};
+use super::push_pull::{Nodes, Walk};
 use super::tree::{NodeId, Tree};
 use super::two_scale::TwoScale;
 use crate::budget;
@@ -323,8 +323,6 @@ impl State {
                 // Cluster links (their geometry worked out when packed, [`cluster_entry`]); a
                 // planar receiver holds its (constant) irradiance in `H^0`, which the push hands
                 // to its faces unchanged.
-                let mut lobes_in = lobes::ZERO;
-                let mut any_lobe = false;
                 for e in blocks.clusters_of(r) {
                     // (Zero: a link taken out, `PackedLinks`, or facing away.)
                     if e.scale == 0.0 {
@@ -343,19 +341,13 @@ impl State {
                     let scale = e.scale as f64;
                     let arriving = intensity.map(|i| i * scale);
                     match &y {
-                        Some(y) if !planar => {
-                            lobes::add_lobe_at(&mut lobes_in, &lobes::opposite(y), arriving);
-                            any_lobe = true;
-                        }
+                        Some(y) if !planar => lobes::add_lobe_at(lr, &lobes::opposite(y), arriving),
                         _ => {
                             for c in 0..3 {
                                 h0[c] += arriving[c];
                             }
                         }
                     }
-                }
-                if any_lobe {
-                    lobes::add(lr, &lobes_in);
                 }
             }
             for c in 0..3 {
@@ -370,8 +362,7 @@ impl State {
     fn push_pull(&mut self, tree: &Tree, gathered: &Gathered) -> f64 {
         let zero = [[0.0; 3]; crate::basis::MAX_LEN];
         let nb = self.nb;
-        let got = Received { h: &gathered.h, lobes: &gathered.lobes };
-        self.walk(tree).push_pull(tree.root, &lobes::ZERO, &zero[..nb], &got, 0)
+        self.walk(tree).push_pull(tree.root, &lobes::ZERO, &zero[..nb], gathered, 0)
     }
 
     /// The intensity lobes node `id` shoots through cluster links (W/sr by direction).
@@ -467,11 +458,11 @@ impl Accelerated {
 }
 
 /// What one gather sweep delivered per node.
-struct Gathered {
+pub(super) struct Gathered {
     /// `H^k` per surface node (`nodes x nb`; empty: nothing).
-    h: Vec<[f64; 3]>,
+    pub h: Vec<[f64; 3]>,
     /// Irradiance lobes per cluster (empty: nothing).
-    lobes: Vec<Lobes>,
+    pub lobes: Vec<Lobes>,
     /// Per node, its `b^0`, read by the constant links.
     constant: Vec<[f64; 3]>,
 }
