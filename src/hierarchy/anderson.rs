@@ -22,6 +22,8 @@
 
 use std::collections::VecDeque;
 
+use rayon::prelude::*;
+
 use crate::budget;
 use crate::error::Result;
 
@@ -43,6 +45,16 @@ pub struct Anderson {
     /// The weighted products of the steps' residual differences with each other, in `steps`'
     /// order: kept from step to step, so a step computes only its new column's.
     gram: VecDeque<Vec<f64>>,
+}
+
+/// Groups of entries a task of the mixer's pass takes; its sums are added block by block, in
+/// order, so that the mix is the same for any number of threads.
+const BLOCK: usize = 2048;
+
+/// One block's share of the new Gram row and of the right-hand side.
+struct BlockSums {
+    row: [f64; MAX_DEPTH + 1],
+    rhs: [f64; MAX_DEPTH + 1],
 }
 
 /// The deepest mixer [`Anderson::new`] makes.
@@ -74,10 +86,12 @@ impl Anderson {
         let Some((mut f_last, mut g_last)) = self.last.take() else {
             // The first step: remember it, and take the plain sweep.
             let (mut f, mut gs) = self.pool.pop().expect("the pool holds depth + 1 pairs");
-            for ((fi, gi), (&xi, &gx)) in f.iter_mut().zip(gs.iter_mut()).zip(x.iter().zip(g.iter())) {
-                *fi = gx - xi;
-                *gi = gx;
-            }
+            f.par_iter_mut().zip(gs.par_iter_mut()).zip(x.par_iter().zip(g.par_iter())).for_each(
+                |((fi, gi), (&xi, &gx))| {
+                    *fi = gx - xi;
+                    *gi = gx;
+                },
+            );
             self.last = Some((f, gs));
             return;
         };
@@ -87,35 +101,57 @@ impl Anderson {
         }
         let (mut df, mut dg) = self.pool.pop().expect("the pool holds depth + 1 pairs");
         // One pass: the new columns, the new residual, and the products the least-squares
-        // problem needs of them (the older columns' products with each other are kept).
+        // problem needs of them (the older columns' products with each other are kept). In
+        // blocks of groups, in parallel: each block's sums are added in block order.
         let m = self.steps.len();
+        let n = self.stride;
+        let span = BLOCK * n;
+        let olds: Vec<&[f64]> = self.steps.iter().map(|(d, _)| d.as_slice()).collect();
+        let blocks: Vec<BlockSums> = df
+            .par_chunks_mut(span)
+            .zip(dg.par_chunks_mut(span))
+            .zip(f_last.par_chunks_mut(span).zip(g_last.par_chunks_mut(span)))
+            .zip(x.par_chunks(span).zip(g.par_chunks(span)))
+            .zip(self.weights.par_chunks(BLOCK))
+            .enumerate()
+            .map(|(k, ((((df, dg), (f_last, g_last)), (x, g)), weights))| {
+                let olds: Vec<&[f64]> = olds.iter().map(|o| &o[k * span..k * span + df.len()]).collect();
+                let mut sums = BlockSums { row: [0.0; MAX_DEPTH + 1], rhs: [0.0; MAX_DEPTH + 1] };
+                for (c, &w) in weights.iter().enumerate() {
+                    let (mut own, mut own_rhs) = (0.0, 0.0);
+                    let mut with = [0.0; MAX_DEPTH];
+                    let mut with_rhs = [0.0; MAX_DEPTH];
+                    for i in c * n..(c + 1) * n {
+                        let f = g[i] - x[i];
+                        let d = f - f_last[i];
+                        df[i] = d;
+                        dg[i] = g[i] - g_last[i];
+                        f_last[i] = f;
+                        g_last[i] = g[i];
+                        own += d * d;
+                        own_rhs += d * f;
+                        for (j, old) in olds.iter().enumerate() {
+                            with[j] += d * old[i];
+                            with_rhs[j] += old[i] * f;
+                        }
+                    }
+                    for j in 0..m {
+                        sums.row[j] += w * with[j];
+                        sums.rhs[j] += w * with_rhs[j];
+                    }
+                    sums.row[m] += w * own;
+                    sums.rhs[m] += w * own_rhs;
+                }
+                sums
+            })
+            .collect();
         let mut row = vec![0.0; m + 1];
         let mut rhs = vec![0.0; m + 1];
-        let n = self.stride;
-        for (c, &w) in self.weights.iter().enumerate() {
-            let (mut own, mut own_rhs) = (0.0, 0.0);
-            let mut with = [0.0; MAX_DEPTH];
-            let mut with_rhs = [0.0; MAX_DEPTH];
-            for i in c * n..(c + 1) * n {
-                let f = g[i] - x[i];
-                let d = f - f_last[i];
-                df[i] = d;
-                dg[i] = g[i] - g_last[i];
-                f_last[i] = f;
-                g_last[i] = g[i];
-                own += d * d;
-                own_rhs += d * f;
-                for (j, (old, _)) in self.steps.iter().enumerate() {
-                    with[j] += d * old[i];
-                    with_rhs[j] += old[i] * f;
-                }
+        for b in &blocks {
+            for j in 0..=m {
+                row[j] += b.row[j];
+                rhs[j] += b.rhs[j];
             }
-            for j in 0..m {
-                row[j] += w * with[j];
-                rhs[j] += w * with_rhs[j];
-            }
-            row[m] += w * own;
-            rhs[m] += w * own_rhs;
         }
         for (j, r) in self.gram.iter_mut().enumerate() {
             r.push(row[j]);
@@ -123,11 +159,14 @@ impl Anderson {
         self.gram.push_back(row);
         self.steps.push_back((df, dg));
         let gamma = self.least_squares(rhs);
-        for ((_, dg), c) in self.steps.iter().zip(gamma) {
-            for (gi, &d) in g.iter_mut().zip(dg) {
-                *gi -= c * d;
+        let images: Vec<(&[f64], f64)> = self.steps.iter().map(|(_, dg)| dg.as_slice()).zip(gamma).collect();
+        g.par_chunks_mut(span).enumerate().for_each(|(k, g)| {
+            for &(dg, c) in &images {
+                for (gi, &d) in g.iter_mut().zip(&dg[k * span..]) {
+                    *gi -= c * d;
+                }
             }
-        }
+        });
         self.last = Some((f_last, g_last));
     }
 

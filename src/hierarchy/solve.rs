@@ -261,7 +261,7 @@ impl State {
             }
             if let Some(a) = accelerated.as_mut() {
                 a.read(&self.b, &leaves, self.nb, Side::After);
-                a.mix_into(&mut self.b, &leaves, self.nb);
+                a.mix_into(&mut self.b, self.nb);
                 self.refresh(tree);
             }
         }
@@ -417,17 +417,27 @@ struct Accelerated {
     before: Vec<f64>,
     after: Vec<f64>,
     mixer: Anderson,
+    /// Per node, its place among the leaves ([`NOT_A_LEAF`] for the others): the mixed leaves
+    /// are written back node by node, in parallel.
+    slot: Vec<u32>,
 }
+
+const NOT_A_LEAF: u32 = u32::MAX;
 
 impl Accelerated {
     fn new(tree: &Tree, leaves: &[NodeId], nb: usize, depth: usize) -> Result<Self> {
         let what = "the hierarchical solve's acceleration";
         let n = leaves.len() * nb * 3;
         let weights = leaves.iter().map(|&id| tree.nodes[id as usize].area).collect();
+        let mut slot = budget::try_filled(tree.nodes.len(), NOT_A_LEAF, what)?;
+        for (k, &id) in leaves.iter().enumerate() {
+            slot[id as usize] = k as u32;
+        }
         Ok(Self {
             before: budget::try_filled(n, 0.0, what)?,
             after: budget::try_filled(n, 0.0, what)?,
             mixer: Anderson::new(depth, weights, nb * 3)?,
+            slot,
         })
     }
 
@@ -436,24 +446,27 @@ impl Accelerated {
             Side::Before => &mut self.before,
             Side::After => &mut self.after,
         };
-        for (chunk, &id) in out.chunks_exact_mut(nb * 3).zip(leaves) {
+        out.par_chunks_exact_mut(nb * 3).zip(leaves).for_each(|(chunk, &id)| {
             let i = id as usize;
             for (dst, src) in chunk.chunks_exact_mut(3).zip(&b[i * nb..(i + 1) * nb]) {
                 dst.copy_from_slice(src);
             }
-        }
+        });
     }
 
     /// Mixes the last sweep and writes the next iterate to the leaves (the tree above them is
     /// then stale until a pull).
-    fn mix_into(&mut self, b: &mut [[f64; 3]], leaves: &[NodeId], nb: usize) {
+    fn mix_into(&mut self, b: &mut [[f64; 3]], nb: usize) {
         self.mixer.mix(&self.before, &mut self.after);
-        for (chunk, &id) in self.after.chunks_exact(nb * 3).zip(leaves) {
-            let i = id as usize;
-            for (dst, src) in b[i * nb..(i + 1) * nb].iter_mut().zip(chunk.chunks_exact(3)) {
-                dst.copy_from_slice(src);
+        let after = &self.after;
+        b.par_chunks_exact_mut(nb).zip(&self.slot).for_each(|(b, &k)| {
+            if k != NOT_A_LEAF {
+                let k = k as usize;
+                for (dst, src) in b.iter_mut().zip(after[k * nb * 3..(k + 1) * nb * 3].chunks_exact(3)) {
+                    dst.copy_from_slice(src);
+                }
             }
-        }
+        });
     }
 }
 
