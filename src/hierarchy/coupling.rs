@@ -49,10 +49,6 @@ pub struct Link {
     pub a: NodeId,
     pub b: NodeId,
     pub coupling: Coupling,
-    /// How near the link came to being split when it was made ([`super::refine::Oracle::load`]):
-    /// with the growth of its ends' brightness since, what [`super::refine::Hierarchy::relink`]
-    /// needs to know whether to test it again.
-    pub load: f32,
 }
 
 /// What computing a link needs besides the two nodes.

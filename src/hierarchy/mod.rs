@@ -148,6 +148,9 @@ pub struct HierarchyStats {
     /// Links and blocked pairs the relink rounds tested again with the solution's brightness
     /// ([`refine::RefineStats::tested`]).
     pub retested: usize,
+    /// Relink rounds after which no node had grown much, which read only the pairs' loads
+    /// ([`refine::RefineStats::quick`]).
+    pub quick_relinks: usize,
     pub kept_links: usize,
     /// Of an update with the pair tree kept: the pairs its touched ones were refined again from
     /// (fewer than `touched_pairs` where whole subtrees were touched and could coarsen).
@@ -325,6 +328,7 @@ fn link_and_solve(
                 let relinked = hierarchy.relink(ctx, &mut radiosity, &linked)?;
                 stats.compute_seconds += relinked.compute_seconds;
                 stats.retested += relinked.tested;
+                stats.quick_relinks += usize::from(relinked.quick);
                 if relinked.relinked == 0 {
                     break;
                 }
@@ -382,7 +386,7 @@ fn finish(
     stats.surface_links = surfaces;
     stats.constant_links = constants;
     stats.cluster_links = stats.links - surfaces - constants;
-    stats.link_bytes = std::mem::size_of::<coupling::Link>() * stats.links + 4 * blocks;
+    stats.link_bytes = (std::mem::size_of::<coupling::Link>() + 4) * stats.links + 4 * blocks;
     stats.pair_tree = hierarchy.splits.len();
     stats.pair_tree_bytes = hierarchy.splits.bytes();
     let corners = if hs.corner_gather {

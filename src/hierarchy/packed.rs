@@ -359,7 +359,7 @@ mod tests {
             1 => Coupling::Constants { ab: x, ba: -x },
             _ => Coupling::Clusters { transmittance: x },
         };
-        Link { a, b, coupling, load: 0.0 }
+        Link { a, b, coupling }
     }
 
     /// A cluster entry made from its link's numbers alone (these links join no tree).

@@ -163,6 +163,10 @@ impl PairSpace {
 /// decision took about a twentieth of a link's time on the monastery's parts.
 const SKIPPED: f64 = 0.05;
 
+/// A relink after which no node grew more than this many times brighter than its pairs were
+/// decided at reads only their loads ([`Hierarchy::relink`]).
+const QUICK_GROWTH: f64 = 2.0;
+
 /// Partially visible links, and pairs whose sampled rays were all blocked, are split while they
 /// can carry more than this share of the threshold.
 const PARTIAL_SHARE: f64 = 0.25;
@@ -373,10 +377,15 @@ fn keep_where<T>(list: &mut Vec<T>, keep: &[bool], mut removed: impl FnMut(&T)) 
 pub struct Hierarchy {
     pub tree: Tree,
     pub links: Vec<Link>,
+    /// Per link, in `links`' order, how near it came to being split when it was decided
+    /// ([`Oracle::load`]): with the growth of its ends' brightness since, what
+    /// [`Hierarchy::relink`] needs to know whether to test it again. Apart from the links, so
+    /// that a relink after which no node grew much reads 4 bytes a link, not the link.
+    pub link_load: Vec<f32>,
     /// Pairs the oracle accepted whose sampled rays were all blocked ([`coupling::Computed`]):
     /// no link for the solve, sources the corner gather tries with its own rays.
     pub blocked: Vec<(NodeId, NodeId)>,
-    /// Per blocked pair, in `blocked`'s order, what [`Link::load`] is to a link
+    /// Per blocked pair, in `blocked`'s order, what [`Hierarchy::link_load`] is to a link
     /// ([`Oracle::blocked_load`]); shorter than `blocked`: unknown, tested.
     pub blocked_load: Vec<f32>,
     /// Pairs of different faces that exchange nothing as they stand: one behind the other's
@@ -419,6 +428,9 @@ pub struct RefineStats {
     /// Links and blocked pairs [`Hierarchy::relink`] tested again (the others could not fail:
     /// [`Hierarchy::decided_at`]).
     pub tested: usize,
+    /// The relink read only the pairs' loads: no node had grown more than [`QUICK_GROWTH`]
+    /// times brighter.
+    pub quick: bool,
     /// Wall seconds spent computing the accepted pairs' couplings (quadrature and visibility),
     /// apart from deciding and filing them: what the seed's series could replace at most.
     pub compute_seconds: f64,
@@ -428,11 +440,13 @@ impl Hierarchy {
     /// `moves`: something may move in a later frame ([`super::HierarchySettings::moves`]), so
     /// that the idle pairs must be known ([`Hierarchy::stores_idle`]).
     pub fn new(tree: Tree, oracle: Oracle, splits: Splits, moves: bool) -> Self {
-        let (links, blocked, blocked_load, idle) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (links, link_load, blocked, blocked_load) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let idle = Vec::new();
         let (changes, packed) = (LinkChanges::default(), None);
         Self {
             tree,
             links,
+            link_load,
             blocked,
             blocked_load,
             stores_idle: moves && !splits.is_kept(),
@@ -501,6 +515,7 @@ impl Hierarchy {
         let mut out = Vec::new();
         let keep: Vec<bool> = self.links.par_iter().map(|l| !touched(l.a, l.b)).collect();
         self.changes.removing(&self.links, &keep);
+        keep_where(&mut self.link_load, &keep, |_| {});
         keep_where(&mut self.links, &keep, |l| out.push((l.a, l.b)));
         let keep: Vec<bool> = self.blocked.par_iter().map(|&(a, b)| !touched(a, b)).collect();
         self.blocked_load.resize(self.blocked.len(), f32::INFINITY);
@@ -565,6 +580,16 @@ impl Hierarchy {
         // Only a pair with an end brighter than when it was decided can fail now, and a link
         // only if its load grew past 1 (`Oracle::load`: linear in each end's brightness).
         let growth = self.growth(radiosity);
+        let nodes_before = self.tree.nodes.len();
+        // The most any node grew, when every growth is known. A pair whose load is at most
+        // `1 / most` cannot fail, and nearly all are such: on the 30k-triangle monastery a few
+        // hundred of its 6.2M pairs have a load above 0.9, and the last relink of an updated
+        // frame finds no node grown 1.2 times. So when no node grew more than `QUICK_GROWTH`
+        // times, the pass reads only the loads (4 bytes a pair, apart from the links), and
+        // leaves the untested ones as they were (see `note_decided` below).
+        let most = growth.iter().try_fold(0.0f64, |m, &g| g.is_finite().then_some(m.max(g)));
+        let quick = most.filter(|&m| m <= QUICK_GROWTH);
+        let quick_bar = quick.map_or(f64::NEG_INFINITY, |m| 1.0 / m);
         // The nodes grown brighter, a bit each: a pair with a known load of at most 1 and neither
         // end brighter passes as it is, and most pairs are such (a bit set a sixty-fourth of the
         // growths' size, looked at instead of both ends' growths).
@@ -582,27 +607,33 @@ impl Hierarchy {
         let oracle = &self.oracle;
         // The same test that made each link, with the new brightness (in parallel: the tree and
         // the estimates are only read); a light link that may now carry more than a light link
-        // may is computed again in full. Every kept link's load is brought to the brightness
-        // now, which `decided_at` records below: scaled by its ends' growth where untested (a
-        // bound still), computed again where tested. A link whose ends both grew no brighter
-        // keeps its load as it was, a bound still: most links are untested, and writing every
-        // one of them (15M on the full monastery) was most of a relink pass.
+        // may is computed again in full. A full pass brings every kept link's load to the
+        // brightness now, which `decided_at` records below: scaled by its ends' growth where
+        // untested (a bound still), computed again where tested. A link whose ends both grew no
+        // brighter keeps its load as it was, a bound still: most links are untested, and writing
+        // every one of them (15M on the full monastery) was most of a relink pass. A quick pass
+        // writes only the loads it computed again.
         let tested = std::sync::atomic::AtomicUsize::new(0);
         // The links that fail, by index: most relinks have none.
+        let links = &self.links;
         let failed: Vec<usize> = self
-            .links
+            .link_load
             .par_iter_mut()
             .enumerate()
-            .filter_map(|(i, l)| {
-                if settled(l.a, l.b, l.load) {
+            .filter_map(|(i, load)| {
+                if (*load as f64) <= quick_bar {
+                    return None;
+                }
+                let l = &links[i];
+                if settled(l.a, l.b, *load) {
                     return None;
                 }
                 // (A NaN, an unknown end's growth times no load, is tested.)
                 let growth = grown(l.a, l.b);
-                let bound = l.load as f64 * growth;
+                let bound = *load as f64 * growth;
                 if bound <= 1.0 {
-                    if growth > 1.0 {
-                        l.load = (bound * (1.0 + 1e-6)) as f32;
+                    if growth > 1.0 && quick.is_none() {
+                        *load = (bound * (1.0 + 1e-6)) as f32;
                     }
                     return None;
                 }
@@ -611,7 +642,7 @@ impl Hierarchy {
                 let kept = matches!(oracle.decide(tree, radiosity, l.a, l.b, bar), Verdict::Link)
                     && !(light && oracle.weight(tree, radiosity, l.a, l.b) == Weight::Full);
                 if kept {
-                    l.load = oracle.load(tree, radiosity, l.a, l.b, light);
+                    *load = oracle.load(tree, radiosity, l.a, l.b, light);
                 }
                 (!kept).then_some(i)
             })
@@ -619,6 +650,7 @@ impl Hierarchy {
         if !failed.is_empty() {
             let verdicts = kept_but(self.links.len(), &failed);
             self.changes.removing(&self.links, &verdicts);
+            keep_where(&mut self.link_load, &verdicts, |_| {});
             keep_where(&mut self.links, &verdicts, |l| work.push((l.a, l.b)));
         }
         // Hidden pairs decided while their ends were dark (a first round knows only the
@@ -633,13 +665,13 @@ impl Hierarchy {
             .zip(self.blocked_load.par_iter_mut())
             .enumerate()
             .filter_map(|(i, (&(a, b), load))| {
-                if settled(a, b, *load) {
+                if (*load as f64) <= quick_bar || settled(a, b, *load) {
                     return None;
                 }
                 let growth = grown(a, b);
                 let bound = *load as f64 * growth;
                 if bound <= 1.0 {
-                    if growth > 1.0 {
+                    if growth > 1.0 && quick.is_none() {
                         *load = (bound * (1.0 + 1e-6)) as f32;
                     }
                     return None;
@@ -659,8 +691,12 @@ impl Hierarchy {
         }
         stats.relinked = work.len();
         stats.tested = tested.into_inner();
+        stats.quick = quick.is_some();
         self.refine_pairs(ctx, radiosity, work, &mut stats, progress)?;
-        self.note_decided(radiosity, 0, true);
+        // A full pass brought every load to the brightness now; a quick one left the untested
+        // loads at what their ends were decided at, so each node keeps the lower of that and
+        // now (a growth from there bounds the growth from either: the bounds stay bounds).
+        self.note_decided(radiosity, nodes_before, quick.is_none());
         stats.links = self.links.len();
         Ok(stats)
     }
@@ -763,6 +799,7 @@ impl Hierarchy {
                 // Reserved first: the allocator's refusal of the large vectors is an error (a
                 // full link's own blocks are small allocations).
                 budget::try_reserve(&mut self.links, part.len(), LINKS)?;
+                budget::try_reserve(&mut self.link_load, part.len(), LINKS)?;
                 if self.stores_idle {
                     budget::try_reserve(&mut self.idle, part.len(), LINKS)?;
                 }
@@ -804,8 +841,8 @@ impl Hierarchy {
         match c.coupling {
             Some(coupling) => {
                 let light = matches!(coupling, coupling::Coupling::Constants { .. });
-                let load = self.oracle.load(&self.tree, radiosity, a, b, light);
-                self.links.push(Link { a, b, coupling, load })
+                self.link_load.push(self.oracle.load(&self.tree, radiosity, a, b, light));
+                self.links.push(Link { a, b, coupling });
             }
             None if c.blocked => {
                 // (Unknown loads before this one stay unknown.)

@@ -97,6 +97,7 @@ pub fn update_frame(
     let mut hierarchy = Hierarchy {
         tree,
         links: std::mem::take(&mut previous.hierarchy.links),
+        link_load: std::mem::take(&mut previous.hierarchy.link_load),
         blocked: std::mem::take(&mut previous.hierarchy.blocked),
         blocked_load: std::mem::take(&mut previous.hierarchy.blocked_load),
         idle: std::mem::take(&mut previous.hierarchy.idle),

@@ -262,39 +262,91 @@ fn updated_frames_agree_with_frames_solved_from_scratch() {
 }
 
 /// The relink rounds test again only links and blocked pairs whose recorded load, times their
-/// ends' growth in brightness since, passes 1 (`Hierarchy::decided_at`, `Link::load`): over the
-/// demo animation with the light dimming and brightening, the frames are the same, link for link
-/// and bit for bit, as when every pair is tested (the records cleared before each update), with
-/// fewer pairs tested.
+/// ends' growth in brightness since, passes 1 (`Hierarchy::decided_at`, `Hierarchy::link_load`),
+/// and a round after which no node grew much reads only the loads, leaving the untested ones as
+/// they were (`RefineStats::quick`): over the demo animation with the light dimming and
+/// brightening, the frames are the same, link for link and bit for bit, as when every pair is
+/// tested (the records cleared before each update), with fewer pairs tested.
 #[test]
 fn relinking_tests_only_what_may_fail() {
-    let mut scene = animated();
-    let light = scene.materials.iter().position(|m| m.emission[0] > 0.0).unwrap();
-    let e = scene.materials[light].emission;
-    scene.emission_keys[light] = emission_ramp((1.0, e.map(|x| 0.3 * x)), (8.0, e.map(|x| 2.0 * x)));
-    let hs = HierarchySettings { keep_pair_tree: true, ..Default::default() };
-    let mut filtered = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
-    let mut every = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
-    let (mut tested_filtered, mut tested_every) = (0, 0);
-    for frame in 2..=8 {
-        let f = frame as f64;
-        every.hierarchy.decided_at.clear();
-        every.hierarchy.blocked_load.clear();
-        let a = update_frame(&mut filtered, &scene, f, &hs, &no_progress).unwrap();
-        let b = update_frame(&mut every, &scene, f, &hs, &no_progress).unwrap();
-        let pairs = |h: &HierarchicalFrame| {
-            let mut p: Vec<_> = h.hierarchy.links.iter().map(|l| (l.a, l.b)).collect();
-            p.sort_unstable();
-            (p, h.hierarchy.blocked.len(), h.hierarchy.idle_pairs().len())
-        };
-        assert_eq!(pairs(&a), pairs(&b), "frame {frame}: the links differ");
-        assert_eq!(face_means(&a), face_means(&b), "frame {frame}: the solutions differ");
-        tested_filtered += a.stats.retested;
-        tested_every += b.stats.retested;
-        (filtered, every) = (a, b);
+    let (mut tested_filtered, mut tested_every, mut quick) = (0, 0, 0);
+    // A steep ramp, whose relinks mostly find nodes much brighter, and a gentle one.
+    for (from, to) in [(0.3, 2.0), (1.0, 1.3)] {
+        let mut scene = animated();
+        let light = scene.materials.iter().position(|m| m.emission[0] > 0.0).unwrap();
+        let e = scene.materials[light].emission;
+        scene.emission_keys[light] = emission_ramp((1.0, e.map(|x| from * x)), (8.0, e.map(|x| to * x)));
+        let hs = HierarchySettings { keep_pair_tree: true, ..Default::default() };
+        let mut filtered = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
+        let mut every = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
+        for frame in 2..=8 {
+            let f = frame as f64;
+            every.hierarchy.decided_at.clear();
+            every.hierarchy.blocked_load.clear();
+            let a = update_frame(&mut filtered, &scene, f, &hs, &no_progress).unwrap();
+            let b = update_frame(&mut every, &scene, f, &hs, &no_progress).unwrap();
+            let pairs = |h: &HierarchicalFrame| {
+                let mut p: Vec<_> = h.hierarchy.links.iter().map(|l| (l.a, l.b)).collect();
+                p.sort_unstable();
+                (p, h.hierarchy.blocked.len(), h.hierarchy.idle_pairs().len())
+            };
+            assert_eq!(pairs(&a), pairs(&b), "ramp {from}-{to}, frame {frame}: the links differ");
+            assert_eq!(
+                face_means(&a),
+                face_means(&b),
+                "ramp {from}-{to}, frame {frame}: the solutions differ"
+            );
+            check_loads_bound(&a, &format!("ramp {from}-{to}, frame {frame}"));
+            tested_filtered += a.stats.retested;
+            tested_every += b.stats.retested;
+            quick += a.stats.quick_relinks;
+            (filtered, every) = (a, b);
+        }
     }
-    println!("pairs tested again: {tested_filtered} with the records, {tested_every} without");
+    println!(
+        "pairs tested again: {tested_filtered} with the records, {tested_every} without; {quick} quick relinks"
+    );
     assert!(tested_every > 0 && tested_filtered * 4 < tested_every);
+    assert!(quick > 0, "no relink read only the loads");
+}
+
+/// Every stored load, times the growth of its ends' brightness since `decided_at`, bounds what
+/// the oracle gives the pair at the frame's own brightness: what lets a relink leave a pair
+/// untested (`Hierarchy::relink`).
+fn check_loads_bound(h: &HierarchicalFrame, what: &str) {
+    use galerkin_radiosity::hierarchy::coupling::Coupling;
+    let hierarchy = &h.hierarchy;
+    let (tree, oracle) = (&hierarchy.tree, &hierarchy.oracle);
+    let radiosity = h.state.radiosity_estimate();
+    let growth = |n: u32| {
+        let (r, v) = (radiosity[n as usize], hierarchy.decided_at.get(n as usize).copied());
+        match v {
+            _ if r <= 0.0 => 0.0,
+            Some(v) if v > 0.0 => r / oracle.threshold / v,
+            _ => f64::INFINITY,
+        }
+    };
+    let bound = |load: f32, a: u32, b: u32| load as f64 * growth(a).max(growth(b)) * (1.0 + 1e-4) + 1e-6;
+    assert_eq!(hierarchy.link_load.len(), hierarchy.links.len(), "{what}: a load per link");
+    for (l, &load) in hierarchy.links.iter().zip(&hierarchy.link_load) {
+        let light = matches!(l.coupling, Coupling::Constants { .. });
+        let now = oracle.load(tree, &radiosity, l.a, l.b, light) as f64;
+        assert!(
+            now <= bound(load, l.a, l.b),
+            "{what}: link {:?} loads {now}, bound {}",
+            (l.a, l.b),
+            bound(load, l.a, l.b)
+        );
+    }
+    for (&(a, b), &load) in hierarchy.blocked.iter().zip(&hierarchy.blocked_load) {
+        let now = oracle.blocked_load(tree, &radiosity, a, b) as f64;
+        assert!(
+            now <= bound(load, a, b),
+            "{what}: blocked pair {:?} loads {now}, bound {}",
+            (a, b),
+            bound(load, a, b)
+        );
+    }
 }
 
 /// A cancelled update leaves the last frame readable as it was, and the next frame is solved
