@@ -104,6 +104,9 @@ struct Setup {
     /// lights or a World).
     fixed: Vec<bool>,
     bvh: Bvh,
+    /// Per BVH node, the object of all its triangles ([`crate::visibility::bvh::MIXED`]: of
+    /// several): [`Setup::near`] looks only at other objects' triangles.
+    node_objects: Vec<u32>,
     /// Per BVH triangle, its size ([`triangle_radius`]) and front normal.
     sizes: Vec<f64>,
     normals: Vec<DVec3>,
@@ -155,7 +158,8 @@ impl Setup {
         let scene_box = faces.iter().fold(Aabb::EMPTY, |b, f| b.union(f.patch.bounds()));
         let finest = if faces.is_empty() { 0.0 } else { CREASE_FINEST * scene_box.diagonal().length() };
         let fixed = (0..faces.len()).map(|e| emits[e] || keyed[e] || hull[e]).collect();
-        Setup { fixed, bvh, sizes, normals, object, finest }
+        let node_objects = bvh.node_tags(|t| object[t.element as usize]);
+        Setup { fixed, bvh, node_objects, sizes, normals, object, finest }
     }
 
     /// The contact split alone: each face's parts, at most `budget` added (the deepest level
@@ -294,17 +298,18 @@ impl Setup {
         let reach = (1.0 + NEAR) * radius;
         let query = Aabb { min: centre - DVec3::splat(reach), max: centre + DVec3::splat(reach) };
         let normal = sub.centre_normal();
+        // The walk skips the subtrees of the part's own object and stops at the first triangle
+        // found: a face of a large model overlaps many of its own model's triangles (the full
+        // monastery's contact split took 1.9 s, and takes 0.19 s so).
         let mut found = false;
-        self.bvh.for_each_overlapping(&query, |k| {
-            if found {
-                return;
-            }
+        self.bvh.for_each_overlapping_except(&query, &self.node_objects, self.object[e], |k| {
             let t = &self.bvh.triangles()[k];
             if self.object[t.element as usize] == self.object[e] || FINEST * self.sizes[k] >= radius {
-                return;
+                return false;
             }
             let in_front = t.v.iter().any(|v| normal.dot(*v - centre) > 1e-9 * radius);
             found = in_front && point_triangle_distance(centre, &t.v) < reach;
+            found
         });
         found
     }

@@ -178,6 +178,10 @@ pub fn solve_frame(
     hs: &HierarchySettings,
     progress: Progress,
 ) -> Result<HierarchicalFrame> {
+    // The preparation below is part of the links' stage: reported (and cancellable) from the
+    // start, so that a large model's first line does not wait for it.
+    let prepared = || if progress(0.0, "links") { Ok(()) } else { Err(Error::Cancelled) };
+    prepared()?;
     let basis = Basis::new(scene.settings.basis_order);
     // Open surfaces' backs (crate::backs) are faces of the tree, after their fronts.
     let faces = crate::backs::with_backs(scene, frame, build_elements(scene, frame, basis), basis, &[]);
@@ -189,7 +193,9 @@ pub fn solve_frame(
     let total_area: f64 = faces.iter().map(|e| e.area).sum();
     // Faces split ahead where another object comes close, as the flat path splits them: only
     // shadows need it, and there are none without visibility.
+    prepared()?;
     let contacts = scene.settings.visibility.then(|| crate::contact_split::plan(scene, &faces));
+    prepared()?;
     let mut tree = Tree::new(faces, reflectance, basis);
     if let Some(parts) = contacts {
         tree.split_for_contacts(&parts);

@@ -32,6 +32,9 @@ struct Node {
 
 const LEAF_SIZE: usize = 4;
 
+/// [`Bvh::node_tags`]' tag of a node whose triangles' tags differ.
+pub const MIXED: u32 = u32::MAX;
+
 /// A traversal of [`Bvh::visit`]: `accept` must be conservative.
 pub trait Visitor {
     /// Whether the box `b` (centre `c`, half extent `h`) may hold what is looked for.
@@ -114,6 +117,62 @@ impl Bvh {
             }
         }
         self.visit(&mut Closures(accept, f));
+    }
+
+    /// Per node, the tag that `tag` gives every triangle below it, or [`MIXED`]: what
+    /// [`Bvh::for_each_overlapping_except`] skips whole subtrees by.
+    pub fn node_tags(&self, tag: impl Fn(&Triangle) -> u32) -> Vec<u32> {
+        let mut tags = vec![MIXED; self.nodes.len()];
+        // Children come after their parent: the last nodes first.
+        for k in (0..self.nodes.len()).rev() {
+            let node = &self.nodes[k];
+            tags[k] = if node.count > 0 {
+                let mut below =
+                    self.triangles[node.start as usize..(node.start + node.count) as usize].iter().map(&tag);
+                let first = below.next().unwrap_or(MIXED);
+                if below.all(|t| t == first) { first } else { MIXED }
+            } else {
+                let (l, r) = (tags[node.start as usize], tags[node.start as usize + 1]);
+                if l == r { l } else { MIXED }
+            };
+        }
+        tags
+    }
+
+    /// [`Bvh::for_each_overlapping`] without the subtrees whose triangles all have the tag `skip`
+    /// (`tags` from [`Bvh::node_tags`]), stopping once `f` returns `true`. Triangles of that tag
+    /// in mixed leaves still reach `f`.
+    pub fn for_each_overlapping_except(
+        &self,
+        query: &Aabb,
+        tags: &[u32],
+        skip: u32,
+        mut f: impl FnMut(usize) -> bool,
+    ) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack = [0u32; 64];
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let k = stack[sp] as usize;
+            let node = &self.nodes[k];
+            if tags[k] == skip || !node.bounds.overlaps(query) {
+                continue;
+            }
+            if node.count > 0 {
+                for i in node.start as usize..(node.start + node.count) as usize {
+                    if self.bounds[i].overlaps(query) && f(i) {
+                        return;
+                    }
+                }
+            } else {
+                stack[sp] = node.start;
+                stack[sp + 1] = node.start + 1;
+                sp += 2;
+            }
+        }
     }
 
     /// Visits every triangle in a leaf reached through nodes (and with triangle bounds) that the
