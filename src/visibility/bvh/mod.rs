@@ -544,6 +544,45 @@ mod tests {
         assert!(hits > 100 && misses > 100, "{hits} hits, {misses} misses: a weak test");
     }
 
+    /// A query that skips one tag finds the triangles of the other tags the plain query finds,
+    /// with tags in blocks (whole subtrees skipped) and scattered (mixed leaves), and stops at
+    /// the first one its callback takes.
+    #[test]
+    fn a_query_without_a_tag_finds_the_other_tags() {
+        let tris = grid(20);
+        let bvh = Bvh::build(tris);
+        for tag in [|e: u32| e / 100, |e: u32| e % 3] {
+            let tags = bvh.node_tags(|t| tag(t.element));
+            for k in 0..50 {
+                let (x, y) = ((k as f64 * 0.618).fract() * 18.0, (k as f64 * 0.414).fract() * 18.0);
+                let size = 0.5 + (k % 7) as f64;
+                let q = Aabb { min: DVec3::new(x, y, -1.0), max: DVec3::new(x + size, y + size, 1.0) };
+                let skip = k as u32 % 4;
+                let mut want = Vec::new();
+                bvh.for_each_overlapping(&q, |i| want.push(i));
+                want.retain(|&i| tag(bvh.triangles()[i].element) != skip);
+                want.sort();
+                let mut got = Vec::new();
+                bvh.for_each_overlapping_except(&q, &tags, skip, |i| {
+                    if tag(bvh.triangles()[i].element) != skip {
+                        got.push(i);
+                    }
+                    false
+                });
+                got.sort();
+                assert_eq!(got, want, "query {k}");
+                let mut calls = 0;
+                bvh.for_each_overlapping_except(&q, &tags, skip, |_| {
+                    calls += 1;
+                    true
+                });
+                assert!(calls <= 1, "query {k}: {calls} calls after the first was taken");
+            }
+        }
+        let tags = bvh.node_tags(|t| t.element / 100);
+        assert!(tags.iter().filter(|&&t| t != MIXED).count() > tags.len() / 2, "few subtrees of one tag");
+    }
+
     #[test]
     fn queries_agree_with_brute_force() {
         let tris = grid(20);
