@@ -59,27 +59,17 @@ pub struct Bvh {
 
 impl Bvh {
     pub fn build(mut triangles: Vec<Triangle>) -> Self {
-        let mut nodes = Vec::with_capacity(2 * triangles.len() / LEAF_SIZE + 1);
         if triangles.is_empty() {
-            return Bvh { nodes, triangles, ..Default::default() };
+            return Bvh { nodes: Vec::new(), triangles, ..Default::default() };
         }
-        nodes.push(Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
-        let mut stack = vec![(0usize, 0usize, triangles.len())];
-        while let Some((node, lo, hi)) = stack.pop() {
-            let tris = &mut triangles[lo..hi];
-            let bounds = tris.iter().fold(Aabb::EMPTY, |b, t| b.union(Aabb::from_points(&t.v)));
-            if tris.len() <= LEAF_SIZE {
-                nodes[node] = Node { bounds, start: lo as u32, count: (hi - lo) as u32 };
-                continue;
-            }
-            let cb = tris.iter().fold(Aabb::EMPTY, |b, t| b.grow(centroid(t)));
-            let mid = sah_partition(tris, &cb);
-            let left = nodes.len();
-            nodes.push(Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
-            nodes.push(Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
-            nodes[node] = Node { bounds, start: left as u32, count: 0 };
-            stack.push((left, lo, lo + mid));
-            stack.push((left + 1, lo + mid, hi));
+        let t = std::time::Instant::now();
+        let nodes = if std::env::var_os("GR_SERIALBVH").is_some() {
+            build_serial(&mut triangles, 0)
+        } else {
+            build_nodes(&mut triangles, 0)
+        };
+        if std::env::var_os("GR_TIMES").is_some() && triangles.len() > 100000 {
+            eprintln!("B {} {:.4}", triangles.len(), t.elapsed().as_secs_f64());
         }
         let bounds: Vec<Aabb> = triangles.iter().map(|t| Aabb::from_points(&t.v)).collect();
         let centred = |b: &Aabb| (b.centre(), b.diagonal() * 0.5);
@@ -289,6 +279,64 @@ thread_local! {
 fn half_area(b: &Aabb) -> f64 {
     let d = (b.max - b.min).max(DVec3::ZERO);
     d.x * d.y + d.y * d.z + d.z * d.x
+}
+
+/// Triangles at and above which [`build_nodes`] builds a node's two subtrees in parallel.
+const PARALLEL_BUILD: usize = 1 << 14;
+
+/// The nodes over `tris` (their indices in the whole list from `first` on), the root first and
+/// each parent before its children, child indices into the returned list. Large lists build
+/// their two halves in parallel and lay them out as `[root, left, right, left's below, right's
+/// below]`; the tree (which triangles each leaf holds, and in what order) is the one the serial
+/// build makes, only the nodes' places differ: every traversal visits the same triangles in the
+/// same order.
+fn build_nodes(tris: &mut [Triangle], first: usize) -> Vec<Node> {
+    if tris.len() < PARALLEL_BUILD {
+        return build_serial(tris, first);
+    }
+    let bounds = tris.iter().fold(Aabb::EMPTY, |b, t| b.union(Aabb::from_points(&t.v)));
+    let cb = tris.iter().fold(Aabb::EMPTY, |b, t| b.grow(centroid(t)));
+    let mid = sah_partition(tris, &cb);
+    let (l, r) = tris.split_at_mut(mid);
+    let (left, right) = rayon::join(|| build_nodes(l, first), || build_nodes(r, first + mid));
+    // Local index j of the left list goes to 1 (j = 0) or j + 2; of the right list to 2 or
+    // j + left.len() + 1. Children are never a list's root.
+    let moved = |n: &Node, shift: usize| match n.count {
+        0 => Node { start: n.start + shift as u32, ..*n },
+        _ => *n,
+    };
+    let (ls, rs) = (2, left.len() + 1);
+    let mut nodes = Vec::with_capacity(left.len() + right.len() + 1);
+    nodes.push(Node { bounds, start: 1, count: 0 });
+    nodes.push(moved(&left[0], ls));
+    nodes.push(moved(&right[0], rs));
+    nodes.extend(left[1..].iter().map(|n| moved(n, ls)));
+    nodes.extend(right[1..].iter().map(|n| moved(n, rs)));
+    nodes
+}
+
+/// [`build_nodes`] on one thread: a node's children made one after the other.
+fn build_serial(tris: &mut [Triangle], first: usize) -> Vec<Node> {
+    let mut nodes = Vec::with_capacity(2 * tris.len() / LEAF_SIZE + 1);
+    nodes.push(Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
+    let mut stack = vec![(0usize, 0usize, tris.len())];
+    while let Some((node, lo, hi)) = stack.pop() {
+        let tris = &mut tris[lo..hi];
+        let bounds = tris.iter().fold(Aabb::EMPTY, |b, t| b.union(Aabb::from_points(&t.v)));
+        if tris.len() <= LEAF_SIZE {
+            nodes[node] = Node { bounds, start: (first + lo) as u32, count: (hi - lo) as u32 };
+            continue;
+        }
+        let cb = tris.iter().fold(Aabb::EMPTY, |b, t| b.grow(centroid(t)));
+        let mid = sah_partition(tris, &cb);
+        let left = nodes.len();
+        nodes.push(Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
+        nodes.push(Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
+        nodes[node] = Node { bounds, start: left as u32, count: 0 };
+        stack.push((left, lo, lo + mid));
+        stack.push((left + 1, lo + mid, hi));
+    }
+    nodes
 }
 
 /// Reorders `tris` around the best binned surface-area-heuristic split (12 bins per axis,
@@ -581,6 +629,54 @@ mod tests {
         }
         let tags = bvh.node_tags(|t| t.element / 100);
         assert!(tags.iter().filter(|&&t| t != MIXED).count() > tags.len() / 2, "few subtrees of one tag");
+    }
+
+    /// The parallel build makes the serial build's tree (each node's bounds and children, each
+    /// leaf's triangles, the triangles' order), its nodes only in other places.
+    #[test]
+    fn the_parallel_build_makes_the_serial_tree() {
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let tris: Vec<Triangle> = (0..3 * PARALLEL_BUILD)
+            .map(|k| {
+                let c = DVec3::new(next() * 10.0, next() * 10.0, next() * next() * 10.0);
+                let v =
+                    [c, c + DVec3::new(next(), 0.0, next()) * 0.3, c + DVec3::new(0.0, next(), next()) * 0.3];
+                Triangle { v, element: k as u32 }
+            })
+            .collect();
+        let (mut a, mut b) = (tris.clone(), tris);
+        let (serial, parallel) = (build_serial(&mut a, 0), build_nodes(&mut b, 0));
+        assert_eq!(
+            a.iter().map(|t| t.element).collect::<Vec<_>>(),
+            b.iter().map(|t| t.element).collect::<Vec<_>>()
+        );
+        assert_eq!(serial.len(), parallel.len());
+        let mut pairs = vec![(0usize, 0usize)];
+        let mut inner = 0;
+        while let Some((i, j)) = pairs.pop() {
+            let (x, y) = (&serial[i], &parallel[j]);
+            assert_eq!(
+                (x.bounds.min, x.bounds.max, x.count),
+                (y.bounds.min, y.bounds.max, y.count),
+                "nodes {i}, {j}"
+            );
+            if x.count > 0 {
+                assert_eq!(x.start, y.start, "leaves {i}, {j}");
+            } else {
+                inner += 1;
+                pairs.push((x.start as usize, y.start as usize));
+                pairs.push((x.start as usize + 1, y.start as usize + 1));
+            }
+        }
+        assert!(inner > 2 * PARALLEL_BUILD / LEAF_SIZE / 2, "{inner} inner nodes: a shallow tree");
+        assert!(
+            parallel.iter().zip(&serial).any(|(p, s)| p.start != s.start),
+            "the same layout: nothing split in parallel"
+        );
     }
 
     #[test]
