@@ -262,12 +262,13 @@ pub struct LinkChanges {
 }
 
 impl LinkChanges {
-    /// Records that the links whose `keep` is false were taken out of `links` (not yet done).
-    pub fn removing(&mut self, links: &[Link], keep: &[bool]) {
+    /// Records that the links at `gone` (ascending indices) were taken out of `links` (not yet
+    /// done).
+    pub fn removing(&mut self, links: &[Link], gone: &[usize]) {
         let fresh = self.fresh.min(links.len());
         let before = self.removed.len();
-        let packed = links[..fresh].iter().zip(keep);
-        self.removed.extend(packed.filter(|(_, k)| !**k).map(|(l, _)| (l.a, l.b)));
+        let packed = gone.iter().take_while(|&&i| i < fresh);
+        self.removed.extend(packed.map(|&i| (links[i].a, links[i].b)));
         // The fresh ones now start where the packed ones left end.
         self.fresh = fresh - (self.removed.len() - before);
     }
@@ -419,7 +420,8 @@ mod tests {
         for round in 0..12 {
             // Some taken out (as a relink or a move does), some made, sometimes on new nodes.
             let keep: Vec<bool> = (0..links.len()).map(|_| random(10) != 0).collect();
-            changes.removing(&links, &keep);
+            let gone: Vec<usize> = (0..links.len()).filter(|&i| !keep[i]).collect();
+            changes.removing(&links, &gone);
             let mut k = keep.iter();
             links.retain(|_| *k.next().unwrap());
             if round % 3 == 2 {
