@@ -80,6 +80,8 @@ TABLES: dict[str, Table | None] = {
                           "cargo bench --bench animation -- --quick", "(the same run)"),
     "touch-walk": Table("cargo bench --bench animation", 3,
                         "cargo bench --bench animation -- --quick", "(the same run)"),
+    "store-compaction": Table("cargo bench --bench stores", 0, "cargo bench --bench stores -- --quick",
+                              "about 30 s after a 1 min build"),
     "ab-moving-light": Table(f"{PY} -m tools.ab HEAD --exact HEAD --runs 5 --gather", 0,
                              f"{PY} -m tools.ab WORK --exact WORK --runs 1 --frames 4 --gather",
                              "a build of the revision, then about 3 min"),

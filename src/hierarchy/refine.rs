@@ -359,10 +359,10 @@ fn indices_where<T: Sync>(list: &[T], gone: impl Fn(&T) -> bool + Sync) -> Vec<u
 
 /// Takes the entries at `gone` (ascending indices) out of `list`, keeping the others in order,
 /// and hands each to `removed` first. The runs kept between them move down whole, a `memmove`
-/// each: `Vec::retain` moved them entry by entry, 1.6x slower on 15M links and 3.5x on 43M
-/// hidden pairs with one in 300 taken out (measured by hand, not kept), and an update of the
+/// each: `Vec::retain` moved them entry by entry, 1.6x slower on 15M links and 1.8x on 43M
+/// hidden pairs with one in 300 taken out (`cargo bench --bench stores`), and an update of the
 /// full monastery compacts each store once or twice.
-fn take_out<T>(list: &mut Vec<T>, gone: &[usize], mut removed: impl FnMut(&T)) {
+pub fn take_out<T>(list: &mut Vec<T>, gone: &[usize], mut removed: impl FnMut(&T)) {
     let Some(&first) = gone.first() else { return };
     let len = list.len();
     assert!(
