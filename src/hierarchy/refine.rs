@@ -351,7 +351,6 @@ impl Oracle {
     }
 }
 
-/// Verdicts "keep" for `n` entries but those at `failed`.
 /// The indices of `list`'s entries that `gone` says go, ascending (found in parallel).
 fn indices_where<T: Sync>(list: &[T], gone: impl Fn(&T) -> bool + Sync) -> Vec<usize> {
     list.par_iter().enumerate().filter_map(|(i, x)| gone(x).then_some(i)).collect()
@@ -681,8 +680,13 @@ impl Hierarchy {
             .par_iter()
             .zip(self.blocked_load.par_iter_mut())
             .enumerate()
-            .filter_map(|(i, (&(a, b), load))| {
-                if (*load as f64) <= quick_bar || settled(a, b, *load) {
+            .filter_map(|(i, (pair, load))| {
+                // (The pair's ends read only past the quick test: a quick pass reads the loads.)
+                if (*load as f64) <= quick_bar {
+                    return None;
+                }
+                let (a, b) = *pair;
+                if settled(a, b, *load) {
                     return None;
                 }
                 let growth = grown(a, b);
