@@ -275,6 +275,49 @@ mod tests {
         assert!(plain_steps > 5 * steps, "plain {plain_steps}, mixed {steps}");
     }
 
+    /// Over many blocks of groups (the pass's parallel blocks, a last one partly filled), each
+    /// mixed iterate is the one Anderson's formula gives computed directly (the history's
+    /// differences, the weighted normal equations, `x = g - dG gamma`): an entry or weight taken
+    /// from the wrong block, or a block's sums added twice, would move it.
+    #[test]
+    fn many_blocks_mix_as_one() {
+        let (groups, stride, depth) = (3 * BLOCK + 17, 2, 3);
+        let n = groups * stride;
+        let s: Vec<f64> = (0..n).map(|i| 1.0 + (i % 7) as f64 * 0.1).collect();
+        // A contraction that couples entries blocks apart.
+        let g = |x: &[f64]| -> Vec<f64> {
+            (0..n).map(|i| s[i] + 0.5 * x[i] + 0.4 * x[(i * 7919 + 13) % n]).collect()
+        };
+        let weights: Vec<f64> = (0..groups).map(|c| 1.0 + (c % 5) as f64).collect();
+        let dot = |u: &[f64], v: &[f64]| (0..n).map(|i| weights[i / stride] * u[i] * v[i]).sum::<f64>();
+        let mut mixer = Anderson::new(depth, weights.clone(), stride).unwrap();
+        let (mut x, mut fs, mut gs) = (vec![0.0; n], Vec::<Vec<f64>>::new(), Vec::<Vec<f64>>::new());
+        for step in 0..8 {
+            let gx = g(&x);
+            let f: Vec<f64> = (0..n).map(|i| gx[i] - x[i]).collect();
+            fs.push(f);
+            gs.push(gx.clone());
+            // Directly: the last `depth` differences of residuals and images.
+            let k = fs.len() - 1;
+            let m = k.min(depth);
+            let diff =
+                |v: &[Vec<f64>], j: usize| -> Vec<f64> { (0..n).map(|i| v[j + 1][i] - v[j][i]).collect() };
+            let df: Vec<Vec<f64>> = (k - m..k).map(|j| diff(&fs, j)).collect();
+            let dg: Vec<Vec<f64>> = (k - m..k).map(|j| diff(&gs, j)).collect();
+            let mut a: Vec<f64> = (0..m * m).map(|e| dot(&df[e / m], &df[e % m])).collect();
+            let mut rhs: Vec<f64> = (0..m).map(|j| dot(&df[j], &fs[k])).collect();
+            let gamma = cholesky_solve(&mut a, &mut rhs, m).expect("well conditioned");
+            let want: Vec<f64> =
+                (0..n).map(|i| gx[i] - (0..m).map(|j| gamma[j] * dg[j][i]).sum::<f64>()).collect();
+            let mut got = gx;
+            mixer.mix(&x, &mut got);
+            let scale = want.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            let off = got.iter().zip(&want).fold(0.0f64, |a, (u, v)| a.max((u - v).abs()));
+            assert!(off <= 1e-9 * scale, "step {step}: {off} off the direct formula (scale {scale})");
+            x = got;
+        }
+    }
+
     #[test]
     fn dependent_steps_are_dropped_not_divided_by() {
         // g(x) = x + 1 on every entry: each step's residual is the same, so dF = 0.
