@@ -62,15 +62,7 @@ impl Bvh {
         if triangles.is_empty() {
             return Bvh { nodes: Vec::new(), triangles, ..Default::default() };
         }
-        let t = std::time::Instant::now();
-        let nodes = if std::env::var_os("GR_SERIALBVH").is_some() {
-            build_serial(&mut triangles, 0)
-        } else {
-            build_nodes(&mut triangles, 0)
-        };
-        if std::env::var_os("GR_TIMES").is_some() && triangles.len() > 100000 {
-            eprintln!("B {} {:.4}", triangles.len(), t.elapsed().as_secs_f64());
-        }
+        let nodes = build_nodes(&mut triangles, 0);
         let bounds: Vec<Aabb> = triangles.iter().map(|t| Aabb::from_points(&t.v)).collect();
         let centred = |b: &Aabb| (b.centre(), b.diagonal() * 0.5);
         let node_centred = nodes.iter().map(|n| centred(&n.bounds)).collect();
