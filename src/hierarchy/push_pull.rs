@@ -185,10 +185,7 @@ impl Walk<'_> {
     /// Sets every node of the subtree of `id` above its leaves from its children (the pull half
     /// of [`Walk::push_pull`], without its pushes).
     pub fn pull(&self, id: NodeId, level: usize) {
-        let children: &[NodeId] = match &self.tree.nodes[id as usize].kind {
-            Kind::Cluster { children } => children,
-            Kind::Surface(s) => s.children.as_ref().map_or(&[], |c| c),
-        };
+        let children = self.tree.children(id);
         if level < PARALLEL_LEVELS && self.tree.nodes[id as usize].is_cluster() {
             children.par_iter().for_each(|&c| self.pull(c, level + 1));
         } else {
@@ -206,10 +203,7 @@ impl Walk<'_> {
         let nb = self.nb;
         let i = id as usize;
         let node = &self.tree.nodes[i];
-        let children: &[NodeId] = match &node.kind {
-            Kind::Cluster { children } => children,
-            Kind::Surface(s) => s.children.as_ref().map_or(&[], |c| c),
-        };
+        let children = self.tree.children(id);
         // SAFETY (every access below): node `i` in its own visit, its children after theirs (the
         // walk's rule).
         let mut power = [0.0; 3];

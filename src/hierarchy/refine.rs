@@ -620,6 +620,24 @@ impl Hierarchy {
         let bright = |a: NodeId| brighter[a as usize / 64] >> (a % 64) & 1 != 0;
         let settled = |a: NodeId, b: NodeId, load: f32| load <= 1.0 && !bright(a) && !bright(b);
         let grown = |a: NodeId, b: NodeId| growth[a as usize].max(growth[b as usize]);
+        // Whether the pair (a, b) may fail now and is tested; if not, a full pass brings its load
+        // to the brightness now (scaled by its ends' growth: a bound still). (A NaN, an unknown
+        // end's growth times no load, is tested.) A quick pass has left the pairs whose load is
+        // at most `quick_bar` before reading their ends.
+        let may_fail = |a: NodeId, b: NodeId, load: &mut f32| {
+            if settled(a, b, *load) {
+                return false;
+            }
+            let growth = grown(a, b);
+            let bound = *load as f64 * growth;
+            if bound <= 1.0 {
+                if growth > 1.0 && quick.is_none() {
+                    *load = (bound * (1.0 + 1e-6)) as f32;
+                }
+                return false;
+            }
+            true
+        };
         let tree = &self.tree;
         let oracle = &self.oracle;
         // The same test that made each link, with the new brightness (in parallel: the tree and
@@ -642,16 +660,7 @@ impl Hierarchy {
                     return None;
                 }
                 let l = &links[i];
-                if settled(l.a, l.b, *load) {
-                    return None;
-                }
-                // (A NaN, an unknown end's growth times no load, is tested.)
-                let growth = grown(l.a, l.b);
-                let bound = *load as f64 * growth;
-                if bound <= 1.0 {
-                    if growth > 1.0 && quick.is_none() {
-                        *load = (bound * (1.0 + 1e-6)) as f32;
-                    }
+                if !may_fail(l.a, l.b, load) {
                     return None;
                 }
                 tested.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -686,15 +695,7 @@ impl Hierarchy {
                     return None;
                 }
                 let (a, b) = *pair;
-                if settled(a, b, *load) {
-                    return None;
-                }
-                let growth = grown(a, b);
-                let bound = *load as f64 * growth;
-                if bound <= 1.0 {
-                    if growth > 1.0 && quick.is_none() {
-                        *load = (bound * (1.0 + 1e-6)) as f32;
-                    }
+                if !may_fail(a, b, load) {
                     return None;
                 }
                 tested.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
