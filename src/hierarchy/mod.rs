@@ -22,6 +22,7 @@ pub mod tree;
 pub mod two_scale;
 pub mod update;
 
+use rayon::prelude::*;
 use std::time::Instant;
 
 use crate::basis::Basis;
@@ -380,15 +381,18 @@ fn finish(
     hierarchy.tree.leaves_below(hierarchy.tree.root, &mut leaves);
     stats.leaves = leaves.len();
     stats.links = hierarchy.links.len();
-    // The counts in one pass over the links, the frame's largest store (15M on the full monastery).
-    let (mut surfaces, mut constants, mut blocks) = (0, 0, 0);
-    for l in &hierarchy.links {
-        match &l.coupling {
-            coupling::Coupling::Surfaces(b) => (surfaces, blocks) = (surfaces + 1, blocks + b.len()),
-            coupling::Coupling::Constants { .. } => constants += 1,
-            coupling::Coupling::Clusters { .. } => {}
-        }
-    }
+    // The counts in one pass over the links, the frame's largest store (15M on the full
+    // monastery: 0.08 s of an updated frame in turn).
+    let count = |[s, c, b]: [usize; 3], l: &coupling::Link| match &l.coupling {
+        coupling::Coupling::Surfaces(x) => [s + 1, c, b + x.len()],
+        coupling::Coupling::Constants { .. } => [s, c + 1, b],
+        coupling::Coupling::Clusters { .. } => [s, c, b],
+    };
+    let [surfaces, constants, blocks] = hierarchy
+        .links
+        .par_iter()
+        .fold(|| [0; 3], count)
+        .reduce(|| [0; 3], |x, y| [x[0] + y[0], x[1] + y[1], x[2] + y[2]]);
     stats.surface_links = surfaces;
     stats.constant_links = constants;
     stats.cluster_links = stats.links - surfaces - constants;

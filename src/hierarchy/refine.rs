@@ -353,7 +353,15 @@ impl Oracle {
 
 /// The indices of `list`'s entries that `gone` says go, ascending (found in parallel).
 fn indices_where<T: Sync>(list: &[T], gone: impl Fn(&T) -> bool + Sync) -> Vec<usize> {
-    list.par_iter().enumerate().filter_map(|(i, x)| gone(x).then_some(i)).collect()
+    // In pieces, each a plain loop, as [`failing`]'s (by entry, a parallel iterator's
+    // `filter_map`: the verdicts 15% slower on the 30k-triangle part's stores).
+    list.par_chunks(PASS_CHUNK)
+        .enumerate()
+        .flat_map_iter(|(k, piece)| {
+            let first = k * PASS_CHUNK;
+            piece.iter().enumerate().filter(|(_, x)| gone(x)).map(move |(j, _)| first + j).collect::<Vec<_>>()
+        })
+        .collect()
 }
 
 /// Takes the entries at `gone` (ascending indices) out of `list`, keeping the others in order,
@@ -388,6 +396,40 @@ pub fn take_out<T>(list: &mut Vec<T>, gone: &[usize], mut removed: impl FnMut(&T
         }
         list.set_len(write);
     }
+}
+
+/// Stored pairs a relink pass takes in one piece of work ([`failing`]).
+const PASS_CHUNK: usize = 4096;
+
+/// The indices, ascending, of the pairs whose load is above `skip_at_most` and which `fails`
+/// says fail (`fails(index, load)`, which may rewrite the load). In parallel pieces of
+/// [`PASS_CHUNK`] loads, each first compared with `skip_at_most` all together (a loop the
+/// compiler vectorises), a piece with none above it left whole: a quick relink finds a few
+/// hundred loads above its bar among tens of millions. (The pass by pair, a parallel iterator's
+/// `filter_map`, took 0.09 s for the full monastery's 43.5M hidden pairs' loads; the same loop
+/// by pieces, 0.02-0.03 s, measured apart on as many loads.) A NaN load is above any bar.
+fn failing(
+    loads: &mut [f32],
+    skip_at_most: f64,
+    fails: impl Fn(usize, &mut f32) -> bool + Sync,
+) -> Vec<usize> {
+    loads
+        .par_chunks_mut(PASS_CHUNK)
+        .enumerate()
+        .flat_map_iter(|(k, piece)| {
+            let mut out = Vec::new();
+            let above = |l: f32| l as f64 > skip_at_most || l.is_nan();
+            if piece.iter().fold(false, |any, &l| any | above(l)) {
+                let first = k * PASS_CHUNK;
+                for (j, load) in piece.iter_mut().enumerate() {
+                    if above(*load) && fails(first + j, load) {
+                        out.push(first + j);
+                    }
+                }
+            }
+            out
+        })
+        .collect()
 }
 
 /// Links of a tree and the oracle that made them.
@@ -651,28 +693,20 @@ impl Hierarchy {
         let tested = std::sync::atomic::AtomicUsize::new(0);
         // The links that fail, by index: most relinks have none.
         let links = &self.links;
-        let failed: Vec<usize> = self
-            .link_load
-            .par_iter_mut()
-            .enumerate()
-            .filter_map(|(i, load)| {
-                if (*load as f64) <= quick_bar {
-                    return None;
-                }
-                let l = &links[i];
-                if !may_fail(l.a, l.b, load) {
-                    return None;
-                }
-                tested.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                let light = matches!(l.coupling, coupling::Coupling::Constants { .. });
-                let kept = matches!(oracle.decide(tree, radiosity, l.a, l.b, bar), Verdict::Link)
-                    && !(light && oracle.weight(tree, radiosity, l.a, l.b) == Weight::Full);
-                if kept {
-                    *load = oracle.load(tree, radiosity, l.a, l.b, light);
-                }
-                (!kept).then_some(i)
-            })
-            .collect();
+        let failed = failing(&mut self.link_load, quick_bar, |i, load| {
+            let l = &links[i];
+            if !may_fail(l.a, l.b, load) {
+                return false;
+            }
+            tested.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let light = matches!(l.coupling, coupling::Coupling::Constants { .. });
+            let kept = matches!(oracle.decide(tree, radiosity, l.a, l.b, bar), Verdict::Link)
+                && !(light && oracle.weight(tree, radiosity, l.a, l.b) == Weight::Full);
+            if kept {
+                *load = oracle.load(tree, radiosity, l.a, l.b, light);
+            }
+            !kept
+        });
         if !failed.is_empty() {
             self.changes.removing(&self.links, &failed);
             take_out(&mut self.link_load, &failed, |_| {});
@@ -684,28 +718,19 @@ impl Hierarchy {
         // 1-5% too dark).
         // (Their loads as the links' above; an unknown load is infinite, and tested.)
         self.blocked_load.resize(self.blocked.len(), f32::INFINITY);
-        let failed: Vec<usize> = self
-            .blocked
-            .par_iter()
-            .zip(self.blocked_load.par_iter_mut())
-            .enumerate()
-            .filter_map(|(i, (pair, load))| {
-                // (The pair's ends read only past the quick test: a quick pass reads the loads.)
-                if (*load as f64) <= quick_bar {
-                    return None;
-                }
-                let (a, b) = *pair;
-                if !may_fail(a, b, load) {
-                    return None;
-                }
-                tested.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                let kept = !oracle.may_carry_much(tree, radiosity, a, b);
-                if kept {
-                    *load = oracle.blocked_load(tree, radiosity, a, b);
-                }
-                (!kept).then_some(i)
-            })
-            .collect();
+        let blocked = &self.blocked;
+        let failed = failing(&mut self.blocked_load, quick_bar, |i, load| {
+            let (a, b) = blocked[i];
+            if !may_fail(a, b, load) {
+                return false;
+            }
+            tested.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let kept = !oracle.may_carry_much(tree, radiosity, a, b);
+            if kept {
+                *load = oracle.blocked_load(tree, radiosity, a, b);
+            }
+            !kept
+        });
         take_out(&mut self.blocked_load, &failed, |_| {});
         take_out(&mut self.blocked, &failed, |&p| work.push(p));
         stats.relinked = work.len();
@@ -964,5 +989,57 @@ mod tests {
                 assert_eq!(Rc::strong_count(t), held, "round {round}, entry {i}");
             }
         }
+    }
+
+    /// `failing` finds, in order, the pairs a plain loop over every load finds (a load above the
+    /// bar, NaN included, that the test fails), leaves the loads below the bar unread, and keeps
+    /// what the test writes to a load; `indices_where` is a plain filter's indices. Over several
+    /// pieces, the last one partly filled, with lone loads above the bar in otherwise quiet
+    /// pieces, and with no bar (a full pass) as well.
+    #[test]
+    fn the_passes_by_pieces_find_what_a_plain_loop_finds() {
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let len = 3 * PASS_CHUNK + 123;
+        let mut loads: Vec<f32> = (0..len)
+            .map(|_| match next() {
+                r if r < 0.001 => f32::NAN,
+                r if r < 0.01 => 1.5 * r as f32 * 100.0,
+                r => 0.5 * r as f32,
+            })
+            .collect();
+        // A quiet piece with one load above the bar, and a last piece whose only one is a NaN.
+        loads[2 * PASS_CHUNK..].iter_mut().for_each(|l| *l = 0.1);
+        (loads[2 * PASS_CHUNK + 9], loads[3 * PASS_CHUNK + 6]) = (0.9, f32::NAN);
+        for bar in [0.6, f64::NEG_INFINITY] {
+            // Fails every third index, and halves the load of every pair it is asked about.
+            let fails = |i: usize, load: &mut f32| {
+                *load *= 0.5;
+                i.is_multiple_of(3)
+            };
+            let mut plain = loads.clone();
+            let mut want = Vec::new();
+            for (i, load) in plain.iter_mut().enumerate() {
+                if (*load as f64 > bar || load.is_nan()) && fails(i, load) {
+                    want.push(i);
+                }
+            }
+            let mut pieces = loads.clone();
+            let seen = std::sync::atomic::AtomicUsize::new(0);
+            let got = failing(&mut pieces, bar, |i, load| {
+                assert!(loads[i] as f64 > bar || loads[i].is_nan(), "load {i} below the bar was tested");
+                seen.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                fails(i, load)
+            });
+            assert_eq!(got, want, "bar {bar}");
+            assert!(want.len() > 3 && seen.into_inner() > want.len(), "too few tested");
+            let same = |x: &f32, y: &f32| x.to_bits() == y.to_bits();
+            assert!(plain.iter().zip(&pieces).all(|(x, y)| same(x, y)), "bar {bar}: the loads differ");
+        }
+        let want: Vec<usize> = (0..len).filter(|&i| loads[i] > 0.3).collect();
+        assert_eq!(indices_where(&loads, |&l| l > 0.3), want);
     }
 }
