@@ -398,7 +398,7 @@ pub fn take_out<T>(list: &mut Vec<T>, gone: &[usize], mut removed: impl FnMut(&T
     }
 }
 
-/// Stored pairs a relink pass takes in one piece of work ([`failing`]).
+/// Stored pairs a pass over a store takes in one piece of work ([`failing`], [`indices_where`]).
 const PASS_CHUNK: usize = 4096;
 
 /// The indices, ascending, of the pairs whose load is above `skip_at_most` and which `fails`
