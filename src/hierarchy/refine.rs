@@ -573,16 +573,29 @@ impl Hierarchy {
     pub fn take_touched(&mut self, touched: impl Fn(NodeId, NodeId) -> bool + Sync) -> Vec<(NodeId, NodeId)> {
         let mut out = Vec::new();
         let gone = indices_where(&self.links, |l| touched(l.a, l.b));
-        self.changes.removing(&self.links, &gone);
-        take_out(&mut self.link_load, &gone, |_| {});
-        take_out(&mut self.links, &gone, |l| out.push((l.a, l.b)));
+        self.take_links(&gone, |l| out.push((l.a, l.b)));
         let gone = indices_where(&self.blocked, |&(a, b)| touched(a, b));
-        self.blocked_load.resize(self.blocked.len(), f32::INFINITY);
-        take_out(&mut self.blocked_load, &gone, |_| {});
-        take_out(&mut self.blocked, &gone, |&p| out.push(p));
+        self.take_blocked(&gone, |&p| out.push(p));
         let gone = indices_where(&self.idle, |&(a, b)| touched(a, b));
         take_out(&mut self.idle, &gone, |&p| out.push(p));
         out
+    }
+
+    /// Takes the links at `gone` (ascending indices) out with their loads, each handed to
+    /// `removed` first, and records it in [`Hierarchy::changes`].
+    fn take_links(&mut self, gone: &[usize], removed: impl FnMut(&Link)) {
+        self.changes.removing(&self.links, gone);
+        take_out(&mut self.link_load, gone, |_| {});
+        take_out(&mut self.links, gone, removed);
+    }
+
+    /// Takes the hidden pairs at `gone` (ascending indices) out with their loads (unknown ones
+    /// made infinite first: [`Hierarchy::blocked_load`] may be shorter), each handed to
+    /// `removed` first.
+    fn take_blocked(&mut self, gone: &[usize], removed: impl FnMut(&(NodeId, NodeId))) {
+        self.blocked_load.resize(self.blocked.len(), f32::INFINITY);
+        take_out(&mut self.blocked_load, gone, |_| {});
+        take_out(&mut self.blocked, gone, removed);
     }
 
     /// The idle pairs ([`Hierarchy::idle`]): as stored, or with the pair tree kept, its leaves
@@ -693,7 +706,7 @@ impl Hierarchy {
         let tested = std::sync::atomic::AtomicUsize::new(0);
         // The links that fail, by index: most relinks have none.
         let links = &self.links;
-        let failed = failing(&mut self.link_load, quick_bar, |i, load| {
+        let failed_links = failing(&mut self.link_load, quick_bar, |i, load| {
             let l = &links[i];
             if !may_fail(l.a, l.b, load) {
                 return false;
@@ -707,11 +720,6 @@ impl Hierarchy {
             }
             !kept
         });
-        if !failed.is_empty() {
-            self.changes.removing(&self.links, &failed);
-            take_out(&mut self.link_load, &failed, |_| {});
-            take_out(&mut self.links, &failed, |l| work.push((l.a, l.b)));
-        }
         // Hidden pairs decided while their ends were dark (a first round knows only the
         // emitters' light) are split now if they may carry enough: kept whole, each would drop
         // all its light from the solve, always the same way (the Cornell box's faces came out
@@ -719,7 +727,7 @@ impl Hierarchy {
         // (Their loads as the links' above; an unknown load is infinite, and tested.)
         self.blocked_load.resize(self.blocked.len(), f32::INFINITY);
         let blocked = &self.blocked;
-        let failed = failing(&mut self.blocked_load, quick_bar, |i, load| {
+        let failed_blocked = failing(&mut self.blocked_load, quick_bar, |i, load| {
             let (a, b) = blocked[i];
             if !may_fail(a, b, load) {
                 return false;
@@ -731,8 +739,9 @@ impl Hierarchy {
             }
             !kept
         });
-        take_out(&mut self.blocked_load, &failed, |_| {});
-        take_out(&mut self.blocked, &failed, |&p| work.push(p));
+        // (Both stores tested before either is changed: the tests read the tree.)
+        self.take_links(&failed_links, |l| work.push((l.a, l.b)));
+        self.take_blocked(&failed_blocked, |&p| work.push(p));
         stats.relinked = work.len();
         stats.tested = tested.into_inner();
         stats.quick = quick.is_some();

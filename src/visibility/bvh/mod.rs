@@ -39,8 +39,17 @@ pub const MIXED: u32 = u32::MAX;
 pub trait Visitor {
     /// Whether the box `b` (centre `c`, half extent `h`) may hold what is looked for.
     fn accept(&self, b: &Aabb, c: DVec3, h: DVec3) -> bool;
+    /// Whether node `node` is entered at all, before its box is tested: a visitor may skip
+    /// subtrees by what they hold ([`Bvh::node_tags`]).
+    fn enters(&self, _node: usize) -> bool {
+        true
+    }
     /// Called with each triangle (and its index) in an accepted leaf whose bounds are accepted.
     fn visit(&mut self, index: usize, triangle: &Triangle);
+    /// Whether the walk is over, asked after each visit.
+    fn done(&self) -> bool {
+        false
+    }
 }
 
 #[derive(Clone, Debug, Default)]
@@ -129,32 +138,31 @@ impl Bvh {
         query: &Aabb,
         tags: &[u32],
         skip: u32,
-        mut f: impl FnMut(usize) -> bool,
+        f: impl FnMut(usize) -> bool,
     ) {
-        if self.nodes.is_empty() {
-            return;
+        /// The query as a [`Visitor`] that skips the subtrees of tag `skip`.
+        struct Except<'a, F> {
+            query: &'a Aabb,
+            tags: &'a [u32],
+            skip: u32,
+            f: F,
+            found: bool,
         }
-        let mut stack = [0u32; 64];
-        let mut sp = 1;
-        while sp > 0 {
-            sp -= 1;
-            let k = stack[sp] as usize;
-            let node = &self.nodes[k];
-            if tags[k] == skip || !node.bounds.overlaps(query) {
-                continue;
+        impl<F: FnMut(usize) -> bool> Visitor for Except<'_, F> {
+            fn accept(&self, b: &Aabb, _: DVec3, _: DVec3) -> bool {
+                b.overlaps(self.query)
             }
-            if node.count > 0 {
-                for i in node.start as usize..(node.start + node.count) as usize {
-                    if self.bounds[i].overlaps(query) && f(i) {
-                        return;
-                    }
-                }
-            } else {
-                stack[sp] = node.start;
-                stack[sp + 1] = node.start + 1;
-                sp += 2;
+            fn enters(&self, node: usize) -> bool {
+                self.tags[node] != self.skip
+            }
+            fn visit(&mut self, index: usize, _: &Triangle) {
+                self.found = (self.f)(index);
+            }
+            fn done(&self) -> bool {
+                self.found
             }
         }
+        self.visit(&mut Except { query, tags, skip, f, found: false });
     }
 
     /// Visits every triangle in a leaf reached through nodes (and with triangle bounds) that the
@@ -171,7 +179,7 @@ impl Bvh {
             sp -= 1;
             let k = stack[sp] as usize;
             let (node, (c, h)) = (&self.nodes[k], self.node_centred[k]);
-            if !visitor.accept(&node.bounds, c, h) {
+            if !visitor.enters(k) || !visitor.accept(&node.bounds, c, h) {
                 continue;
             }
             if node.count > 0 {
@@ -179,6 +187,9 @@ impl Bvh {
                     let (c, h) = self.triangle_centred[i];
                     if visitor.accept(&self.bounds[i], c, h) {
                         visitor.visit(i, &self.triangles[i]);
+                        if visitor.done() {
+                            return;
+                        }
                     }
                 }
             } else {
