@@ -99,6 +99,11 @@ pub struct ReceivedBlocks {
     /// own passes, 15% of an updated frame of the full monastery.)
     cluster_offsets: Vec<usize>,
     clusters: Vec<ClusterEntry>,
+    /// Per receiver (`nb` each), what its surface and constant links bring it from sources at
+    /// `B = 1`: the first column of each block, and each constant link's `G^00` in the first
+    /// row. The hemisphere bound's furnace reads these instead of every block
+    /// ([`super::solve::State::bound_leaves`]).
+    white: Vec<f64>,
     nb: usize,
 }
 
@@ -139,11 +144,13 @@ impl ReceivedBlocks {
         let mut blocks = budget::try_filled(count.saturating_mul(nb2), 0.0f32, what)?;
         let mut constants = budget::try_filled(constant_count, (0 as NodeId, 0.0f32), what)?;
         let mut clusters = budget::try_filled(cluster_count, ClusterEntry::none(0), what)?;
+        let mut white = budget::try_filled(nodes * nb, 0.0f64, what)?;
         // Receivers in runs of `RUN`, each run's part of the four outputs split off in order.
         const RUN: usize = 4096;
         let mut runs = Vec::with_capacity(nodes.div_ceil(RUN));
         let (mut src, mut blk) = (&mut sources[..], &mut blocks[..]);
         let (mut con, mut clu) = (&mut constants[..], &mut clusters[..]);
+        let mut wht = &mut white[..];
         for r0 in (0..nodes).step_by(RUN) {
             let r1 = (r0 + RUN).min(nodes);
             let n = offsets[r1] - offsets[r0];
@@ -153,12 +160,15 @@ impl ReceivedBlocks {
             let (b_run, b_rest) = std::mem::take(&mut blk).split_at_mut(n * nb2);
             let (c_run, c_rest) = std::mem::take(&mut con).split_at_mut(m);
             let (x_run, x_rest) = std::mem::take(&mut clu).split_at_mut(x);
-            (src, blk, con, clu) = (s_rest, b_rest, c_rest, x_rest);
-            runs.push((r0..r1, s_run, b_run, c_run, x_run));
+            let (w_run, w_rest) = std::mem::take(&mut wht).split_at_mut((r1 - r0) * nb);
+            (src, blk, con, clu, wht) = (s_rest, b_rest, c_rest, x_rest, w_rest);
+            runs.push((r0..r1, s_run, b_run, c_run, x_run, w_run));
         }
-        runs.into_par_iter().for_each(|(receivers, src, blk, con, clu)| {
+        runs.into_par_iter().for_each(|(receivers, src, blk, con, clu, wht)| {
             let (mut k, mut j, mut i) = (0, 0, 0);
+            let first = receivers.start;
             for r in receivers {
+                let white = &mut wht[(r - first) * nb..(r - first + 1) * nb];
                 for &(l, side) in incoming.of(r) {
                     let link = &links[l as usize];
                     let source = if side == 0 { link.b } else { link.a };
@@ -166,11 +176,17 @@ impl ReceivedBlocks {
                         Coupling::Surfaces(both) => {
                             let side = side as usize;
                             src[k] = source;
-                            blk[k * nb2..(k + 1) * nb2].copy_from_slice(&both[side * nb2..(side + 1) * nb2]);
+                            let block = &both[side * nb2..(side + 1) * nb2];
+                            blk[k * nb2..(k + 1) * nb2].copy_from_slice(block);
+                            for (w, row) in white.iter_mut().zip(block.chunks_exact(nb)) {
+                                *w += row[0] as f64;
+                            }
                             k += 1;
                         }
                         Coupling::Constants { ab, ba } => {
-                            con[j] = (source, if side == 0 { *ab } else { *ba });
+                            let g = if side == 0 { *ab } else { *ba };
+                            con[j] = (source, g);
+                            white[0] += g as f64;
                             j += 1;
                         }
                         Coupling::Clusters { transmittance } => {
@@ -181,7 +197,17 @@ impl ReceivedBlocks {
                 }
             }
         });
-        Ok(Self { offsets, sources, blocks, constant_offsets, constants, cluster_offsets, clusters, nb })
+        Ok(Self {
+            offsets,
+            sources,
+            blocks,
+            constant_offsets,
+            constants,
+            cluster_offsets,
+            clusters,
+            white,
+            nb,
+        })
     }
 
     /// Receivers it has runs for (nodes added since have none).
@@ -212,6 +238,15 @@ impl ReceivedBlocks {
         &self.constants[self.constant_offsets[r]..self.constant_offsets[r + 1]]
     }
 
+    /// What node `r`'s surface and constant links bring it from sources at `B = 1` (`nb`
+    /// coefficients; none for a node added since).
+    pub(crate) fn white_of(&self, r: usize) -> &[f64] {
+        if r >= self.nodes() {
+            return &[];
+        }
+        &self.white[r * self.nb..(r + 1) * self.nb]
+    }
+
     /// Node `r`'s cluster links.
     pub(crate) fn clusters_of(&self, r: usize) -> &[ClusterEntry] {
         if r >= self.nodes() {
@@ -231,12 +266,19 @@ impl ReceivedBlocks {
         let nb2 = self.nb * self.nb;
         let (a, b) = (self.offsets[r], self.offsets[r + 1]);
         if let Some(k) = self.sources[a..b].iter().position(|&x| x == s) {
+            let block = &self.blocks[(a + k) * nb2..(a + k + 1) * nb2];
+            for (w, row) in
+                self.white[r * self.nb..(r + 1) * self.nb].iter_mut().zip(block.chunks_exact(self.nb))
+            {
+                *w -= row[0] as f64;
+            }
             self.blocks[(a + k) * nb2..(a + k + 1) * nb2].fill(0.0);
             self.sources[a + k] = receiver;
             return true;
         }
         let (a, b) = (self.constant_offsets[r], self.constant_offsets[r + 1]);
         if let Some(e) = self.constants[a..b].iter_mut().find(|e| e.0 == s) {
+            self.white[r * self.nb] -= e.1 as f64;
             *e = (receiver, 0.0);
             return true;
         }

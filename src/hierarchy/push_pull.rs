@@ -84,12 +84,25 @@ impl<'a> Nodes<'a> {
     }
 }
 
+/// How a walk sets a leaf from the light `H` that reached it.
+#[derive(Clone, Copy)]
+pub(super) enum Leaves<'a> {
+    /// `b = e + rho bound H`: the solve, each leaf's reflectance scaled by its hemisphere bound
+    /// (per node; empty: none, every factor 1; [`super::solve::State::bound_leaves`]).
+    Solve { bound: &'a [f64] },
+    /// `b = H`: the furnace, every surface white and dark, which makes a leaf's mean the sum of
+    /// its form factors when every source is at `B = 1`.
+    Furnace,
+}
+
 /// One walk over the tree.
 pub(super) struct Walk<'a> {
     pub tree: &'a Tree,
     pub nodes: Nodes<'a>,
     /// Per leaf, `e^k + (rho E_d)^k` (`nodes x nb`).
     pub sources: &'a [[f64; 3]],
+    /// How the leaves take what reaches them.
+    pub leaves: Leaves<'a>,
     pub two_scale: &'a TwoScale,
     pub nb: usize,
 }
@@ -155,13 +168,19 @@ impl Walk<'_> {
                 }
                 match s.children {
                     None => {
-                        let rho = self.tree.reflectance[s.face as usize];
                         // SAFETY: node `i`, in its own visit (the walk's rule).
                         let (b, before) = unsafe { (self.nodes.b(i), *self.nodes.mean(i)) };
-                        for k in 0..nb {
-                            for c in 0..3 {
-                                b[k][c] = self.sources[i * nb + k][c] + rho[c] * h[k][c];
+                        match self.leaves {
+                            Leaves::Solve { bound } => {
+                                let f = bound.get(i).copied().unwrap_or(1.0);
+                                let rho = self.tree.reflectance[s.face as usize].map(|r| r * f);
+                                for k in 0..nb {
+                                    for c in 0..3 {
+                                        b[k][c] = self.sources[i * nb + k][c] + rho[c] * h[k][c];
+                                    }
+                                }
                             }
+                            Leaves::Furnace => b.copy_from_slice(h),
                         }
                         let after = self.mean_of(s, i);
                         node.area * (0..3).map(|c| (after[c] - before[c]).abs()).fold(0.0, f64::max)
