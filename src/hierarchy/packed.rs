@@ -145,7 +145,7 @@ impl ReceivedBlocks {
         let mut constants = budget::try_filled(constant_count, (0 as NodeId, 0.0f32), what)?;
         let mut clusters = budget::try_filled(cluster_count, ClusterEntry::none(0), what)?;
         let mut white = budget::try_filled(nodes * nb, 0.0f64, what)?;
-        // Receivers in runs of `RUN`, each run's part of the four outputs split off in order.
+        // Receivers in runs of `RUN`, each run's part of the five outputs split off in order.
         const RUN: usize = 4096;
         let mut runs = Vec::with_capacity(nodes.div_ceil(RUN));
         let (mut src, mut blk) = (&mut sources[..], &mut blocks[..]);
