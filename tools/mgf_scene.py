@@ -8,7 +8,7 @@ first round's solver could not bake; docs/validation-real.md, "RenderPark's offi
 
 The subset of MGF 2.0 those scenes use: named vertices (`v NAME =` then `p x y z`; a name may be
 defined again, a face takes its value at the time), polygons (`f v1 v2 ...`, counter-clockwise
-seen from the front, as the library's faces; more than four corners fanned into triangles),
+seen from the front, as the library's faces; more than four corners cut into triangles),
 materials (`m NAME =` or `m NAME = OTHER`, then `c`, `cxy x y`, `rd`, `ed`; `m NAME` takes a
 defined one back), objects (`o NAME` ... `o`), transforms `xf` of scaling (`-s`) and
 translation (`-t`), and `ring` (a disk or annulus, as a fan of quads). Other entities are
@@ -116,7 +116,7 @@ class Reader:
         self.vertex: str | None = None
         self.transforms: list[tuple[float, list[float]]] = []
         self.objects: list[str] = []
-        # Per object name, its vertices and (face, material index) pairs.
+        # Per object name, its vertices, its faces (corner indices) and each face's material.
         self.meshes: dict[str, tuple[list[list[float]], list[list[int]], list[int]]] = {}
         # Per object name, per face, the MGF object it came from (`o` entities counted in order).
         self.instances: dict[str, list[int]] = {}
@@ -144,10 +144,7 @@ class Reader:
         vertices.extend(corners)
         index = list(range(base, base + len(corners)))
         material = self.current_material()
-        if len(index) <= 4:
-            pieces = [index]
-        else:
-            pieces = [[index[0], index[k], index[k + 1]] for k in range(1, len(index) - 1)]
+        pieces = [index] if len(index) <= 4 else [[index[k] for k in t] for t in ear_clip(corners)]
         for piece in pieces:
             faces.append(piece)
             mats.append(material)
@@ -258,6 +255,49 @@ class Reader:
             outer = [at(r1, a), at(r1, b)]
             inner = [at(r0, b), at(r0, a)] if r0 > 0.0 else [centre]
             self.add_polygon(outer + inner)
+
+
+def ear_clip(corners: list[list[float]]) -> list[tuple[int, int, int]]:
+    """Triangles (corner indices, the polygon's winding) of a planar polygon, convex or not, by
+    ear clipping in the plane of its largest normal component (the office has a concave
+    hexagon, which a fan would fold over itself)."""
+    n = len(corners)
+    # Newell's normal.
+    normal = [0.0, 0.0, 0.0]
+    for i in range(n):
+        a, b = corners[i], corners[(i + 1) % n]
+        for k in range(3):
+            u, v = (k + 1) % 3, (k + 2) % 3
+            normal[k] += (a[u] - b[u]) * (a[v] + b[v])
+    k = max(range(3), key=lambda i: abs(normal[i]))
+    u, v = (k + 1) % 3, (k + 2) % 3
+    sign = 1.0 if normal[k] >= 0.0 else -1.0
+    pts = [(c[u], c[v]) for c in corners]
+
+    def turn(a, b, c):
+        return sign * (
+            (pts[b][0] - pts[a][0]) * (pts[c][1] - pts[a][1])
+            - (pts[b][1] - pts[a][1]) * (pts[c][0] - pts[a][0])
+        )
+
+    def inside(p, a, b, c):
+        return turn(a, b, p) >= 0.0 and turn(b, c, p) >= 0.0 and turn(c, a, p) >= 0.0
+
+    left = list(range(n))
+    out = []
+    while len(left) > 3:
+        for i in range(len(left)):
+            a, b, c = left[i - 1], left[i], left[(i + 1) % len(left)]
+            if turn(a, b, c) > 0.0 and not any(inside(p, a, b, c) for p in left if p not in (a, b, c)):
+                out.append((a, b, c))
+                left.pop(i)
+                break
+        else:
+            # (Degenerate: no ear left; fan the rest.)
+            out.extend((left[0], left[j], left[j + 1]) for j in range(1, len(left) - 1))
+            return out
+    out.append(tuple(left))
+    return out
 
 
 def cross(a: list[float], b: list[float]) -> list[float]:

@@ -167,3 +167,17 @@ def test_the_turned_floor_is_lit_on_the_hierarchy(tmp_path):
     # light alone 0.5 x 100 x F, F about 0.012 at its middle).
     assert means["turned"] > 0.1, means
     assert means["as written"] < 1e-6 * means["turned"], means
+
+
+def test_a_concave_polygon_is_cut_into_triangles_that_cover_it_once():
+    # An L-shaped hexagon (area 3), counter-clockwise seen from +z, in the plane z = 1: a fan from
+    # its first corner would cross the notch.
+    hexagon = [[0, 0, 1], [2, 0, 1], [2, 1, 1], [1, 1, 1], [1, 2, 1], [0, 2, 1]]
+    for start in range(6):
+        corners = hexagon[start:] + hexagon[:start]
+        triangles = mgf_scene.ear_clip(corners)
+        assert len(triangles) == 4
+        areas = [normal(corners, t)[2] / 2 for t in triangles]
+        # Each triangle faces as the polygon does, and together they cover its area once.
+        assert all(a > 0 for a in areas), (start, triangles)
+        assert sum(areas) == pytest.approx(3.0)
