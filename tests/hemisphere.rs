@@ -32,6 +32,25 @@ fn with_objects(scene: &Scene, objects: Vec<Object>) -> Scene {
     .unwrap()
 }
 
+/// The walls of `base` (a closed box) with every wall doubled by a coplanar copy, and with only
+/// its first wall doubled, each with its label.
+fn doubled_walls(base: &Scene) -> [(&'static str, Vec<Object>); 2] {
+    let mut all = base.objects.clone();
+    all.extend(base.objects.iter().cloned());
+    let mut one = base.objects.clone();
+    one.push(base.objects[0].clone());
+    [("all walls doubled", all), ("one wall doubled", one)]
+}
+
+/// Two closed inward boxes of grey 0.7 emitting 1, crossing each other, under `settings`
+/// (visibility off: a wall inside the other box sees both interiors).
+fn crossing_boxes(settings: Settings) -> Scene {
+    let a = scenes::box_mesh("A", DVec3::ZERO, DVec3::ONE, 2, true, 0);
+    let b = scenes::box_mesh("B", DVec3::new(0.5, 0.3, 0.2), DVec3::new(1.5, 1.3, 1.2), 2, true, 0);
+    let m = vec![Material { name: "grey".into(), reflectance: [0.7; 3], emission: [1.0; 3] }];
+    Scene::new(Settings { visibility: false, ..settings }, (1, 1), m, vec![Vec::new()], vec![a, b]).unwrap()
+}
+
 /// A closed box whose walls are all doubled by coplanar copies, or only one of them: every
 /// receiver sees the doubled walls twice, which without the bound returned more light than the
 /// box emits and reflects (5.40x emission instead of 3.33x; all walls doubled diverged). Any
@@ -42,12 +61,8 @@ fn coplanar_duplicates_create_no_light() {
         for rho in [0.7, 0.95] {
             let s = Settings { basis_order: order, tolerance: 1e-7, ..Settings::default() };
             let base = scenes::closed_box(2, rho, 1.0, s);
-            let mut all = base.objects.clone();
-            all.extend(base.objects.iter().cloned());
-            let mut one = base.objects.clone();
-            one.push(base.objects[0].clone());
             let want = 1.0 / (1.0 - rho);
-            for (label, objects) in [("all walls doubled", all), ("one wall doubled", one)] {
+            for (label, objects) in doubled_walls(&base) {
                 let got = energy_ratio(&with_objects(&base, objects));
                 eprintln!("order {order} rho {rho} {label}: {got:.4} (want {want:.4})");
                 assert!((got / want - 1.0).abs() < 0.01, "order {order} rho {rho} {label}: {got} vs {want}");
@@ -63,11 +78,7 @@ fn coplanar_duplicates_create_no_light() {
 #[test]
 fn crossing_boxes_without_visibility_create_no_light() {
     for (order, slack) in [(0, 1e-3), (1, 0.025), (2, 0.025)] {
-        let s = Settings { basis_order: order, tolerance: 1e-7, visibility: false, ..Settings::default() };
-        let a = scenes::box_mesh("A", DVec3::ZERO, DVec3::ONE, 2, true, 0);
-        let b = scenes::box_mesh("B", DVec3::new(0.5, 0.3, 0.2), DVec3::new(1.5, 1.3, 1.2), 2, true, 0);
-        let m = vec![Material { name: "grey".into(), reflectance: [0.7; 3], emission: [1.0; 3] }];
-        let scene = Scene::new(s, (1, 1), m, vec![Vec::new()], vec![a, b]).unwrap();
+        let scene = crossing_boxes(Settings { basis_order: order, tolerance: 1e-7, ..Settings::default() });
         let (got, want) = (energy_ratio(&scene), 1.0 / 0.3);
         eprintln!("crossing boxes, visibility off, order {order}: {got:.4} (want {want:.4})");
         assert!(got <= want * (1.0 + slack) && got >= want * (1.0 - 1e-3), "order {order}: {got}");
@@ -324,24 +335,15 @@ fn the_hierarchy_creates_no_light_either() {
     for rho in [0.7, 0.95] {
         let s = Settings { basis_order: 1, tolerance: 1e-6, ..Settings::default() };
         let base = scenes::closed_box(2, rho, 1.0, s);
-        let mut all = base.objects.clone();
-        all.extend(base.objects.iter().cloned());
-        let mut one = base.objects.clone();
-        one.push(base.objects[0].clone());
         let want = 1.0 / (1.0 - rho);
-        for (label, objects) in
-            [("as modelled", base.objects.clone()), ("all walls doubled", all), ("one wall doubled", one)]
-        {
+        let [all, one] = doubled_walls(&base);
+        for (label, objects) in [("as modelled", base.objects.clone()), all, one] {
             let got = hierarchical_energy_ratio(&with_objects(&base, objects));
             eprintln!("hierarchy, rho {rho} {label}: {got:.4} (want {want:.4})");
             assert!((got / want - 1.0).abs() < 0.01, "rho {rho} {label}: {got} vs {want}");
         }
     }
-    let s = Settings { basis_order: 1, tolerance: 1e-6, visibility: false, ..Settings::default() };
-    let a = scenes::box_mesh("A", DVec3::ZERO, DVec3::ONE, 2, true, 0);
-    let b = scenes::box_mesh("B", DVec3::new(0.5, 0.3, 0.2), DVec3::new(1.5, 1.3, 1.2), 2, true, 0);
-    let m = vec![Material { name: "grey".into(), reflectance: [0.7; 3], emission: [1.0; 3] }];
-    let scene = Scene::new(s, (1, 1), m, vec![Vec::new()], vec![a, b]).unwrap();
+    let scene = crossing_boxes(Settings { basis_order: 1, tolerance: 1e-6, ..Settings::default() });
     let (got, want) = (hierarchical_energy_ratio(&scene), 1.0 / 0.3);
     eprintln!("hierarchy, crossing boxes, visibility off: {got:.4} (want {want:.4})");
     assert!(got <= want * 1.025 && got >= want * 0.99, "crossing boxes: {got}");

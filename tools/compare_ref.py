@@ -13,14 +13,18 @@ import json
 import numpy as np
 
 
-def compare(result: str, reference: str) -> dict:
+def _corners(result: str, reference: str) -> dict:
+    """Per object of the reference, (Cycles' corners, ours): ours the mean of the channels, the
+    object's first corners (a scene with faces appended, tools/two_sided.py, has more)."""
     ref = json.loads(open(reference).read())
     frame = json.loads(open(result).read())["frames"][0]
     ours = {o["name"]: np.asarray(o["corner_radiosity"], np.float64).mean(axis=1) for o in frame["objects"]}
+    return {name: (np.asarray(v), ours[name][: len(v)]) for name, v in ref["objects"].items()}
+
+
+def compare(result: str, reference: str) -> dict:
     out = {}
-    for name, values in ref["objects"].items():
-        cyc = np.asarray(values)
-        b = ours[name][: len(cyc)]  # a scene with faces appended (tools/two_sided.py): the first corners
+    for name, (cyc, b) in _corners(result, reference).items():
         # (An object black in Cycles, its corners all buried, reads nan or inf.)
         with np.errstate(divide="ignore", invalid="ignore"):
             out[name] = (float(np.sqrt(np.mean((b - cyc) ** 2)) / cyc.mean()), float(b.mean() / cyc.mean()))
@@ -29,11 +33,9 @@ def compare(result: str, reference: str) -> dict:
 
 def compare_all(result: str, reference: str) -> tuple[float, float]:
     """[`compare`] over every corner of every object of the reference at once."""
-    ref = json.loads(open(reference).read())
-    frame = json.loads(open(result).read())["frames"][0]
-    ours = {o["name"]: np.asarray(o["corner_radiosity"], np.float64).mean(axis=1) for o in frame["objects"]}
-    cyc = np.concatenate([np.asarray(v) for v in ref["objects"].values()])
-    b = np.concatenate([ours[name][: len(v)] for name, v in ref["objects"].items()])
+    pairs = _corners(result, reference).values()
+    cyc = np.concatenate([c for c, _ in pairs])
+    b = np.concatenate([o for _, o in pairs])
     return float(np.sqrt(np.mean((b - cyc) ** 2)) / cyc.mean()), float(b.mean() / cyc.mean())
 
 

@@ -1007,11 +1007,8 @@ mod tests {
     /// pieces, and with no bar (a full pass) as well.
     #[test]
     fn the_passes_by_pieces_find_what_a_plain_loop_finds() {
-        let mut state = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = move || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = super::coupling::SplitMix(0x2545_F491_4F6C_DD1D);
+        let mut next = move || rng.next();
         let len = 3 * PASS_CHUNK + 123;
         let mut loads: Vec<f32> = (0..len)
             .map(|_| match next() {

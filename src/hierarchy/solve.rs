@@ -286,23 +286,7 @@ impl State {
     fn bound_leaves(&mut self, tree: &Tree, packed: &PackedLinks, gathered: &mut Gathered) -> Result<()> {
         let (nb, n) = (self.nb, tree.nodes.len());
         let what = "the hierarchy's hemisphere bound";
-        let mut white = State {
-            nb,
-            b: budget::try_filled(n * nb, [0.0; 3], what)?,
-            sources: Vec::new(),
-            has_sources: Vec::new(),
-            mean: budget::try_filled(n, [0.0; 3], what)?,
-            lobes: budget::try_filled(n, lobes::ZERO, what)?,
-            bound: Vec::new(),
-            two_scale: self.two_scale.clone(),
-        };
-        let mut leaves = Vec::new();
-        tree.leaves_below(tree.root, &mut leaves);
-        // `Gamma_0 = 1`: `b^0 = 1` is `B = 1` over the leaf.
-        for &id in &leaves {
-            white.b[id as usize * nb] = [1.0; 3];
-        }
-        white.refresh(tree);
+        let (mut white, leaves) = self.white(tree)?;
         white.furnace_gather(tree, packed, gathered)?;
         let zero = [[0.0; 3]; crate::basis::MAX_LEN];
         let walk = Walk {
@@ -324,6 +308,32 @@ impl State {
         }
         self.bound = bound;
         Ok(())
+    }
+
+    /// A state of this one's basis with every surface at `B = 1` (pulled: every surface node at
+    /// `b = (1, 0, ...)`, clusters' means and lobes those of white faces), and the tree's leaves;
+    /// no sources. [`crate::Error::OutOfMemory`] when it cannot be had.
+    fn white(&self, tree: &Tree) -> Result<(State, Vec<NodeId>)> {
+        let (nb, n) = (self.nb, tree.nodes.len());
+        let what = "the hierarchy's hemisphere bound";
+        let mut white = State {
+            nb,
+            b: budget::try_filled(n * nb, [0.0; 3], what)?,
+            sources: Vec::new(),
+            has_sources: Vec::new(),
+            mean: budget::try_filled(n, [0.0; 3], what)?,
+            lobes: budget::try_filled(n, lobes::ZERO, what)?,
+            bound: Vec::new(),
+            two_scale: self.two_scale.clone(),
+        };
+        let mut leaves = Vec::new();
+        tree.leaves_below(tree.root, &mut leaves);
+        // `Gamma_0 = 1`: `b^0 = 1` is `B = 1` over the leaf.
+        for &id in &leaves {
+            white.b[id as usize * nb] = [1.0; 3];
+        }
+        white.refresh(tree);
+        Ok((white, leaves))
     }
 
     /// What every node receives through its own links from the current state, into `out`
@@ -614,13 +624,7 @@ mod tests {
         let s = &h.stats;
         assert!(s.cluster_links > 0 && s.constant_links > 0 && s.surface_links > 0, "{s:?}");
         let (tree, packed) = (&h.hierarchy.tree, h.hierarchy.packed.as_ref().unwrap());
-        let mut white = State::new(tree);
-        let mut leaves = Vec::new();
-        tree.leaves_below(tree.root, &mut leaves);
-        for &id in &leaves {
-            white.b[id as usize * white.nb] = [1.0; 3];
-        }
-        white.refresh(tree);
+        let (white, _) = State::new(tree).white(tree).unwrap();
         let empty = || Gathered { h: Vec::new(), lobes: Vec::new(), constant: Vec::new() };
         let (mut swept, mut furnace) = (empty(), empty());
         white.gather(tree, packed, &mut swept).unwrap();
