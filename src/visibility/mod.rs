@@ -143,6 +143,10 @@ pub struct Occluders {
     bvh: Bvh,
     /// Per BVH triangle: `v0`, `v1 - v0`, `v2 - v0` (the edges [`bvh::segment_hits`] forms).
     edges: Vec<[DVec3; 3]>,
+    /// Per BVH triangle, its plane `(n, d)` (`n . p = d`, `n` unit; zero for a degenerate
+    /// triangle, which blocks nothing): for [`Occluders::crosses`], which asks it of every
+    /// candidate of a corner's source.
+    triangle_planes: Vec<(DVec3, f64)>,
     /// Per element: its plane when some occluder triangle lies wholly behind it (the only case
     /// in which the plane test in [`Occluders::link_visibility`] drops anything).
     culling_planes: Vec<Option<(DVec3, f64)>>,
@@ -196,7 +200,14 @@ impl Occluders {
             }
         }
         let bvh = Bvh::build(tris);
-        let edges = bvh.triangles().iter().map(|t| triangle_edges(t.v)).collect();
+        let edges: Vec<[DVec3; 3]> = bvh.triangles().iter().map(|t| triangle_edges(t.v)).collect();
+        let triangle_planes = edges
+            .iter()
+            .map(|[v0, e1, e2]| {
+                let n = e1.cross(*e2).normalize_or_zero();
+                (n, n.dot(*v0))
+            })
+            .collect();
         let eps = 1e-9 * scale;
         let culling_planes = {
             use rayon::prelude::*;
@@ -219,7 +230,18 @@ impl Occluders {
             .flat_map(|p| sample_points(p, samples_per_axis).into_iter().take(cells))
             .collect();
         let sample_bounds = samples.chunks(cells).map(Aabb::from_points).collect();
-        Occluders { bvh, edges, culling_planes, scale, samples_per_axis, samples, sample_bounds, hull, alias }
+        Occluders {
+            bvh,
+            edges,
+            triangle_planes,
+            culling_planes,
+            scale,
+            samples_per_axis,
+            samples,
+            sample_bounds,
+            hull,
+            alias,
+        }
     }
 
     /// The id element `e`'s own triangles carry ([`Occluders::with_aliases`]): the one a ray

@@ -48,15 +48,14 @@ impl Occluders {
     /// face), nor when `bounds` lies wholly on `x`'s side of it (the walls standing on a
     /// neighbour's far edge, which every shaft from a corner touches).
     fn crosses(&self, t: usize, x: DVec3, bounds: &Aabb) -> bool {
-        let [v0, e1, e2] = self.edges[t];
-        let n = e1.cross(e2);
-        let eps = 1e-9 * self.scale * n.length();
-        let from = n.dot(x - v0);
+        let (n, d) = self.triangle_planes[t];
+        let eps = 1e-9 * self.scale;
+        let from = n.dot(x) - d;
         if from.abs() <= eps {
             return false;
         }
         let (c, h) = (0.5 * (bounds.min + bounds.max), 0.5 * (bounds.max - bounds.min));
-        let (mid, spread) = (n.dot(c - v0), n.abs().dot(h));
+        let (mid, spread) = (n.dot(c) - d, n.abs().dot(h));
         if from > 0.0 { mid - spread < -eps } else { mid + spread > eps }
     }
 
