@@ -54,7 +54,7 @@ impl Occluders {
         if from.abs() <= eps {
             return false;
         }
-        let (c, h) = (0.5 * (bounds.min + bounds.max), 0.5 * (bounds.max - bounds.min));
+        let (c, h) = (bounds.centre(), 0.5 * bounds.diagonal());
         let (mid, spread) = (n.dot(c) - d, n.abs().dot(h));
         if from > 0.0 { mid - spread < -eps } else { mid + spread > eps }
     }
@@ -208,6 +208,11 @@ mod tests {
     use crate::geometry::{Aabb, Patch};
     use crate::visibility::Occluders;
 
+    /// The bilinear patch through four corners.
+    fn quad(c: [[f64; 3]; 4]) -> Patch {
+        Patch::from_corners(&c.map(DVec3::from_array))
+    }
+
     /// A point on a face that a copy of it covers (the decimated monastery has many), the copy
     /// tilted a little about a line through the point and the point a rounding error behind
     /// it, sees a source in front: the copy's plane holds the point, so no segment from it
@@ -217,7 +222,6 @@ mod tests {
     /// drop the copy: it reaches in front of it.
     #[test]
     fn a_copy_of_the_receiving_face_through_the_point_hides_nothing() {
-        let quad = |c: [[f64; 3]; 4]| Patch::from_corners(&c.map(DVec3::from_array));
         let receiver = quad([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 1.0, 1.0], [0.0, 0.0, 1.0]]);
         // The copy, tilted by 4e-6 about the line x = 0, z = 0.5.
         let d = 2e-6;
@@ -247,26 +251,11 @@ mod tests {
     /// standing on the source's far edge, the point on the source's side of it.
     #[test]
     fn a_wall_beyond_the_source_is_no_candidate() {
-        let floor = Patch::from_corners(&[
-            DVec3::new(0.0, 0.0, 0.0),
-            DVec3::new(1.0, 0.0, 0.0),
-            DVec3::new(1.0, 1.0, 0.0),
-            DVec3::new(0.0, 1.0, 0.0),
-        ]);
+        let floor = quad([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]]);
         // A wall in the plane y = 1 over the floor's edge, and the receiving point on a post
         // facing +x inside the room, a little above the floor.
-        let wall = Patch::from_corners(&[
-            DVec3::new(0.0, 1.0, 0.0),
-            DVec3::new(0.0, 1.0, 1.0),
-            DVec3::new(1.0, 1.0, 1.0),
-            DVec3::new(1.0, 1.0, 0.0),
-        ]);
-        let post = Patch::from_corners(&[
-            DVec3::new(0.0, 0.2, 0.0),
-            DVec3::new(0.0, 0.8, 0.0),
-            DVec3::new(0.0, 0.8, 0.5),
-            DVec3::new(0.0, 0.2, 0.5),
-        ]);
+        let wall = quad([[0.0, 1.0, 0.0], [0.0, 1.0, 1.0], [1.0, 1.0, 1.0], [1.0, 1.0, 0.0]]);
+        let post = quad([[0.0, 0.2, 0.0], [0.0, 0.8, 0.0], [0.0, 0.8, 0.5], [0.0, 0.2, 0.5]]);
         let occluders = Occluders::new(&[post, floor, wall], 2);
         let x = DVec3::new(0.0, 0.5, 0.25);
         let mut candidates = Vec::new();
