@@ -221,6 +221,32 @@ fn face_means(h: &galerkin_radiosity::hierarchy::HierarchicalFrame) -> Vec<f64> 
     (0..h.hierarchy.tree.faces.len()).map(|f| h.face_mean(f)[0]).collect()
 }
 
+/// The link phase decides the work stack in parallel (descents, filed in order by one thread)
+/// and computes links in parallel: the decimated monastery's links, hidden pairs and face means
+/// are bit for bit the same on one, two and three threads.
+#[test]
+fn the_links_are_the_same_for_every_thread_count() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real");
+    let mut scene = read_scene(&dir.join("monastery_scene.json")).unwrap();
+    scene.settings.corner_gather = false;
+    let settings = HierarchySettings::of(&scene.settings);
+    let solve = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let h = pool.install(|| solve_frame(&scene, 0.0, &settings, &no_progress).unwrap());
+        let links: Vec<String> =
+            h.hierarchy.links.iter().map(|l| format!("{} {} {:?}", l.a, l.b, l.coupling)).collect();
+        (links, h.hierarchy.blocked.clone(), face_means(&h))
+    };
+    let one = solve(1);
+    assert!(one.0.len() > 10_000 && !one.1.is_empty(), "{} links, {} hidden pairs", one.0.len(), one.1.len());
+    for threads in [2, 3] {
+        let other = solve(threads);
+        assert!(one.0 == other.0, "{threads} threads: other links");
+        assert_eq!(one.1, other.1, "{threads} threads: other hidden pairs");
+        assert_eq!(one.2, other.2, "{threads} threads: other face means");
+    }
+}
+
 /// A real mesh in CI: the pybullet monastery decimated to 1,000 triangles on a ground, lit by
 /// an emissive quad, baked through a session with the hierarchical method; its mean corner
 /// radiosity per object within 8% of a converged Cycles bake of the same scene. (Corners from

@@ -135,18 +135,30 @@ impl PairSpace {
         &self,
         tree: &Tree,
         of: f64,
-        (a, b): (NodeId, NodeId),
+        pair: (NodeId, NodeId),
         new: &[(NodeId, NodeId)],
         shares: &mut Vec<f64>,
     ) -> Result<f64> {
-        if new.is_empty() {
-            return Ok(of);
-        }
         budget::try_reserve(shares, new.len(), NODES)?;
+        Ok(self.divide_in(tree, of, pair, new, shares))
+    }
+
+    /// [`PairSpace::divide`] with room for the shares made already (a [`Descent`]'s own few).
+    fn divide_in(
+        &self,
+        tree: &Tree,
+        of: f64,
+        (a, b): (NodeId, NodeId),
+        new: &[(NodeId, NodeId)],
+        shares: &mut Vec<f64>,
+    ) -> f64 {
+        if new.is_empty() {
+            return of;
+        }
         let start = shares.len();
         if !tree.node(a).is_cluster() && !tree.node(b).is_cluster() {
             shares.resize(start + new.len(), of / new.len() as f64);
-            return Ok(0.0);
+            return 0.0;
         }
         shares.extend(new.iter().map(|&(a, b)| self.links(tree, a, b)));
         let sum: f64 = shares[start..].iter().sum();
@@ -155,8 +167,120 @@ impl PairSpace {
         } else {
             shares[start..].iter_mut().for_each(|x| *x = of / new.len() as f64);
         }
-        Ok(0.0)
+        0.0
     }
+}
+
+/// What [`Descent::of`] reads: the tree and the estimates as they stand when a chunk of the
+/// work stack is decided.
+struct Deciding<'a> {
+    tree: &'a Tree,
+    oracle: &'a Oracle,
+    space: &'a PairSpace,
+    radiosity: &'a [f64],
+    stores_idle: bool,
+}
+
+/// A decision for the serial loop of [`Hierarchy::refine_pairs`] to file, in order.
+enum Decided {
+    /// The pair `(a, b)` was split at `s`, whose children exist (the pair tree's record).
+    Split(NodeId, NodeId, NodeId),
+    /// The pair carries nothing and is kept as idle.
+    Idle(NodeId, NodeId),
+    /// The pair is to be linked as it stands, with its share of the work.
+    Link(NodeId, NodeId, Weight, f64),
+    /// The pair is to be split at the surface leaf `s`: new nodes, which the serial loop makes.
+    SplitLeaf(NodeId, NodeId, NodeId, f64),
+    /// The pair is left on the work stack, undecided, with its share.
+    Open(NodeId, NodeId, f64),
+}
+
+/// One pair taken off the work stack, decided with the pairs its splits make, depth first,
+/// while they need no new node (the split end is a cluster or a surface split already), at
+/// most [`DESCENT`] decisions. Before, every pair a split made went back on the stack and was
+/// decided in a later round, its split filed by the serial loop: on a 30k-triangle crop of the
+/// monastery over 16M splits of a cluster, whose filing (the progress estimates of the pairs
+/// made, [`PairSpace::links`], reading both nodes) was most of the link phase's serial part.
+/// The verdicts are those of one pair at a time (a verdict reads the two nodes and their
+/// estimates, which a split elsewhere does not change), and deterministic for every thread
+/// count; the links of a round come in another order than when each split went back on the
+/// stack, so the solves after it round differently.
+struct Descent {
+    decided: Vec<Decided>,
+    /// The work's share settled by the decisions (skipped pairs, and splits that made no pairs).
+    settled: f64,
+    /// The pairs left [`Decided::Open`].
+    open: usize,
+}
+
+/// The most decisions one [`Descent`] makes: enough that a descent's filing is a copy, few
+/// enough that the top of the refinement (one pair, the root's with itself) spreads over the
+/// threads within a few rounds.
+const DESCENT: usize = 64;
+
+impl Descent {
+    fn of(d: &Deciding, pair: (NodeId, NodeId), share: f64) -> Self {
+        let (tree, bar) = (d.tree, d.oracle.threshold);
+        let mut out = Descent { decided: Vec::new(), settled: 0.0, open: 0 };
+        // The pairs still to decide and their shares, a stack as the work is: the same order.
+        let (mut stack, mut shares) = (vec![pair], vec![share]);
+        let mut decisions = 0;
+        while let Some((a, b)) = stack.pop() {
+            let share = shares.pop().expect("a share per pair");
+            if decisions == DESCENT {
+                // The rest back on the work stack, bottom first, so that it pops as here.
+                stack.push((a, b));
+                shares.push(share);
+                out.open = stack.len();
+                for (&(a, b), &share) in stack.iter().zip(&shares) {
+                    out.decided.push(Decided::Open(a, b, share));
+                }
+                break;
+            }
+            decisions += 1;
+            let pushed = stack.len();
+            if a == b {
+                // A cluster's light among its own parts; a surface does not light itself (its
+                // parts are one face: nothing to record).
+                if tree.node(a).is_cluster() {
+                    out.decided.push(Decided::Split(a, a, a));
+                }
+                let children = tree.children(a);
+                for (i, &x) in children.iter().enumerate() {
+                    stack.extend(children[i..].iter().map(|&y| (x, y)));
+                }
+                out.settled += d.space.divide_in(tree, share, (a, b), &stack[pushed..], &mut shares);
+                continue;
+            }
+            match d.oracle.decide(tree, d.radiosity, a, b, bar) {
+                Verdict::Skip => {
+                    out.settled += share;
+                    if d.stores_idle && !same_face(tree, a, b) {
+                        out.decided.push(Decided::Idle(a, b));
+                    }
+                }
+                Verdict::Link => {
+                    let weight = d.oracle.weight(tree, d.radiosity, a, b);
+                    out.decided.push(Decided::Link(a, b, weight, share));
+                }
+                Verdict::Split(s) if tree.children(s).is_empty() => {
+                    out.decided.push(Decided::SplitLeaf(a, b, s, share));
+                }
+                Verdict::Split(s) => {
+                    out.decided.push(Decided::Split(a, b, s));
+                    let other = if s == a { b } else { a };
+                    stack.extend(tree.children(s).iter().map(|&c| (c, other)));
+                    out.settled += d.space.divide_in(tree, share, (a, b), &stack[pushed..], &mut shares);
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Whether `a` and `b` are parts of one face.
+fn same_face(tree: &Tree, a: NodeId, b: NodeId) -> bool {
+    matches!((tree.node(a).surface(), tree.node(b).surface()), (Some(x), Some(y)) if x.face == y.face)
 }
 
 /// What a pair the oracle skips costs (a decision) in links computed ([`PairSpace::links`]): a
@@ -170,6 +294,15 @@ const QUICK_GROWTH: f64 = 2.0;
 /// Partially visible links, and pairs whose sampled rays were all blocked, are split while they
 /// can carry more than this share of the threshold.
 const PARTIAL_SHARE: f64 = 0.25;
+
+/// How a computed pair is filed ([`Oracle::filing`]).
+enum Filing {
+    /// A shadow boundary crosses the pair (some rays pass), or may (none does: a few rays cannot
+    /// show that the pair is wholly hidden), and the pair may carry enough to matter.
+    SplitForShadows,
+    /// Kept as computed, with this load ([`Oracle::load`], [`Oracle::blocked_load`]).
+    Load(f32),
+}
 
 /// The decision for one pair.
 enum Verdict {
@@ -295,6 +428,26 @@ impl Oracle {
     fn may_carry_much(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId) -> bool {
         self.pair_power(tree, radiosity, a, b) > PARTIAL_SHARE * self.threshold
             && (self.splittable(tree, a) || self.splittable(tree, b))
+    }
+
+    /// How [`Hierarchy::take_computed`] files the computed pair `(a, b)`, worked out beside
+    /// the computation (in parallel; the filing's own reads were a tenth of the link phase's
+    /// serial part on the full monastery): split further when a shadow boundary crosses it, or
+    /// may, and it may carry much; else kept with its load (a link's, a hidden pair's; unused
+    /// for a pair that exchanges nothing). The two ends and their estimates are what a split
+    /// elsewhere leaves as they are, so this is what the filing read itself.
+    fn filing(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId, c: &coupling::Computed) -> Filing {
+        if (c.partial || c.blocked) && self.may_carry_much(tree, radiosity, a, b) {
+            return Filing::SplitForShadows;
+        }
+        Filing::Load(match &c.coupling {
+            Some(coupling) => {
+                let light = matches!(coupling, coupling::Coupling::Constants { .. });
+                self.load(tree, radiosity, a, b, light)
+            }
+            None if c.blocked => self.blocked_load(tree, radiosity, a, b),
+            None => 0.0,
+        })
     }
 
     fn decide(&self, tree: &Tree, radiosity: &[f64], a: NodeId, b: NodeId, bar: f64) -> Verdict {
@@ -617,7 +770,7 @@ impl Hierarchy {
     }
 
     fn same_face(&self, a: NodeId, b: NodeId) -> bool {
-        matches!((self.tree.node(a).surface(), self.tree.node(b).surface()), (Some(x), Some(y)) if x.face == y.face)
+        same_face(&self.tree, a, b)
     }
 
     /// Builds the links from the root's interaction with itself, `radiosity` per node (it grows
@@ -768,14 +921,13 @@ impl Hierarchy {
         stats: &mut RefineStats,
         progress: LinkProgress,
     ) -> Result<()> {
-        let bar = self.oracle.threshold;
         let space = PairSpace::new(&self.tree);
         // Per pair on `work`, and per accepted pair, its share of the work ([`PairSpace`]).
         let mut shares: Vec<f64> = Vec::new();
         budget::try_reserve(&mut shares, work.len(), LINKS)?;
         shares.extend(work.iter().map(|&(a, b)| space.links(&self.tree, a, b)));
         let total: f64 = shares.iter().sum();
-        let mut settled = 0.0;
+        let (mut settled, mut reported) = (0.0, 0.0f64);
         let mut accepted = Vec::new();
         let mut accepted_shares = Vec::new();
         let mut part = Vec::new();
@@ -788,65 +940,73 @@ impl Hierarchy {
                 // time, for every thread count.
                 let top = work.split_off(work.len().saturating_sub(DECIDE_CHUNK));
                 let top_shares = shares.split_off(shares.len() - top.len());
-                let tree = &self.tree;
-                let oracle = &self.oracle;
-                let verdicts: Vec<Option<(Verdict, Weight)>> = top
+                let (tree, oracle, seen): (_, _, &[f64]) = (&self.tree, &self.oracle, radiosity);
+                let stores_idle = self.stores_idle;
+                let descents: Vec<Descent> = top
                     .par_iter()
-                    .map(|&(a, b)| {
-                        (a != b).then(|| match oracle.decide(tree, radiosity, a, b, bar) {
-                            Verdict::Link => (Verdict::Link, oracle.weight(tree, radiosity, a, b)),
-                            v => (v, Weight::Full),
-                        })
+                    .zip(&top_shares)
+                    .map(|(&pair, &share)| {
+                        Descent::of(
+                            &Deciding { tree, oracle, space: &space, radiosity: seen, stores_idle },
+                            pair,
+                            share,
+                        )
                     })
                     .collect();
-                for ((&(a, b), verdict), &share) in top.iter().zip(verdicts).zip(&top_shares).rev() {
-                    let pushed = work.len();
-                    let Some((verdict, weight)) = verdict else {
-                        // A cluster's light among its own parts; a surface does not light itself
-                        // (its parts are one face: nothing to record).
-                        let children = self.tree.children(a).to_vec();
-                        if self.tree.node(a).is_cluster() {
-                            self.splits.record(a, a, a)?;
-                        }
-                        for (i, &x) in children.iter().enumerate() {
-                            for &y in &children[i..] {
-                                work.push((x, y));
-                            }
-                        }
-                        settled += space.divide(&self.tree, share, (a, b), &work[pushed..], &mut shares)?;
-                        continue;
-                    };
-                    match verdict {
-                        Verdict::Skip => {
-                            settled += share;
-                            if self.stores_idle && !self.same_face(a, b) {
+                for descent in descents.into_iter().rev() {
+                    settled += descent.settled;
+                    budget::try_reserve(&mut work, descent.open, NODES)?;
+                    budget::try_reserve(&mut shares, descent.open, NODES)?;
+                    for decided in descent.decided {
+                        match decided {
+                            Decided::Split(a, b, s) => self.splits.record(a, b, s)?,
+                            Decided::Idle(a, b) => {
                                 budget::try_reserve(&mut self.idle, 1, LINKS)?;
                                 self.idle.push((a, b));
                             }
-                        }
-                        Verdict::Link => {
-                            accepted.push((a, b, weight));
-                            accepted_shares.push(share);
-                        }
-                        Verdict::Split(s) => {
-                            self.split_pair((a, b), s, radiosity, &mut work)?;
-                            settled +=
-                                space.divide(&self.tree, share, (a, b), &work[pushed..], &mut shares)?;
+                            Decided::Link(a, b, weight, share) => {
+                                accepted.push((a, b, weight));
+                                accepted_shares.push(share);
+                            }
+                            Decided::Open(a, b, share) => {
+                                work.push((a, b));
+                                shares.push(share);
+                            }
+                            Decided::SplitLeaf(a, b, s, share) => {
+                                let pushed = work.len();
+                                self.split_pair((a, b), s, radiosity, &mut work)?;
+                                settled +=
+                                    space.divide(&self.tree, share, (a, b), &work[pushed..], &mut shares)?;
+                            }
                         }
                     }
                 }
             }
             // In chunks, so that the batch reports its progress and can be cancelled, and so
-            // that what a chunk computed becomes links before the next is computed.
-            for (chunk, chunk_shares) in accepted.chunks(LINK_CHUNK).zip(accepted_shares.chunks(LINK_CHUNK)) {
-                if !progress((settled / total).min(1.0)) {
+            // that what a chunk computed becomes links before the next is computed. The batch's
+            // share is reported as its chunks are computed, evenly (each chunk is as many links
+            // to compute): the pairs' own shares follow the subtrees the refinement descended,
+            // so that in the order the descents file them the first half of a batch's pairs
+            // held 69% of its share on the decimated monastery, and the report ran ahead. Never
+            // less than a report before it: a pair split for its shadows passes its share on.
+            let (from, batch): (f64, f64) = (settled, accepted_shares.iter().sum());
+            for (k, (chunk, chunk_shares)) in
+                accepted.chunks(LINK_CHUNK).zip(accepted_shares.chunks(LINK_CHUNK)).enumerate()
+            {
+                let computed = (k * LINK_CHUNK) as f64 / accepted.len() as f64;
+                reported = reported.max(((from + batch * computed) / total).min(1.0));
+                if !progress(reported) {
                     return Err(crate::Error::Cancelled);
                 }
-                let tree = &self.tree;
+                let (tree, oracle, seen): (_, _, &[f64]) = (&self.tree, &self.oracle, radiosity);
                 let t = std::time::Instant::now();
                 chunk
                     .par_iter()
-                    .map(|&(a, b, weight)| coupling::compute_as(ctx, tree, a, b, weight))
+                    .map(|&(a, b, weight)| {
+                        let c = coupling::compute_as(ctx, tree, a, b, weight);
+                        let filing = oracle.filing(tree, seen, a, b, &c);
+                        (c, filing)
+                    })
                     .collect_into_vec(&mut part);
                 stats.compute_seconds += t.elapsed().as_secs_f64();
                 // Reserved first: the allocator's refusal of the large vectors is an error (a
@@ -858,9 +1018,10 @@ impl Hierarchy {
                 }
                 budget::try_reserve(&mut self.blocked, part.len(), LINKS)?;
                 budget::try_reserve(&mut self.blocked_load, part.len(), LINKS)?;
-                for ((&(a, b, _), c), &share) in chunk.iter().zip(part.drain(..)).zip(chunk_shares) {
+                for ((&(a, b, _), (c, filing)), &share) in chunk.iter().zip(part.drain(..)).zip(chunk_shares)
+                {
                     let pushed = work.len();
-                    if self.take_computed(a, b, c, radiosity, &mut work, stats)? {
+                    if self.take_computed(a, b, c, filing, radiosity, &mut work, stats)? {
                         settled += share;
                     } else {
                         settled += space.divide(&self.tree, share, (a, b), &work[pushed..], &mut shares)?;
@@ -871,36 +1032,38 @@ impl Hierarchy {
         Ok(())
     }
 
-    /// Files the computed link between `a` and `b`: a link, a blocked or an idle pair (`true`:
+    /// Files the computed link between `a` and `b` as `filing` says ([`Oracle::filing`]): a link, a blocked or an idle pair (`true`:
     /// the pair is settled), or, when a shadow boundary crosses (or may cross) a pair that
     /// carries enough, its larger node split onto `work` (`false`).
+    #[allow(clippy::too_many_arguments)]
     fn take_computed(
         &mut self,
         a: NodeId,
         b: NodeId,
         c: coupling::Computed,
+        filing: Filing,
         radiosity: &mut Vec<f64>,
         work: &mut Vec<(NodeId, NodeId)>,
         stats: &mut RefineStats,
     ) -> Result<bool> {
-        // A shadow boundary crosses the pair (some rays pass), or may (none does: a few rays
-        // cannot show that the pair is wholly hidden), and the pair may carry enough to matter.
-        if (c.partial || c.blocked) && self.oracle.may_carry_much(&self.tree, radiosity, a, b) {
-            stats.split_for_shadows += 1;
-            let s = self.larger_splittable(a, b);
-            self.split_pair((a, b), s, radiosity, work)?;
-            return Ok(false);
-        }
+        let load = match filing {
+            Filing::SplitForShadows => {
+                stats.split_for_shadows += 1;
+                let s = self.larger_splittable(a, b);
+                self.split_pair((a, b), s, radiosity, work)?;
+                return Ok(false);
+            }
+            Filing::Load(load) => load,
+        };
         match c.coupling {
             Some(coupling) => {
-                let light = matches!(coupling, coupling::Coupling::Constants { .. });
-                self.link_load.push(self.oracle.load(&self.tree, radiosity, a, b, light));
+                self.link_load.push(load);
                 self.links.push(Link { a, b, coupling });
             }
             None if c.blocked => {
                 // (Unknown loads before this one stay unknown.)
                 self.blocked_load.resize(self.blocked.len(), f32::INFINITY);
-                self.blocked_load.push(self.oracle.blocked_load(&self.tree, radiosity, a, b));
+                self.blocked_load.push(load);
                 self.blocked.push((a, b));
             }
             None if self.stores_idle && !self.same_face(a, b) => self.idle.push((a, b)),
