@@ -201,10 +201,10 @@ enum Decided {
 /// decided in a later round, its split filed by the serial loop: on a 30k-triangle crop of the
 /// monastery over 16M splits of a cluster, whose filing (the progress estimates of the pairs
 /// made, [`PairSpace::links`], reading both nodes) was most of the link phase's serial part.
-/// The verdicts are those of one pair at a time (a verdict reads the two nodes and their
-/// estimates, which a split elsewhere does not change), and deterministic for every thread
-/// count; the links of a round come in another order than when each split went back on the
-/// stack, so the solves after it round differently.
+/// Each pair is decided as it would be alone (a verdict reads the two nodes and their
+/// estimates, which a split elsewhere does not change), and the whole is the same for every
+/// thread count. (Not the links of when each split went back on the stack: the surfaces'
+/// quadtree nodes are made in another order, and their ids seed a cluster link's rays.)
 struct Descent {
     decided: Vec<Decided>,
     /// The work's share settled by the decisions (skipped pairs, and splits that made no pairs).
