@@ -935,9 +935,9 @@ impl Hierarchy {
             accepted.clear();
             accepted_shares.clear();
             while accepted.len() < BATCH && !work.is_empty() {
-                // The top of the stack decided in parallel (the tree and the estimates are only
-                // read), then filed in order (splits add nodes): the same verdicts as one at a
-                // time, for every thread count.
+                // The top of the stack decided in parallel, each pair by a descent (the tree and
+                // the estimates are only read), then filed in order (a surface leaf's split adds
+                // nodes): the same verdicts as one at a time, the same for every thread count.
                 let top = work.split_off(work.len().saturating_sub(DECIDE_CHUNK));
                 let top_shares = shares.split_off(shares.len() - top.len());
                 let (tree, oracle, seen): (_, _, &[f64]) = (&self.tree, &self.oracle, radiosity);
@@ -1032,9 +1032,10 @@ impl Hierarchy {
         Ok(())
     }
 
-    /// Files the computed link between `a` and `b` as `filing` says ([`Oracle::filing`]): a link, a blocked or an idle pair (`true`:
-    /// the pair is settled), or, when a shadow boundary crosses (or may cross) a pair that
-    /// carries enough, its larger node split onto `work` (`false`).
+    /// Files the computed link between `a` and `b` as `filing` says ([`Oracle::filing`]): a
+    /// link, a blocked or an idle pair (`true`: the pair is settled), or, when a shadow boundary
+    /// crosses (or may cross) a pair that carries enough, its larger node split onto `work`
+    /// (`false`).
     #[allow(clippy::too_many_arguments)]
     fn take_computed(
         &mut self,
