@@ -143,7 +143,8 @@ impl PairSpace {
         Ok(self.divide_in(tree, of, pair, new, shares))
     }
 
-    /// [`PairSpace::divide`] with room for the shares made already (a [`Descent`]'s own few).
+    /// [`PairSpace::divide`] without asking the budget for room (a [`Descent`]'s own short
+    /// list, a few shares).
     fn divide_in(
         &self,
         tree: &Tree,
@@ -769,10 +770,6 @@ impl Hierarchy {
         leaves.into_iter().filter(|&(a, b)| !stored.contains(&key(a, b))).collect()
     }
 
-    fn same_face(&self, a: NodeId, b: NodeId) -> bool {
-        same_face(&self.tree, a, b)
-    }
-
     /// Builds the links from the root's interaction with itself, `radiosity` per node (it grows
     /// with the tree: new nodes take their parent's).
     /// [`Error::OutOfMemory`](crate::Error::OutOfMemory) when the links or nodes cannot be
@@ -940,18 +937,17 @@ impl Hierarchy {
                 // nodes): the same verdicts as one at a time, the same for every thread count.
                 let top = work.split_off(work.len().saturating_sub(DECIDE_CHUNK));
                 let top_shares = shares.split_off(shares.len() - top.len());
-                let (tree, oracle, seen): (_, _, &[f64]) = (&self.tree, &self.oracle, radiosity);
-                let stores_idle = self.stores_idle;
+                let deciding = Deciding {
+                    tree: &self.tree,
+                    oracle: &self.oracle,
+                    space: &space,
+                    radiosity,
+                    stores_idle: self.stores_idle,
+                };
                 let descents: Vec<Descent> = top
                     .par_iter()
                     .zip(&top_shares)
-                    .map(|(&pair, &share)| {
-                        Descent::of(
-                            &Deciding { tree, oracle, space: &space, radiosity: seen, stores_idle },
-                            pair,
-                            share,
-                        )
-                    })
+                    .map(|(&pair, &share)| Descent::of(&deciding, pair, share))
                     .collect();
                 for descent in descents.into_iter().rev() {
                     settled += descent.settled;
@@ -1067,7 +1063,7 @@ impl Hierarchy {
                 self.blocked_load.push(load);
                 self.blocked.push((a, b));
             }
-            None if self.stores_idle && !self.same_face(a, b) => self.idle.push((a, b)),
+            None if self.stores_idle && !same_face(&self.tree, a, b) => self.idle.push((a, b)),
             None => {}
         }
         Ok(true)
