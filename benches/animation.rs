@@ -139,6 +139,11 @@ fn run_hierarchy(scene: &Scene) -> HierRun {
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let hierarchy_only = std::env::args().any(|a| a == "--hierarchy");
+    if std::env::args().any(|a| a == "--methods") {
+        let settings = Settings { basis_order: 2, corner_gather: false, ..Settings::default() };
+        methods_table(&settings, quick);
+        return;
+    }
     // The solver's methods side by side; the corner gather (the same work for every method) is
     // off here and reported by `gather_seconds` in a bake's frame stats.
     let settings = Settings { basis_order: 2, corner_gather: false, ..Settings::default() };
@@ -335,6 +340,56 @@ fn bench_scenes(settings: &Settings, quick: bool, frames: i64) -> Vec<(&'static 
             scenes::cornell_box_moving_light(if quick { 6 } else { 14 }, frames, settings.clone()),
         ),
     ]
+}
+
+/// Per-frame seconds of every updated frame of `scene` solved by `method` through a session, as
+/// the CLI bakes it (the first frame left out).
+fn frame_seconds(scene: &Scene, method: Method) -> Vec<f64> {
+    let mut session = Session::new(scene.clone(), method).unwrap();
+    let seconds: Vec<f64> = (scene.frames.0..=scene.frames.1)
+        .map(|f| session.solve_frame(f as f64, &no_progress).unwrap().seconds)
+        .collect();
+    seconds[1..].to_vec()
+}
+
+/// The `q`-quantile of `x` (sorted in place), by the nearest rank.
+fn quantile(x: &mut [f64], q: f64) -> f64 {
+    x.sort_by(f64::total_cmp);
+    x[((q * x.len() as f64).ceil() as usize).clamp(1, x.len()) - 1]
+}
+
+/// Issue 20's moving-light row: the box's frames on the flat path's default method and on the
+/// hierarchy, the two alternated run by run so that the machine's drift falls on both
+/// (docs/benchmarks.md's "box-methods" block; `-- --methods`).
+fn methods_table(settings: &Settings, quick: bool) {
+    let (frames, runs) = if quick { (4, 1) } else { (48, 5) };
+    let scene = scenes::cornell_box_moving_light(if quick { 6 } else { 14 }, frames, settings.clone());
+    let methods = [("flat, the default method", Method::Incremental), ("hierarchy", Method::Hierarchical)];
+    let mut seconds = vec![Vec::new(); methods.len()];
+    for _ in 0..runs {
+        for (k, &(_, method)) in methods.iter().enumerate() {
+            seconds[k].extend(frame_seconds(&scene, method));
+        }
+    }
+    println!(
+        "\nThe moving-light box ({} patches, order 2, corner gather off), {frames} frames per run, the methods \
+         alternated over {runs} runs; seconds per updated frame through a session (as the CLI bakes), over every \
+         run's frames 2..{frames}, {} threads:\n",
+        scene.face_count(),
+        rayon::current_num_threads()
+    );
+    println!("| method | median s/frame | p25 | p75 | x the flat median |");
+    println!("|---|---|---|---|---|");
+    let flat = quantile(&mut seconds[0].clone(), 0.5);
+    for ((name, _), x) in methods.iter().zip(&mut seconds) {
+        let median = quantile(x, 0.5);
+        println!(
+            "| {name} | {median:.4} | {:.4} | {:.4} | {:.2}x |",
+            quantile(x, 0.25),
+            quantile(x, 0.75),
+            median / flat
+        );
+    }
 }
 
 /// The flat methods side by side: docs/benchmarks.md's "animation" block.

@@ -76,6 +76,8 @@ TABLES: dict[str, Table | None] = {
                        "about 5 min"),
     "animation-hierarchy": Table("cargo bench --bench animation", 1,
                                  "cargo bench --bench animation -- --quick", "(the same run)"),
+    "box-methods": Table("cargo bench --bench animation -- --methods", 0,
+                         "cargo bench --bench animation -- --methods --quick", "about 1 min"),
     "solve-mixing": Table("cargo bench --bench animation", 2,
                           "cargo bench --bench animation -- --quick", "(the same run)"),
     "touch-walk": Table("cargo bench --bench animation", 3,
