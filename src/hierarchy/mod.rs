@@ -85,6 +85,10 @@ pub struct HierarchySettings {
     /// 53M, 0.4 GB, on the full monastery), and an update that finds something moved after all
     /// solves afresh.
     pub moves: bool,
+    /// Check every hemisphere bound whose furnace gathered only the changed receivers against
+    /// one that gathers them all: an internal error where they differ. For tests.
+    #[doc(hidden)]
+    pub check_furnace: bool,
 }
 
 impl HierarchySettings {
@@ -110,6 +114,7 @@ impl Default for HierarchySettings {
             corner_gather: false,
             keep_pair_tree: false,
             moves: true,
+            check_furnace: false,
         }
     }
 }
@@ -356,7 +361,7 @@ fn link_and_solve(
             &mut hierarchy.changes,
             &geometry,
         )?;
-        let packed = hierarchy.packed.as_ref().expect("packed just now");
+        let packed = hierarchy.packed.as_mut().expect("packed just now");
         let solved = state.solve_packed(&hierarchy.tree, packed, stop, hs, &cancel)?;
         stats.sweeps += solved.sweeps;
         stats.solve_seconds += t.elapsed().as_secs_f64();

@@ -6,6 +6,7 @@
 use rayon::prelude::*;
 
 use super::coupling::{Coupling, Link};
+use super::solve::Gathered;
 use super::tree::NodeId;
 use crate::budget;
 use crate::error::Result;
@@ -301,6 +302,12 @@ pub struct LinkChanges {
     /// `links[fresh..]` were made since (links are only appended, and taking some out keeps the
     /// others' order).
     fresh: usize,
+    /// Both ends of every link taken out since (packed or made since): receivers whose furnace
+    /// rows the hemisphere bound must gather again ([`PackedLinks::furnace`]).
+    ends: Vec<NodeId>,
+    /// `links[unread..]` were made since [`PackedLinks::update`] last read the changes (a part
+    /// of those since the packing, `links[fresh..]`): their ends are the furnace's too.
+    unread: usize,
 }
 
 impl LinkChanges {
@@ -311,6 +318,9 @@ impl LinkChanges {
         let before = self.removed.len();
         let packed = gone.iter().take_while(|&&i| i < fresh);
         self.removed.extend(packed.map(|&i| (links[i].a, links[i].b)));
+        self.ends.extend(gone.iter().flat_map(|&i| [links[i].a, links[i].b]));
+        let unread = self.unread.min(links.len());
+        self.unread = unread - gone.iter().take_while(|&&i| i < unread).count();
         // The fresh ones now start where the packed ones left end.
         self.fresh = fresh - (self.removed.len() - before);
     }
@@ -324,6 +334,12 @@ pub struct PackedLinks {
     fresh: Option<ReceivedBlocks>,
     /// Entries of `main` zeroed.
     zeroed: usize,
+    /// What the hemisphere bound's furnace gathered per node when it last ran, and the receivers
+    /// whose links changed since ([`super::solve::State::bound_leaves`] gathers only theirs
+    /// again; `None`: every row). Kept with the packing, from solve to solve and frame to frame,
+    /// as it is: a row is what the node's links bring it.
+    pub(super) furnace: Option<Gathered>,
+    pub(super) changed: Vec<NodeId>,
 }
 
 impl PackedLinks {
@@ -336,8 +352,9 @@ impl PackedLinks {
         geometry: ClusterGeometry,
     ) -> Result<Self> {
         let main = ReceivedBlocks::new(links, &Incoming::new(nodes, links)?, nb, geometry)?;
-        *changes = LinkChanges { removed: Vec::new(), fresh: links.len() };
-        Ok(Self { main, fresh: None, zeroed: 0 })
+        *changes =
+            LinkChanges { removed: Vec::new(), fresh: links.len(), ends: Vec::new(), unread: links.len() };
+        Ok(Self { main, fresh: None, zeroed: 0, furnace: None, changed: Vec::new() })
     }
 
     /// Brings `packed` to `links` as `changes` say they changed, or packs them anew (none yet,
@@ -356,16 +373,27 @@ impl PackedLinks {
             *packed = Some(Self::new(nodes, links, nb, changes, geometry)?);
             return Ok(());
         };
+        // The receivers whose rows the furnace must gather again: the ends of the links taken
+        // out, and of those made since the changes were last read.
+        let consistent = changes.fresh <= links.len() && changes.unread <= links.len();
+        let made = &links[changes.unread.min(links.len())..];
+        let more = changes.ends.len() + 2 * made.len();
+        budget::try_reserve(&mut p.changed, more, "the hierarchy's changed receivers")?;
+        p.changed.append(&mut changes.ends);
+        p.changed.extend(made.iter().flat_map(|l| [l.a, l.b]));
+        changes.unread = links.len();
         let fresh = links.len().saturating_sub(changes.fresh);
         let zeroed = p.zeroed + 2 * changes.removed.len();
         let live = p.main.entries().checked_sub(zeroed);
         // Each link is two entries (one per side); `links` not as the changes say, or more than
-        // a quarter changed: pack anew.
-        if changes.fresh > links.len()
-            || live != Some(2 * changes.fresh)
-            || 4 * (zeroed + 2 * fresh) > p.main.entries()
-        {
-            *packed = Some(Self::new(nodes, links, nb, changes, geometry)?);
+        // a quarter changed: pack anew (the furnace's rows kept, unless the changes were wrong).
+        let trusted = consistent && live == Some(2 * changes.fresh);
+        if !trusted || 4 * (zeroed + 2 * fresh) > p.main.entries() {
+            let mut anew = Self::new(nodes, links, nb, changes, geometry)?;
+            if trusted {
+                (anew.furnace, anew.changed) = (p.furnace.take(), std::mem::take(&mut p.changed));
+            }
+            *packed = Some(anew);
             return Ok(());
         }
         for &(a, b) in &changes.removed {

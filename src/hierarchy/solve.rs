@@ -221,25 +221,27 @@ impl State {
         cancel: &(dyn Fn() -> bool + Sync),
     ) -> Result<SolveStats> {
         let geometry = |r, s, t| cluster_entry(tree, r, s, t);
-        let packed =
+        let mut packed =
             PackedLinks::new(tree.nodes.len(), links, self.nb, &mut LinkChanges::default(), &geometry)?;
-        self.solve_packed(tree, &packed, stop, hs, cancel)
+        self.solve_packed(tree, &mut packed, stop, hs, cancel)
     }
 
-    /// [`State::solve`] on links packed already.
+    /// [`State::solve`] on links packed already (whose furnace rows the hemisphere bound keeps,
+    /// [`PackedLinks::furnace`]).
     pub fn solve_packed(
         &mut self,
         tree: &Tree,
-        packed: &PackedLinks,
+        packed: &mut PackedLinks,
         stop: f64,
         hs: &super::HierarchySettings,
         cancel: &(dyn Fn() -> bool + Sync),
     ) -> Result<SolveStats> {
         let mut stats = SolveStats::default();
+        self.bound_leaves(tree, packed, hs.check_furnace)?;
+        let packed = &*packed;
         // One buffer for every sweep's gathered light: made anew each sweep (190 MB on the full
         // monastery), its pages' first touches were a twentieth of an updated frame.
-        let mut gathered = Gathered { h: Vec::new(), lobes: Vec::new(), constant: Vec::new() };
-        self.bound_leaves(tree, packed, &mut gathered)?;
+        let mut gathered = Gathered::empty();
         let first = self.source_power(tree).max(1e-300);
         let mut leaves = Vec::new();
         tree.leaves_below(tree.root, &mut leaves);
@@ -280,14 +282,28 @@ impl State {
     /// cluster link's kernel ratio), and above `1 / rho` a surface creates light and the solve
     /// diverges (RenderPark's office: docs/validation-real.md). A leaf's sum `S` is what it
     /// gathers, through its own links and those pushed down from its ancestors, when every
-    /// surface is at `B = 1`: one sweep of a furnace with the solve's own gather and push (into
-    /// `gathered`, the solve's buffer), so that `S` is the sum the sweeps apply. A leaf then takes
-    /// its reflectance times [`bound_of`]`(S)`.
-    fn bound_leaves(&mut self, tree: &Tree, packed: &PackedLinks, gathered: &mut Gathered) -> Result<()> {
+    /// surface is at `B = 1`: one sweep of a furnace with the solve's own gather and push, so
+    /// that `S` is the sum the sweeps apply. A leaf then takes its reflectance times
+    /// [`bound_of`]`(S)`. What each node gathered is kept with the packing, and gathered again
+    /// only at the receivers whose links changed since ([`PackedLinks::changed`]): the furnace
+    /// ran before every solve, two or three a frame, and its gather over every cluster link was
+    /// most of it on the 30k-triangle monastery (27-48 ms of 50-70). `check`: gather every row
+    /// too, and fail where a kept one differs.
+    fn bound_leaves(&mut self, tree: &Tree, packed: &mut PackedLinks, check: bool) -> Result<()> {
         let (nb, n) = (self.nb, tree.nodes.len());
         let what = "the hierarchy's hemisphere bound";
         let (mut white, leaves) = self.white(tree)?;
-        white.furnace_gather(tree, packed, gathered)?;
+        let kept = packed.furnace.take();
+        let mut changed = std::mem::take(&mut packed.changed);
+        let incremental = kept.is_some();
+        let mut rows = kept.unwrap_or_else(Gathered::empty);
+        white.furnace_gather(tree, packed, &mut rows, incremental.then_some(&mut changed))?;
+        if check {
+            let mut whole = Gathered::empty();
+            white.furnace_gather(tree, packed, &mut whole, None)?;
+            check_rows(&rows, &whole)?;
+        }
+        let gathered = &rows;
         let zero = [[0.0; 3]; crate::basis::MAX_LEN];
         let walk = Walk {
             tree,
@@ -307,6 +323,8 @@ impl State {
             bound[id as usize] = bound_of(white.mean[id as usize][0], rho);
         }
         self.bound = bound;
+        changed.clear();
+        (packed.furnace, packed.changed) = (Some(rows), changed);
         Ok(())
     }
 
@@ -436,34 +454,74 @@ impl State {
     /// ...)` at every surface node, the pull keeping the constant): what a receiver's surface
     /// and constant links bring is then a sum the packing keeps (its blocks' first columns and
     /// its `G^00`s, [`super::packed::ReceivedBlocks::white_of`]), read instead of every block;
-    /// cluster links read the sources' means and lobes as a sweep does.
-    fn furnace_gather(&self, tree: &Tree, packed: &PackedLinks, out: &mut Gathered) -> Result<()> {
+    /// cluster links read the sources' means and lobes as a sweep does. Into `out`: every row, or
+    /// with `changed` the rows of those receivers and of the nodes `out` does not hold yet (the
+    /// others as they are), unless they are a quarter of the nodes or more.
+    fn furnace_gather(
+        &self,
+        tree: &Tree,
+        packed: &PackedLinks,
+        out: &mut Gathered,
+        changed: Option<&mut Vec<NodeId>>,
+    ) -> Result<()> {
         let (nb, n) = (self.nb, tree.nodes.len());
-        if out.h.len() != n * nb || out.lobes.len() != n {
-            let what = "the hierarchy's gathered light";
-            out.h = budget::try_filled(n * nb, [0.0; 3], what)?;
-            out.lobes = budget::try_filled(n, lobes::ZERO, what)?;
+        let what = "the hierarchy's gathered light";
+        let held = out.lobes.len();
+        let some = match changed {
+            Some(list) if out.h.len() == held * nb && held <= n => {
+                list.extend(held as NodeId..n as NodeId);
+                list.sort_unstable();
+                list.dedup();
+                (list.len() < n / 4).then_some(&*list)
+            }
+            _ => None,
+        };
+        let more = n * nb - out.h.len().min(n * nb);
+        budget::try_reserve(&mut out.h, more, what)?;
+        budget::try_reserve(&mut out.lobes, n - held.min(n), what)?;
+        out.h.resize(n * nb, [0.0; 3]);
+        out.lobes.resize(n, lobes::ZERO);
+        let Some(rows) = some else {
+            out.h.par_chunks_mut(nb).zip(out.lobes.par_iter_mut()).enumerate().for_each(|(r, (hr, lr))| {
+                self.furnace_row(tree, packed, r, hr, lr);
+            });
+            return Ok(());
+        };
+        let gathered: Vec<([[f64; 3]; crate::basis::MAX_LEN], Lobes)> = rows
+            .par_iter()
+            .map(|&r| {
+                let (mut hr, mut lr) = ([[0.0; 3]; crate::basis::MAX_LEN], lobes::ZERO);
+                self.furnace_row(tree, packed, r as usize, &mut hr[..nb], &mut lr);
+                (hr, lr)
+            })
+            .collect();
+        for (&r, (hr, lr)) in rows.iter().zip(gathered) {
+            let r = r as usize;
+            out.h[r * nb..(r + 1) * nb].copy_from_slice(&hr[..nb]);
+            out.lobes[r] = lr;
         }
-        out.h.par_chunks_mut(nb).zip(out.lobes.par_iter_mut()).enumerate().for_each(|(r, (hr, lr))| {
-            hr.fill([0.0; 3]);
-            *lr = lobes::ZERO;
-            let mut h0 = [0.0f64; 3];
-            let planar = tree.nodes[r].plane_normal.is_some();
-            for blocks in packed.parts() {
-                for (h, &w) in hr.iter_mut().zip(blocks.white_of(r)) {
-                    for c in 0..3 {
-                        h[c] += w;
-                    }
-                }
-                for e in blocks.clusters_of(r) {
-                    self.cluster_arrival(e, planar, &mut h0, lr);
-                }
-            }
-            for c in 0..3 {
-                hr[0][c] += h0[c];
-            }
-        });
         Ok(())
+    }
+
+    /// What receiver `r` gathers in a furnace ([`State::furnace_gather`]), into `hr` and `lr`.
+    fn furnace_row(&self, tree: &Tree, packed: &PackedLinks, r: usize, hr: &mut [[f64; 3]], lr: &mut Lobes) {
+        hr.fill([0.0; 3]);
+        *lr = lobes::ZERO;
+        let mut h0 = [0.0f64; 3];
+        let planar = tree.nodes[r].plane_normal.is_some();
+        for blocks in packed.parts() {
+            for (h, &w) in hr.iter_mut().zip(blocks.white_of(r)) {
+                for c in 0..3 {
+                    h[c] += w;
+                }
+            }
+            for e in blocks.clusters_of(r) {
+                self.cluster_arrival(e, planar, &mut h0, lr);
+            }
+        }
+        for c in 0..3 {
+            hr[0][c] += h0[c];
+        }
     }
 
     /// Pushes `gathered` to the leaves, sets `b = e + rho H` there and pulls; returns the leaves'
@@ -595,6 +653,22 @@ impl Accelerated {
     }
 }
 
+/// Where the furnace's kept rows ([`State::bound_leaves`]) differ from the same rows gathered
+/// whole: by more than the rounding of a source's white state pulled again after a split.
+fn check_rows(kept: &Gathered, whole: &Gathered) -> Result<()> {
+    let scale = whole.h.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
+    let apart = kept.h.len() != whole.h.len()
+        || kept.lobes.len() != whole.lobes.len()
+        || kept.h.iter().flatten().zip(whole.h.iter().flatten()).any(|(a, b)| (a - b).abs() > 1e-12 * scale)
+        || kept.lobes.iter().zip(&whole.lobes).any(|(a, b)| {
+            a.iter().flatten().zip(b.iter().flatten()).any(|(x, y)| (x - y).abs() > 1e-12 * scale)
+        });
+    if apart {
+        return Err(Error::Internal("the hemisphere bound's kept furnace rows are not the furnace's".into()));
+    }
+    Ok(())
+}
+
 /// What one gather sweep delivered per node.
 pub(super) struct Gathered {
     /// `H^k` per surface node (`nodes x nb`; empty: nothing).
@@ -603,6 +677,12 @@ pub(super) struct Gathered {
     pub lobes: Vec<Lobes>,
     /// Per node, its `b^0`, read by the constant links.
     constant: Vec<[f64; 3]>,
+}
+
+impl Gathered {
+    pub(super) fn empty() -> Self {
+        Self { h: Vec::new(), lobes: Vec::new(), constant: Vec::new() }
+    }
 }
 
 #[cfg(test)]
@@ -628,7 +708,7 @@ mod tests {
         let empty = || Gathered { h: Vec::new(), lobes: Vec::new(), constant: Vec::new() };
         let (mut swept, mut furnace) = (empty(), empty());
         white.gather(tree, packed, &mut swept).unwrap();
-        white.furnace_gather(tree, packed, &mut furnace).unwrap();
+        white.furnace_gather(tree, packed, &mut furnace, None).unwrap();
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * (1.0 + a.abs());
         let mut nonzero = 0;
         for (x, y) in swept.h.iter().zip(&furnace.h) {

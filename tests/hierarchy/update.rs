@@ -436,3 +436,25 @@ fn the_pair_tree_walk_finds_what_the_scan_finds() {
         );
     }
 }
+
+/// The hemisphere bound's furnace gathers again only the receivers whose links changed since it
+/// last ran, keeping the other rows with the packing from solve to solve and frame to frame
+/// (`State::bound_leaves`). Checked at every solve of every frame (`check_furnace` gathers them
+/// all too and fails where a kept row differs): the demo animation with and without the pair
+/// tree (updates that refine only, and that coarsen), and the seed's room, where a panel moves
+/// past a still wall light.
+#[test]
+fn the_furnace_gathers_again_only_what_changed() {
+    for (scene, frames) in [(animated(), 8), (seed_room(2.0, 6, settings()), 6)] {
+        for keep_pair_tree in [false, true] {
+            let hs = HierarchySettings { keep_pair_tree, check_furnace: true, ..Default::default() };
+            let mut h = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
+            for frame in 2..=frames {
+                let next = update_frame(&mut h, &scene, frame as f64, &hs, &no_progress)
+                    .unwrap_or_else(|e| panic!("frame {frame} (pair tree kept: {keep_pair_tree}): {e}"));
+                assert!(next.stats.updated, "frame {frame} was not updated");
+                h = next;
+            }
+        }
+    }
+}
