@@ -343,13 +343,16 @@ fn bench_scenes(settings: &Settings, quick: bool, frames: i64) -> Vec<(&'static 
 }
 
 /// Per-frame seconds of every updated frame of `scene` solved by `method` through a session, as
-/// the CLI bakes it (the first frame left out).
+/// the CLI bakes it (the first frame left out; none of the others may have been built afresh).
 fn frame_seconds(scene: &Scene, method: Method) -> Vec<f64> {
     let mut session = Session::new(scene.clone(), method).unwrap();
-    let seconds: Vec<f64> = (scene.frames.0..=scene.frames.1)
-        .map(|f| session.solve_frame(f as f64, &no_progress).unwrap().seconds)
+    let stats: Vec<FrameStats> = (scene.frames.0..=scene.frames.1)
+        .map(|f| session.solve_frame(f as f64, &no_progress).unwrap())
         .collect();
-    seconds[1..].to_vec()
+    for s in &stats[1..] {
+        assert!(!s.full_rebuild, "{method:?}: frame {} was built afresh", s.frame);
+    }
+    stats[1..].iter().map(|s| s.seconds).collect()
 }
 
 /// The `q`-quantile of `x` (sorted in place), by the nearest rank.
@@ -366,14 +369,17 @@ fn methods_table(settings: &Settings, quick: bool) {
     let scene = scenes::cornell_box_moving_light(if quick { 6 } else { 14 }, frames, settings.clone());
     let methods = [("flat, the default method", Method::Incremental), ("hierarchy", Method::Hierarchical)];
     let mut seconds = vec![Vec::new(); methods.len()];
-    for _ in 0..runs {
-        for (k, &(_, method)) in methods.iter().enumerate() {
-            seconds[k].extend(frame_seconds(&scene, method));
+    // Each method first in every other run, so that what a run leaves (caches, the allocator's
+    // pages) falls on both.
+    for run in 0..runs {
+        for k in 0..methods.len() {
+            let k = if run % 2 == 0 { k } else { methods.len() - 1 - k };
+            seconds[k].extend(frame_seconds(&scene, methods[k].1));
         }
     }
     println!(
         "\nThe moving-light box ({} patches, order 2, corner gather off), {frames} frames per run, the methods \
-         alternated over {runs} runs; seconds per updated frame through a session (as the CLI bakes), over every \
+         alternated over {runs} runs (each first in every other); seconds per updated frame through a session (as the CLI bakes), over every \
          run's frames 2..{frames}, {} threads:\n",
         scene.face_count(),
         rayon::current_num_threads()

@@ -138,6 +138,10 @@ pub struct HierarchyStats {
     pub cluster_links: usize,
     pub link_bytes: usize,
     pub sweeps: usize,
+    /// The hemisphere bound's furnaces (one per solve) and the rows they gathered, of `nodes`
+    /// each at most ([`solve::State::bound_leaves`]).
+    pub furnaces: usize,
+    pub furnace_rows: usize,
     pub link_seconds: f64,
     /// Of `link_seconds`, computing the couplings of accepted pairs
     /// ([`refine::RefineStats::compute_seconds`]).
@@ -364,6 +368,8 @@ fn link_and_solve(
         let packed = hierarchy.packed.as_mut().expect("packed just now");
         let solved = state.solve_packed(&hierarchy.tree, packed, stop, hs, &cancel)?;
         stats.sweeps += solved.sweeps;
+        stats.furnaces += 1;
+        stats.furnace_rows += solved.furnace_rows;
         stats.solve_seconds += t.elapsed().as_secs_f64();
     }
     Ok(())

@@ -47,6 +47,9 @@ pub struct State {
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct SolveStats {
     pub sweeps: usize,
+    /// Rows the hemisphere bound's furnace gathered ([`State::bound_leaves`]; all the nodes, or
+    /// the receivers whose links changed).
+    pub furnace_rows: usize,
     /// Area-weighted change of the leaves' mean radiosity in the last sweep (W).
     pub last_change: f64,
 }
@@ -236,8 +239,8 @@ impl State {
         hs: &super::HierarchySettings,
         cancel: &(dyn Fn() -> bool + Sync),
     ) -> Result<SolveStats> {
-        let mut stats = SolveStats::default();
-        self.bound_leaves(tree, packed, hs.check_furnace)?;
+        let furnace_rows = self.bound_leaves(tree, packed, hs.check_furnace)?;
+        let mut stats = SolveStats { furnace_rows, ..Default::default() };
         let packed = &*packed;
         // One buffer for every sweep's gathered light: made anew each sweep (190 MB on the full
         // monastery), its pages' first touches were a twentieth of an updated frame.
@@ -288,8 +291,8 @@ impl State {
     /// only at the receivers whose links changed since ([`PackedLinks::changed`]): the furnace
     /// ran before every solve, two or three a frame, and its gather over every cluster link was
     /// most of it on the 30k-triangle monastery (27-48 ms of 50-70). `check`: gather every row
-    /// too, and fail where a kept one differs.
-    fn bound_leaves(&mut self, tree: &Tree, packed: &mut PackedLinks, check: bool) -> Result<()> {
+    /// too, and fail where a kept one differs. Returns the rows gathered.
+    fn bound_leaves(&mut self, tree: &Tree, packed: &mut PackedLinks, check: bool) -> Result<usize> {
         let (nb, n) = (self.nb, tree.nodes.len());
         let what = "the hierarchy's hemisphere bound";
         let (mut white, leaves) = self.white(tree)?;
@@ -297,7 +300,8 @@ impl State {
         let mut changed = std::mem::take(&mut packed.changed);
         let incremental = kept.is_some();
         let mut rows = kept.unwrap_or_else(Gathered::empty);
-        white.furnace_gather(tree, packed, &mut rows, incremental.then_some(&mut changed))?;
+        let gathered_rows =
+            white.furnace_gather(tree, packed, &mut rows, incremental.then_some(&mut changed))?;
         if check {
             let mut whole = Gathered::empty();
             white.furnace_gather(tree, packed, &mut whole, None)?;
@@ -325,7 +329,7 @@ impl State {
         self.bound = bound;
         changed.clear();
         (packed.furnace, packed.changed) = (Some(rows), changed);
-        Ok(())
+        Ok(gathered_rows)
     }
 
     /// A state of this one's basis with every surface at `B = 1` (pulled: every surface node at
@@ -456,14 +460,15 @@ impl State {
     /// its `G^00`s, [`super::packed::ReceivedBlocks::white_of`]), read instead of every block;
     /// cluster links read the sources' means and lobes as a sweep does. Into `out`: every row, or
     /// with `changed` the rows of those receivers and of the nodes `out` does not hold yet (the
-    /// others as they are), unless they are a quarter of the nodes or more.
+    /// others as they are), unless they are a quarter of the nodes or more. Returns the rows
+    /// gathered.
     fn furnace_gather(
         &self,
         tree: &Tree,
         packed: &PackedLinks,
         out: &mut Gathered,
         changed: Option<&mut Vec<NodeId>>,
-    ) -> Result<()> {
+    ) -> Result<usize> {
         let (nb, n) = (self.nb, tree.nodes.len());
         let what = "the hierarchy's gathered light";
         let held = out.lobes.len();
@@ -485,7 +490,7 @@ impl State {
             out.h.par_chunks_mut(nb).zip(out.lobes.par_iter_mut()).enumerate().for_each(|(r, (hr, lr))| {
                 self.furnace_row(tree, packed, r, hr, lr);
             });
-            return Ok(());
+            return Ok(n);
         };
         let gathered: Vec<([[f64; 3]; crate::basis::MAX_LEN], Lobes)> = rows
             .par_iter()
@@ -500,7 +505,7 @@ impl State {
             out.h[r * nb..(r + 1) * nb].copy_from_slice(&hr[..nb]);
             out.lobes[r] = lr;
         }
-        Ok(())
+        Ok(rows.len())
     }
 
     /// What receiver `r` gathers in a furnace ([`State::furnace_gather`]), into `hr` and `lr`.
@@ -656,7 +661,8 @@ impl Accelerated {
 /// Where the furnace's kept rows ([`State::bound_leaves`]) differ from the same rows gathered
 /// whole: by more than the rounding of a source's white state pulled again after a split.
 fn check_rows(kept: &Gathered, whole: &Gathered) -> Result<()> {
-    let scale = whole.h.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
+    let largest = |x: &[f64]| x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let scale = whole.h.iter().chain(whole.lobes.iter().flatten()).map(|x| largest(x)).fold(1e-300, f64::max);
     let apart = kept.h.len() != whole.h.len()
         || kept.lobes.len() != whole.lobes.len()
         || kept.h.iter().flatten().zip(whole.h.iter().flatten()).any(|(a, b)| (a - b).abs() > 1e-12 * scale)

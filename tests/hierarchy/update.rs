@@ -449,12 +449,17 @@ fn the_furnace_gathers_again_only_what_changed() {
         for keep_pair_tree in [false, true] {
             let hs = HierarchySettings { keep_pair_tree, check_furnace: true, ..Default::default() };
             let mut h = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
+            let (mut rows, mut whole) = (h.stats.furnace_rows, h.stats.furnaces * h.stats.nodes);
             for frame in 2..=frames {
                 let next = update_frame(&mut h, &scene, frame as f64, &hs, &no_progress)
                     .unwrap_or_else(|e| panic!("frame {frame} (pair tree kept: {keep_pair_tree}): {e}"));
                 assert!(next.stats.updated, "frame {frame} was not updated");
+                (rows, whole) =
+                    (rows + next.stats.furnace_rows, whole + next.stats.furnaces * next.stats.nodes);
                 h = next;
             }
+            // (Not every row every time: the kept ones were checked.)
+            assert!(2 * rows < whole, "the furnaces gathered {rows} rows of {whole}");
         }
     }
 }
