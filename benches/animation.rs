@@ -386,15 +386,11 @@ fn methods_table(settings: &Settings, quick: bool) {
     );
     println!("| method | median s/frame | p25 | p75 | x the flat median |");
     println!("|---|---|---|---|---|");
-    let flat = quantile(&mut seconds[0].clone(), 0.5);
-    for ((name, _), x) in methods.iter().zip(&mut seconds) {
-        let median = quantile(x, 0.5);
-        println!(
-            "| {name} | {median:.4} | {:.4} | {:.4} | {:.2}x |",
-            quantile(x, 0.25),
-            quantile(x, 0.75),
-            median / flat
-        );
+    let quartiles: Vec<[f64; 3]> =
+        seconds.iter_mut().map(|x| [0.25, 0.5, 0.75].map(|q| quantile(x, q))).collect();
+    let flat = quartiles[0][1];
+    for ((name, _), [p25, median, p75]) in methods.iter().zip(quartiles) {
+        println!("| {name} | {median:.4} | {p25:.4} | {p75:.4} | {:.2}x |", median / flat);
     }
 }
 

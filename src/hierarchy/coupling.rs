@@ -472,7 +472,7 @@ pub(crate) fn kernel_weighted_rays(
 /// An end of a sampled segment: face, position, normal.
 pub(crate) type End = (u32, DVec3, DVec3);
 
-/// What [`kernel_weighted_rays`] found.
+/// What [`kernel_weighted_rays`] and [`kernel_weighted_combos`] found.
 pub(crate) struct Rays {
     /// Segments cast (whose ends face each other; at most [`CLUSTER_RAYS`]), and those of them
     /// that arrive.
@@ -514,9 +514,9 @@ mod tests {
     use super::*;
 
     /// A square of side 1 centred at `c`, spanned by the unit vectors `u` and `v` (its normal
-    /// `u x v`): the point at `(s, t)` in `[0,1]^2`, with the normal, on face 0.
-    fn square(c: DVec3, u: DVec3, v: DVec3) -> impl Fn(f64, f64) -> End {
-        move |s, t| (0, c + (s - 0.5) * u + (t - 0.5) * v, u.cross(v))
+    /// `u x v`): the point at `(s, t)` in `[0,1]^2`, with the normal, on face `face`.
+    fn square(face: u32, c: DVec3, u: DVec3, v: DVec3) -> impl Fn(f64, f64) -> End {
+        move |s, t| (face, c + (s - 0.5) * u + (t - 0.5) * v, u.cross(v))
     }
 
     /// `square`'s patch, for the occluders.
@@ -525,9 +525,63 @@ mod tests {
         Patch { corners: [corner(0.0, 0.0), corner(1.0, 0.0), corner(1.0, 1.0), corner(0.0, 1.0)] }
     }
 
+    /// By brute force over a 40 x 40 grid on each of `a` and `b`: the mean over the pairs of
+    /// points of `cos cos / r^4` (the kernel times `r^2`, as `kernel_weighted_*` weigh it, less
+    /// `d^2`) for the pairs not `hidden(x, y)`, the same for every pair, and the share of the
+    /// pairs that face each other.
+    fn brute_force(
+        a: impl Fn(f64, f64) -> End,
+        b: impl Fn(f64, f64) -> End,
+        hidden: impl Fn(DVec3, DVec3) -> bool,
+    ) -> (f64, f64, f64) {
+        let n = 40;
+        let grid = |k: usize| (k as f64 + 0.5) / n as f64;
+        let (mut visible, mut all, mut facing) = (0.0, 0.0, 0);
+        for (i, j, k, l) in (0..n * n * n * n).map(|x| (x % n, x / n % n, x / (n * n) % n, x / (n * n * n))) {
+            let ((_, x, nx), (_, y, ny)) = (a(grid(i), grid(j)), b(grid(k), grid(l)));
+            let d = y - x;
+            let r2 = d.length_squared();
+            let kernel = (nx.dot(d).max(0.0) * ny.dot(-d).max(0.0)) / (r2 * r2);
+            facing += usize::from(nx.dot(d) > 0.0 && ny.dot(-d) > 0.0);
+            all += kernel;
+            visible += if hidden(x, y) { 0.0 } else { kernel };
+        }
+        let pairs = (n * n * n * n) as f64;
+        (visible / pairs, all / pairs, facing as f64 / pairs)
+    }
+
+    /// The mean over `draws` draws of [`kernel_weighted_combos`] between [`CLUSTER_RAYS`] points
+    /// drawn uniformly on each of `a` and `b`, and whether every cast segment arrived.
+    fn mean_estimate(
+        a: impl Fn(f64, f64) -> End,
+        b: impl Fn(f64, f64) -> End,
+        (ca, cb): (DVec3, DVec3),
+        occluders: Option<&Occluders>,
+        seed: u64,
+    ) -> (f64, bool) {
+        let draws = 4000;
+        let mut rng = SplitMix(seed);
+        let (mut mean, mut all_arrived) = (0.0, true);
+        for _ in 0..draws {
+            let xs: [End; CLUSTER_RAYS] = std::array::from_fn(|_| a(rng.next(), rng.next()));
+            let ys: [End; CLUSTER_RAYS] = std::array::from_fn(|_| b(rng.next(), rng.next()));
+            let rays = kernel_weighted_combos(occluders, ca, cb, &xs, &ys);
+            all_arrived &= rays.arrived == rays.facing;
+            mean += rays.weighted / draws as f64;
+        }
+        (mean, all_arrived)
+    }
+
+    /// The centres' model `cos_x(w)+ cos_y(-w)+ / d^2` between the squares `a` and `b` at `ca`
+    /// and `cb`.
+    fn model(a: &impl Fn(f64, f64) -> End, b: &impl Fn(f64, f64) -> End, ca: DVec3, cb: DVec3) -> f64 {
+        let (w, d2) = ((cb - ca).normalize(), ca.distance_squared(cb));
+        a(0.5, 0.5).2.dot(w).max(0.0) * b(0.5, 0.5).2.dot(-w).max(0.0) / d2
+    }
+
     /// With a blocker between the two squares (hiding 30-70% of the kernel), the pairings'
     /// estimate averaged over many draws is the visible kernel ratio integrated by brute force
-    /// (a 40 x 40 grid on each square, each segment tested against the blocker's rectangle).
+    /// (each segment tested against the blocker's rectangle).
     #[test]
     fn blocked_pairings_estimate_the_visible_kernel_ratio() {
         let (ca, cb) = (DVec3::ZERO, DVec3::new(0.4, 0.0, 0.5));
@@ -541,79 +595,37 @@ mod tests {
             &[square_patch(ca, ua, va), square_patch(cb, ub, vb), blocker],
             2,
         );
-        let (a, b) = (square(ca, ua, va), square(cb, ub, vb));
-        let (a, b) = (
-            move |s, t| -> End { (0, a(s, t).1, a(s, t).2) },
-            move |s, t| -> End { (1, b(s, t).1, b(s, t).2) },
-        );
-        let (w, d2) = ((cb - ca).normalize(), ca.distance_squared(cb));
-        let model = a(0.5, 0.5).2.dot(w).max(0.0) * b(0.5, 0.5).2.dot(-w).max(0.0) / d2;
-        let n = 40;
-        let grid = |k: usize| (k as f64 + 0.5) / n as f64;
-        let (mut unblocked, mut visible) = (0.0, 0.0);
-        for (i, j, k, l) in (0..n * n * n * n).map(|x| (x % n, x / n % n, x / (n * n) % n, x / (n * n * n))) {
-            let ((_, x, nx), (_, y, ny)) = (a(grid(i), grid(j)), b(grid(k), grid(l)));
-            let d = y - x;
-            let r2 = d.length_squared();
-            let kernel = (nx.dot(d).max(0.0) * ny.dot(-d).max(0.0)) / (r2 * r2);
-            // The segment crosses the blocker's plane at `t` (x on z = 0, y above it).
-            let p = x + d * ((z - x.z) / d.z);
-            let hidden = (p.x - cx).abs() < hx && p.y.abs() < 1.0;
-            unblocked += kernel;
-            visible += if hidden { 0.0 } else { kernel };
-        }
-        let share = visible / unblocked;
-        let exact = visible / (n * n * n * n) as f64 / model;
-        let draws = 4000;
-        let mut rng = SplitMix(11);
-        let mut mean = 0.0;
-        for _ in 0..draws {
-            let xs: [End; CLUSTER_RAYS] = std::array::from_fn(|_| a(rng.next(), rng.next()));
-            let ys: [End; CLUSTER_RAYS] = std::array::from_fn(|_| b(rng.next(), rng.next()));
-            mean += kernel_weighted_combos(Some(&occluders), ca, cb, &xs, &ys).weighted / draws as f64;
-        }
+        let (a, b) = (square(0, ca, ua, va), square(1, cb, ub, vb));
+        // A segment from `x` (on z = 0) to `y` (above the blocker) crosses its plane here.
+        let hidden = |x: DVec3, y: DVec3| {
+            let p = x + (y - x) * ((z - x.z) / (y.z - x.z));
+            (p.x - cx).abs() < hx && p.y.abs() < 1.0
+        };
+        let (visible, all, _) = brute_force(&a, &b, hidden);
+        let exact = visible / model(&a, &b, ca, cb);
+        let (mean, _) = mean_estimate(&a, &b, (ca, cb), Some(&occluders), 11);
+        let share = visible / all;
         assert!(share > 0.3 && share < 0.7, "a blocker worth testing: {share} of the kernel visible");
         assert!((mean / exact - 1.0).abs() < 0.02, "pairings {mean}, brute force {exact}");
     }
 
     /// Unoccluded, the pairings' estimate of the kernel ratio averaged over many draws is the
-    /// ratio integrated by brute force (a 40 x 40 grid on each square): the mean of `cos cos /
-    /// r^2` over the two over the model `cos_x(w)+ cos_y(-w)+ / d^2` at the centres. The
-    /// receiving square is tilted so that a part of the pairings do not face each other (18%:
-    /// they carry nothing), and near enough that the ratio is well above 1 (1.48), but not near
-    /// [`MAX_KERNEL_RATIO`], whose clipping of single draws lowers the mean (at a ratio of 2.5,
-    /// 9.6% low).
+    /// ratio integrated by brute force: the mean of `cos cos / r^2` over the two over the model
+    /// `cos_x(w)+ cos_y(-w)+ / d^2` at the centres. The receiving square is tilted so that a
+    /// part of the pairings do not face each other (18%: they carry nothing), and near enough
+    /// that the ratio is well above 1 (1.48), but not near [`MAX_KERNEL_RATIO`], whose clipping
+    /// of single draws lowers the mean (at a ratio of 2.5, 9.6% low).
     #[test]
     fn the_pairings_estimate_the_kernel_ratio_of_brute_force_integration() {
         let (ca, cb) = (DVec3::ZERO, DVec3::new(0.4, 0.0, 0.5));
-        let a = square(ca, DVec3::X, DVec3::Y);
         let tilt = 0.6f64;
-        let b = square(cb, DVec3::new(tilt.cos(), 0.0, tilt.sin()), DVec3::NEG_Y);
-        let (w, d2) = ((cb - ca).normalize(), ca.distance_squared(cb));
-        let model = a(0.5, 0.5).2.dot(w).max(0.0) * b(0.5, 0.5).2.dot(-w).max(0.0) / d2;
-        let n = 40;
-        let grid = |k: usize| (k as f64 + 0.5) / n as f64;
-        let (mut kernel, mut facing) = (0.0, 0);
-        for (i, j, k, l) in (0..n * n * n * n).map(|x| (x % n, x / n % n, x / (n * n) % n, x / (n * n * n))) {
-            let ((_, x, nx), (_, y, ny)) = (a(grid(i), grid(j)), b(grid(k), grid(l)));
-            let d = y - x;
-            let r2 = d.length_squared();
-            kernel += (nx.dot(d).max(0.0) * ny.dot(-d).max(0.0)) / (r2 * r2);
-            facing += usize::from(nx.dot(d) > 0.0 && ny.dot(-d) > 0.0);
-        }
-        let facing = facing as f64 / (n * n * n * n) as f64;
+        let a = square(0, ca, DVec3::X, DVec3::Y);
+        let b = square(0, cb, DVec3::new(tilt.cos(), 0.0, tilt.sin()), DVec3::NEG_Y);
+        let (kernel, _, facing) = brute_force(&a, &b, |_, _| false);
         assert!(facing > 0.5 && facing < 0.95, "some pairings face away: {facing}");
-        let exact = kernel / (n * n * n * n) as f64 / model;
-        let draws = 4000;
-        let mut rng = SplitMix(7);
-        let mut mean = 0.0;
-        for _ in 0..draws {
-            let xs: [End; CLUSTER_RAYS] = std::array::from_fn(|_| a(rng.next(), rng.next()));
-            let ys: [End; CLUSTER_RAYS] = std::array::from_fn(|_| b(rng.next(), rng.next()));
-            let rays = kernel_weighted_combos(None, ca, cb, &xs, &ys);
-            assert_eq!(rays.arrived, rays.facing, "nothing blocks");
-            mean += rays.weighted / draws as f64;
-        }
+        let exact = kernel / model(&a, &b, ca, cb);
+        let (mean, all_arrived) = mean_estimate(&a, &b, (ca, cb), None, 7);
+        assert!(all_arrived, "nothing blocks");
         assert!(exact > 1.2 && exact < MAX_KERNEL_RATIO, "a ratio worth testing: {exact}");
         assert!((mean / exact - 1.0).abs() < 0.01, "pairings {mean}, brute force {exact}");
     }
