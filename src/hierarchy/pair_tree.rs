@@ -76,19 +76,42 @@ pub struct Splits {
 }
 
 /// The children of pair `(a, b)` split at `s`, in the order the refinement makes them.
-pub fn children(tree: &Tree, a: NodeId, b: NodeId, s: NodeId) -> Vec<(NodeId, NodeId)> {
+pub fn children(tree: &Tree, a: NodeId, b: NodeId, s: NodeId) -> PairChildren {
     let c = tree.children(s);
+    let mut out = PairChildren { pairs: [(0, 0); MAX_PAIR_CHILDREN], len: 0 };
+    let mut push = |p| {
+        out.pairs[out.len] = p;
+        out.len += 1;
+    };
     if a == b {
-        let mut out = Vec::with_capacity(c.len() * (c.len() + 1) / 2);
         for (i, &x) in c.iter().enumerate() {
             for &y in &c[i..] {
-                out.push((x, y));
+                push((x, y));
             }
         }
-        out
     } else {
         let other = if s == a { b } else { a };
-        c.iter().map(|&x| (x, other)).collect()
+        c.iter().for_each(|&x| push((x, other)));
+    }
+    out
+}
+
+/// A pair's children: at most a surface's four quadrants paired among themselves.
+const MAX_PAIR_CHILDREN: usize = 10;
+
+/// [`children`]'s pairs, kept on the stack: the walks down the pair tree visit tens of
+/// thousands of pairs a frame, and a vector for each pair's children was most of an updated
+/// frame's walk on the moving-light box.
+#[derive(Clone, Copy)]
+pub struct PairChildren {
+    pairs: [(NodeId, NodeId); MAX_PAIR_CHILDREN],
+    len: usize,
+}
+
+impl std::ops::Deref for PairChildren {
+    type Target = [(NodeId, NodeId)];
+    fn deref(&self) -> &Self::Target {
+        &self.pairs[..self.len]
     }
 }
 
@@ -232,7 +255,7 @@ impl Splits {
         let (mut out, mut stack) = (Vec::new(), vec![(tree.root, tree.root)]);
         while let Some((a, b)) = stack.pop() {
             match map.get(&key(a, b)) {
-                Some(&s) => stack.extend(children(tree, a, b, s).into_iter().rev()),
+                Some(&s) => stack.extend(children(tree, a, b, s).iter().rev()),
                 None if !neutral(a, b) => out.push((a, b)),
                 None => {}
             }
@@ -274,8 +297,11 @@ where
     };
     let kids = children(tree, a, b, s);
     let first_top = tops.len();
-    let below: Vec<Subtree> = kids.iter().map(|&p| visit(map, tree, rules, p, tops, touched)).collect();
-    inner(rules, (a, b), &kids, &below, tops, first_top)
+    let mut below = [Subtree { all: false, any: false }; MAX_PAIR_CHILDREN];
+    for (t, &p) in below.iter_mut().zip(kids.iter()) {
+        *t = visit(map, tree, rules, p, tops, touched);
+    }
+    inner(rules, (a, b), &kids, &below[..kids.len()], tops, first_top)
 }
 
 /// An inner pair `(a, b)`'s subtree from its children's (`kids`, `below`), the tops its
@@ -373,7 +399,7 @@ fn forget_below<T, M, N, W>(
     let mut stack = vec![(a, b)];
     while let Some((x, y)) = stack.pop() {
         match map.remove(&key(x, y)) {
-            Some(s) => stack.extend(children(tree, x, y, s)),
+            Some(s) => stack.extend_from_slice(&children(tree, x, y, s)),
             None if !(rules.neutral)(x, y) && !(rules.touched)(x, y) => untouched.push((x, y)),
             None => {}
         }

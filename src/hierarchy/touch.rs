@@ -78,6 +78,11 @@ impl<'a> Touch<'a> {
         Self { moves, holds, boxes, below, eps }
     }
 
+    /// Per node: it holds a moved face.
+    pub fn holds(&self) -> &[bool] {
+        &self.holds
+    }
+
     /// The pair `(a, b)` may have changed ([the module's rule](self)).
     pub fn pair(&self, a: NodeId, b: NodeId) -> bool {
         self.test(&self.boxes, a, b)
@@ -121,7 +126,7 @@ pub fn by_walk(hierarchy: &Hierarchy, touch: &Touch) -> Option<Vec<(NodeId, Node
             continue;
         }
         match splits.split_of(a, b) {
-            Some(s) => stack.extend(pair_tree::children(tree, a, b, s)),
+            Some(s) => stack.extend_from_slice(&pair_tree::children(tree, a, b, s)),
             None if !neutral(tree, a, b) && touch.pair(a, b) => out.push((a, b)),
             None => {}
         }
