@@ -43,6 +43,32 @@ impl Aabb {
     pub fn diagonal(&self) -> DVec3 {
         self.max - self.min
     }
+
+    /// The box grown by `margin` on every side.
+    pub fn inflated(&self, margin: f64) -> Self {
+        Aabb { min: self.min - DVec3::splat(margin), max: self.max + DVec3::splat(margin) }
+    }
+
+    /// The segment from `p` to `q` has a point in the box (the slab test, closed).
+    pub fn meets_segment(&self, p: DVec3, q: DVec3) -> bool {
+        let d = q - p;
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        for k in 0..3 {
+            if d[k] == 0.0 {
+                if p[k] < self.min[k] || p[k] > self.max[k] {
+                    return false;
+                }
+                continue;
+            }
+            let (a, b) = ((self.min[k] - p[k]) / d[k], (self.max[k] - p[k]) / d[k]);
+            t0 = t0.max(a.min(b));
+            t1 = t1.min(a.max(b));
+            if t0 > t1 {
+                return false;
+            }
+        }
+        true
+    }
 }
 
 /// A rectangle `[s0,s1] x [t0,t1]` of a patch's parameter domain.
@@ -238,6 +264,50 @@ mod tests {
     }
 
     use super::*;
+
+    /// The slab test against points sampled densely along the segment: a segment meets the
+    /// box exactly when one of its points is in it (up to the sampling's step), in thin and
+    /// flat boxes too (a moving light's swept box has no height).
+    #[test]
+    fn a_segment_meets_a_box_where_its_points_are_in_it() {
+        let boxes = [
+            Aabb { min: DVec3::new(-1.0, -0.5, 0.2), max: DVec3::new(0.5, 0.5, 1.0) },
+            Aabb { min: DVec3::new(-0.3, 0.4, -0.3), max: DVec3::new(0.3, 0.4, 0.3) },
+        ];
+        let mut rng = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng >> 11) as f64 / (1u64 << 53) as f64 * 4.0 - 2.0
+        };
+        let inside = |x: &Aabb, p: DVec3| x.min.cmple(p).all() && p.cmple(x.max).all();
+        let mut met = 0;
+        for x in &boxes {
+            for i in 0..4000 {
+                let p = DVec3::new(next(), next(), next());
+                // Every fourth segment along an axis, and some at the flat box's height.
+                let mut q = DVec3::new(next(), next(), next());
+                if i % 4 == 0 {
+                    q = DVec3::new(p.x, p.y, q.z);
+                }
+                let (p, q) =
+                    if i % 5 == 0 { (DVec3::new(p.x, 0.4, p.z), DVec3::new(q.x, 0.4, q.z)) } else { (p, q) };
+                let sampled = (0..=20_000).any(|k| inside(x, p.lerp(q, k as f64 / 20_000.0)));
+                let meets = x.meets_segment(p, q);
+                if sampled {
+                    assert!(meets, "{p} -> {q} passes through {x:?}");
+                    met += 1;
+                }
+                if meets && !sampled {
+                    // Only a graze shorter than the sampling's step.
+                    let near = x.inflated((q - p).length() / 20_000.0);
+                    assert!((0..=20_000).any(|k| inside(&near, p.lerp(q, k as f64 / 20_000.0))));
+                }
+            }
+        }
+        assert!(met > 400, "too few segments met a box to test anything: {met}");
+    }
 
     #[test]
     fn triangle_is_a_collapsed_quad_with_half_the_area() {

@@ -61,6 +61,8 @@ pub struct LinkContext<'a> {
     pub near: NearRule,
     /// The rule of light links' outer integral ([`LIGHT_POINTS`]).
     light_rule: GaussLegendre,
+    /// An animation's frame: the cluster links' casts of the frame before it may take.
+    pub reuse: Option<Reuse<'a>>,
 }
 
 /// How a link between two near surfaces (bounding spheres within [`SEPARATION`] radii-sums) is
@@ -82,6 +84,7 @@ impl<'a> LinkContext<'a> {
             rules: (1..=8).map(GaussLegendre::new).collect(),
             near: NearRule::Coarse,
             light_rule: GaussLegendre::new(LIGHT_POINTS),
+            reuse: None,
         }
     }
 }
@@ -114,24 +117,110 @@ pub fn compute(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Computed
 /// Computes the link between `a` and `b`; `weight` applies to surface pairs (a cluster link is
 /// light as it is).
 pub fn compute_as(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId, weight: Weight) -> Computed {
+    compute_cast(ctx, tree, a, b, weight).0
+}
+
+/// [`compute_as`], and for a cluster link whose segments were cast against occluders, the cast
+/// (for [`Casts`]) and whether it was the last frame's ([`Reuse`]).
+pub fn compute_cast(
+    ctx: &LinkContext,
+    tree: &Tree,
+    a: NodeId,
+    b: NodeId,
+    weight: Weight,
+) -> (Computed, Option<Casting>) {
     let (na, nb) = (tree.node(a), tree.node(b));
     match (&na.kind, &nb.kind) {
         (Kind::Surface(sa), Kind::Surface(sb)) => {
             let (ea, eb) = (Side::of(sa, na.centre, na.radius), Side::of(sb, nb.centre, nb.radius));
-            match weight {
+            let computed = match weight {
                 Weight::Full => surfaces(ctx, &ea, &eb),
                 Weight::Light => light_surfaces(ctx, &ea, &eb),
-            }
+            };
+            (computed, None)
         }
         _ => {
-            let rays = transmittance(ctx, tree, a, b);
+            let last = ctx.reuse.as_ref().and_then(|r| r.cast_of(a, b));
+            let reused = last.is_some();
+            let cast = last.unwrap_or_else(|| transmittance(ctx, tree, a, b));
+            let rays = &cast.rays;
             let t = rays.weighted;
-            Computed {
+            let computed = Computed {
                 coupling: (t > 0.0).then_some(Coupling::Clusters { transmittance: t as f32 }),
                 partial: rays.arrived > 0 && rays.arrived < rays.facing,
                 blocked: rays.facing > 0 && rays.arrived == 0,
-            }
+            };
+            (computed, ctx.occluders.is_some().then_some(Casting { cast, reused }))
         }
+    }
+}
+
+/// A cluster link's segments as [`kernel_weighted_combos`] cast them, and what they found.
+#[derive(Clone, Copy)]
+pub struct Cast {
+    /// The first `rays.facing` hold the segments' ends (f32: [`Reuse::cast_of`] tests them
+    /// against boxes grown by more than their rounding).
+    ends: [[f32; 6]; CLUSTER_RAYS],
+    rays: Rays,
+}
+
+/// A cluster link's cast as [`compute_cast`] made it: anew, or the last frame's (`reused`).
+pub struct Casting {
+    pub cast: Cast,
+    pub reused: bool,
+}
+
+/// The casts of the cluster links an animation's frame computed, by pair, for the next frame
+/// to take where it may ([`Reuse`]); kept only by updated frames (a first frame computes
+/// millions on a large model).
+pub type Casts = super::pair_tree::PairMap<Cast>;
+
+/// What a frame may take from the casts of the frame before ([`LinkContext::reuse`]).
+///
+/// A pair that a move touched although neither end holds a moved face (a moved object's swept
+/// box meets the shaft between its ends) draws the same points as it did then: the points
+/// below a node depend on its faces only ([`sample_point`], seeded by the pair). Its segments
+/// are the same, and a segment that meets no swept box (the moved faces' old and new places)
+/// is blocked by the same faces as then. So when none does, the cast is what a fresh one
+/// would give, bit for bit. On the moving-light box about half of an updated frame's cluster
+/// pairs are touched this way: the light's box meets the shafts of the pairs around it.
+pub struct Reuse<'a> {
+    pub last: &'a Casts,
+    /// Per node of the tree the move was found on: it holds a moved face (nodes made since
+    /// hold none of the last frame's pairs).
+    pub holds: &'a [bool],
+    /// The moved objects' swept boxes, grown by more than an f32 end's rounding.
+    swept: Vec<crate::geometry::Aabb>,
+}
+
+impl<'a> Reuse<'a> {
+    /// `swept`: the moves' boxes ([`super::touch::Moves::swept`]) on `tree`.
+    pub fn new(last: &'a Casts, holds: &'a [bool], swept: &[crate::geometry::Aabb], tree: &Tree) -> Self {
+        // An f32 end is within 2^-24 of the scene's largest coordinate of the cast one, and so
+        // is every point between two ends.
+        let size = tree
+            .faces
+            .iter()
+            .map(|e| e.patch.bounds())
+            .chain(swept.iter().copied())
+            .map(|x| x.min.abs().max(x.max.abs()).max_element())
+            .fold(0.0, f64::max);
+        let margin = 1e-6 * size.max(1e-300);
+        Self { last, holds, swept: swept.iter().map(|x| x.inflated(margin)).collect() }
+    }
+
+    /// The last frame's cast of `(a, b)` where it holds this frame ([`Reuse`]).
+    fn cast_of(&self, a: NodeId, b: NodeId) -> Option<Cast> {
+        let holds = |x: NodeId| self.holds.get(x as usize).copied().unwrap_or(true);
+        if holds(a) || holds(b) {
+            return None;
+        }
+        let cast = self.last.get(&super::pair_tree::key(a, b))?;
+        let end = |e: &[f32; 6], k: usize| DVec3::new(e[k] as f64, e[k + 1] as f64, e[k + 2] as f64);
+        let crossed = cast.ends[..cast.rays.facing]
+            .iter()
+            .any(|e| self.swept.iter().any(|x| x.meets_segment(end(e, 0), end(e, 3))));
+        (!crossed).then_some(*cast)
     }
 }
 
@@ -329,12 +418,18 @@ impl LightPoints {
 /// The transmittance of the pair `a`, `b`: [`kernel_weighted_combos`] between
 /// [`CLUSTER_RAYS`] points drawn below each (eq. 1 integrated over both ends against the
 /// centres' model).
-fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Rays {
+fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Cast {
     let (ca, cb) = (tree.node(a).centre, tree.node(b).centre);
     let mut rng = SplitMix(((a as u64) << 32) ^ b as u64 ^ 0x5851_F42D_4C95_7F2D);
     let xs: [End; CLUSTER_RAYS] = std::array::from_fn(|_| sample_point(tree, a, &mut rng));
     let ys: [End; CLUSTER_RAYS] = std::array::from_fn(|_| sample_point(tree, b, &mut rng));
-    kernel_weighted_combos(ctx.occluders, ca, cb, &xs, &ys)
+    let (rays, segments) = kernel_weighted_combos(ctx.occluders, ca, cb, &xs, &ys);
+    let f = |p: DVec3| [p.x as f32, p.y as f32, p.z as f32];
+    let ends = segments.map(|(x, y)| {
+        let (x, y) = (f(x), f(y));
+        [x[0], x[1], x[2], y[0], y[1], y[2]]
+    });
+    Cast { ends, rays }
 }
 
 /// [`kernel_weighted_rays`] over every pairing of the points `xs` (below the node at `ca`) with
@@ -347,14 +442,14 @@ fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Rays {
 /// behind a blocker: `blocked_pairings_estimate_the_visible_kernel_ratio`.) Drawing a pair of
 /// points for each segment until `m` faced took 22 draws a link on average (of at most 32) on
 /// the 30k-triangle monastery, and drawing a point (a face by area, then the point) was a tenth
-/// of its first frame.
+/// of its first frame. Also returns the segments cast (the first `facing`).
 pub(crate) fn kernel_weighted_combos(
     occluders: Option<&Occluders>,
     ca: DVec3,
     cb: DVec3,
     xs: &[End; CLUSTER_RAYS],
     ys: &[End; CLUSTER_RAYS],
-) -> Rays {
+) -> (Rays, [(DVec3, DVec3); CLUSTER_RAYS]) {
     const M: usize = CLUSTER_RAYS;
     let d2 = ca.distance_squared(cb);
     let w = (cb - ca).normalize_or_zero();
@@ -401,7 +496,7 @@ pub(crate) fn kernel_weighted_combos(
             arriving_distance / cast as f64
         };
     }
-    rays
+    (rays, ends)
 }
 
 /// The most [`kernel_weighted_rays`] may scale the centres' model by: near pairs of clusters see
@@ -473,6 +568,7 @@ pub(crate) fn kernel_weighted_rays(
 pub(crate) type End = (u32, DVec3, DVec3);
 
 /// What [`kernel_weighted_rays`] and [`kernel_weighted_combos`] found.
+#[derive(Clone, Copy)]
 pub(crate) struct Rays {
     /// Segments cast (whose ends face each other; at most [`CLUSTER_RAYS`]), and those of them
     /// that arrive.
@@ -565,7 +661,7 @@ mod tests {
         for _ in 0..draws {
             let xs: [End; CLUSTER_RAYS] = std::array::from_fn(|_| a(rng.next(), rng.next()));
             let ys: [End; CLUSTER_RAYS] = std::array::from_fn(|_| b(rng.next(), rng.next()));
-            let rays = kernel_weighted_combos(occluders, ca, cb, &xs, &ys);
+            let (rays, _) = kernel_weighted_combos(occluders, ca, cb, &xs, &ys);
             all_arrived &= rays.arrived == rays.facing;
             mean += rays.weighted / draws as f64;
         }

@@ -146,6 +146,9 @@ pub struct HierarchyStats {
     /// Of `link_seconds`, computing the couplings of accepted pairs
     /// ([`refine::RefineStats::compute_seconds`]).
     pub compute_seconds: f64,
+    /// Of the cluster links computed, those whose cast was the last frame's
+    /// ([`coupling::Reuse`]).
+    pub reused_casts: usize,
     pub solve_seconds: f64,
     /// Distinct corner points gathered, and the gather's time (0 without it).
     pub gather_points: usize,
@@ -334,15 +337,19 @@ fn link_and_solve(
         let linked = |f: f64| progress(from + width * f, "links");
         match start.take() {
             Some(Start::Root) => {
-                stats.compute_seconds += hierarchy.link_all(ctx, &mut radiosity, &linked)?.compute_seconds;
+                let linked = hierarchy.link_all(ctx, &mut radiosity, &linked)?;
+                stats.compute_seconds += linked.compute_seconds;
+                stats.reused_casts += linked.reused_casts;
             }
             Some(Start::Pairs(work)) => {
-                stats.compute_seconds +=
-                    hierarchy.link_pairs(ctx, &mut radiosity, work, &linked)?.compute_seconds;
+                let linked = hierarchy.link_pairs(ctx, &mut radiosity, work, &linked)?;
+                stats.compute_seconds += linked.compute_seconds;
+                stats.reused_casts += linked.reused_casts;
             }
             None => {
                 let relinked = hierarchy.relink(ctx, &mut radiosity, &linked)?;
                 stats.compute_seconds += relinked.compute_seconds;
+                stats.reused_casts += relinked.reused_casts;
                 stats.retested += relinked.tested;
                 stats.quick_relinks += usize::from(relinked.quick);
                 if relinked.relinked == 0 {

@@ -630,6 +630,10 @@ pub struct Hierarchy {
     /// recorded in `changes`.
     pub changes: LinkChanges,
     pub packed: Option<PackedLinks>,
+    /// The casts of the cluster links this frame computed, for the next frame to take where a
+    /// move cannot have changed them ([`coupling::Reuse`]); filled only while linking with a
+    /// [`coupling::LinkContext::reuse`] (an animation's updated frames).
+    pub casts: coupling::Casts,
 }
 
 /// Counts of one refinement.
@@ -647,6 +651,8 @@ pub struct RefineStats {
     /// Wall seconds spent computing the accepted pairs' couplings (quadrature and visibility),
     /// apart from deciding and filing them: what the seed's series could replace at most.
     pub compute_seconds: f64,
+    /// Cluster links whose cast was the last frame's ([`coupling::Reuse`]).
+    pub reused_casts: usize,
 }
 
 impl Hierarchy {
@@ -669,6 +675,7 @@ impl Hierarchy {
             decided_at: Vec::new(),
             changes,
             packed,
+            casts: coupling::Casts::default(),
         }
     }
 
@@ -999,12 +1006,15 @@ impl Hierarchy {
                 chunk
                     .par_iter()
                     .map(|&(a, b, weight)| {
-                        let c = coupling::compute_as(ctx, tree, a, b, weight);
+                        let (c, cast) = coupling::compute_cast(ctx, tree, a, b, weight);
                         let filing = oracle.filing(tree, seen, a, b, &c);
-                        (c, filing)
+                        (c, filing, cast)
                     })
                     .collect_into_vec(&mut part);
                 stats.compute_seconds += t.elapsed().as_secs_f64();
+                if ctx.reuse.is_some() {
+                    self.record_casts(chunk, &mut part, stats)?;
+                }
                 // Reserved first: the allocator's refusal of the large vectors is an error (a
                 // full link's own blocks are small allocations).
                 budget::try_reserve(&mut self.links, part.len(), LINKS)?;
@@ -1014,7 +1024,8 @@ impl Hierarchy {
                 }
                 budget::try_reserve(&mut self.blocked, part.len(), LINKS)?;
                 budget::try_reserve(&mut self.blocked_load, part.len(), LINKS)?;
-                for ((&(a, b, _), (c, filing)), &share) in chunk.iter().zip(part.drain(..)).zip(chunk_shares)
+                for ((&(a, b, _), (c, filing, _)), &share) in
+                    chunk.iter().zip(part.drain(..)).zip(chunk_shares)
                 {
                     let pushed = work.len();
                     if self.take_computed(a, b, c, filing, radiosity, &mut work, stats)? {
@@ -1023,6 +1034,29 @@ impl Hierarchy {
                         settled += space.divide(&self.tree, share, (a, b), &work[pushed..], &mut shares)?;
                     }
                 }
+            }
+        }
+        Ok(())
+    }
+
+    /// Keeps the casts of a chunk's cluster links in [`Hierarchy::casts`] (taking them out of
+    /// `part`).
+    fn record_casts(
+        &mut self,
+        chunk: &[(NodeId, NodeId, coupling::Weight)],
+        part: &mut [(coupling::Computed, Filing, Option<coupling::Casting>)],
+        stats: &mut RefineStats,
+    ) -> Result<()> {
+        let casts = &mut self.casts;
+        let more = part.iter().filter(|p| p.2.is_some()).count();
+        casts.try_reserve(more).map_err(|_| {
+            let bytes = (casts.len() + more) * (std::mem::size_of::<coupling::Cast>() + 8);
+            budget::out_of_memory("the cluster links' casts", bytes as u64)
+        })?;
+        for (&(a, b, _), (_, _, cast)) in chunk.iter().zip(part.iter_mut()) {
+            if let Some(c) = cast.take() {
+                stats.reused_casts += usize::from(c.reused);
+                casts.insert(super::pair_tree::key(a, b), c.cast);
             }
         }
         Ok(())

@@ -33,6 +33,7 @@ use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
 use crate::system::{Progress, build_elements_reusing};
 
+use super::coupling;
 use super::refine::{Hierarchy, Oracle};
 use super::touch::{Moves, Touch, neutral};
 use super::{HierarchicalFrame, HierarchySettings, HierarchyStats, Lighting, Start};
@@ -107,13 +108,14 @@ pub fn update_frame(
         decided_at,
         changes: std::mem::take(&mut previous.hierarchy.changes),
         packed: previous.hierarchy.packed.take(),
+        casts: Default::default(),
     };
+    let last_casts = std::mem::take(&mut previous.hierarchy.casts);
     // Nothing moved (an emission change alone): no pair is touched.
-    let (touched, work) = if moves.swept.is_empty() {
-        (0, Vec::new())
-    } else {
-        let touch = Touch::new(&hierarchy.tree, &moves);
-        take_changed(&mut hierarchy, &touch, &state.radiosity_estimate())
+    let touch = (!moves.swept.is_empty()).then(|| Touch::new(&hierarchy.tree, &moves));
+    let (touched, work) = match &touch {
+        None => (0, Vec::new()),
+        Some(touch) => take_changed(&mut hierarchy, touch, &state.radiosity_estimate()),
     };
     let mut stats = HierarchyStats {
         faces: hierarchy.tree.faces.len(),
@@ -126,7 +128,12 @@ pub fn update_frame(
     };
     stats.link_seconds += t.elapsed().as_secs_f64();
     let rule = GaussLegendre::new(scene.settings.quadrature_order);
-    let ctx = super::link_context(scene, hs, &rule, lit.occluders.as_ref());
+    let mut ctx = super::link_context(scene, hs, &rule, lit.occluders.as_ref());
+    // The next frame takes the casts this one makes; this one those of the frame before, where
+    // the move cannot have changed them.
+    let no_move = [];
+    let holds = touch.as_ref().map_or(&no_move[..], |t| t.holds());
+    ctx.reuse = Some(coupling::Reuse::new(&last_casts, holds, &moves.swept, &hierarchy.tree));
     super::link_and_solve(
         &mut hierarchy,
         &mut state,

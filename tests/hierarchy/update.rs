@@ -9,7 +9,7 @@ use galerkin_radiosity::hierarchy::{HierarchicalFrame, HierarchySettings, Lighti
 use galerkin_radiosity::scene::{Scene, Settings};
 
 use super::hierarchy_checks::{check_pair_tree, check_pairs, check_partition};
-use galerkin_radiosity::scenes::{cornell_box_animated, emission_ramp, seed_room};
+use galerkin_radiosity::scenes::{cornell_box_animated, cornell_box_moving_light, emission_ramp, seed_room};
 use galerkin_radiosity::session::{Method, Session};
 use galerkin_radiosity::system::no_progress;
 
@@ -179,6 +179,33 @@ fn a_local_move_keeps_most_links() {
             s.touched_pairs
         );
         check_pairs(&next, &scene, f, &hs);
+        h = next;
+    }
+}
+
+/// The moving-light box's cluster links that the light's move touched only through their
+/// shafts take the frame before's casts where no segment meets the light's swept box
+/// (`coupling::Reuse`): some are taken, and every link, blocked and idle pair of the updated
+/// frames is still what a fresh computation gives, bit for bit.
+#[test]
+fn casts_a_move_cannot_change_are_taken_from_the_frame_before() {
+    let scene = cornell_box_moving_light(6, 8, settings());
+    let hs = HierarchySettings { keep_pair_tree: true, ..Default::default() };
+    let mut h = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
+    assert_eq!(h.stats.reused_casts, 0, "a first frame has no frame before");
+    for frame in 2..=4 {
+        let f = frame as f64;
+        let next = update_frame(&mut h, &scene, f, &hs, &no_progress).unwrap();
+        let s = &next.stats;
+        assert!(s.cluster_links > 0, "frame {frame}: no cluster links to test");
+        // (Frame 2 has only frame 1's, which a first frame does not keep.)
+        if frame > 2 {
+            assert!(s.reused_casts > 0, "frame {frame}: no cast was taken from the frame before");
+        } else {
+            assert_eq!(s.reused_casts, 0);
+        }
+        check_pairs(&next, &scene, f, &hs);
+        check_partition(&next);
         h = next;
     }
 }
