@@ -120,6 +120,33 @@ impl Walk<'_> {
         got: &Gathered,
         level: usize,
     ) -> f64 {
+        self.descend(id, inherited, pushed, got, level, true)
+    }
+
+    /// [`Walk::push_pull`] without the pull: only the leaves' `b` and means are written, the
+    /// nodes above them left as they were until a [`Walk::pull`]. For a sweep that the mixer
+    /// changes before anything reads it (it pulled twice), and for the furnace, which reads the
+    /// leaves alone.
+    pub fn push(
+        &self,
+        id: NodeId,
+        inherited: &Lobes,
+        pushed: &[[f64; 3]],
+        got: &Gathered,
+        level: usize,
+    ) -> f64 {
+        self.descend(id, inherited, pushed, got, level, false)
+    }
+
+    fn descend(
+        &self,
+        id: NodeId,
+        inherited: &Lobes,
+        pushed: &[[f64; 3]],
+        got: &Gathered,
+        level: usize,
+        pull: bool,
+    ) -> f64 {
         let nb = self.nb;
         let i = id as usize;
         let node = &self.tree.nodes[i];
@@ -142,11 +169,13 @@ impl Walk<'_> {
                 }
                 let flat = &*flat;
                 if level < PARALLEL_LEVELS {
-                    let parts: Vec<f64> =
-                        children.par_iter().map(|&c| self.push_pull(c, &l, flat, got, level + 1)).collect();
+                    let parts: Vec<f64> = children
+                        .par_iter()
+                        .map(|&c| self.descend(c, &l, flat, got, level + 1, pull))
+                        .collect();
                     parts.iter().sum()
                 } else {
-                    children.iter().map(|&c| self.push_pull(c, &l, flat, got, level + 1)).sum()
+                    children.iter().map(|&c| self.descend(c, &l, flat, got, level + 1, pull)).sum()
                 }
             }
             Kind::Surface(s) => {
@@ -183,6 +212,10 @@ impl Walk<'_> {
                             Leaves::Furnace => b.copy_from_slice(h),
                         }
                         let after = self.mean_of(s, i);
+                        if !pull {
+                            // SAFETY: as above.
+                            unsafe { *self.nodes.mean(i) = after };
+                        }
                         node.area * (0..3).map(|c| (after[c] - before[c]).abs()).fold(0.0, f64::max)
                     }
                     Some(children) => {
@@ -190,14 +223,16 @@ impl Walk<'_> {
                         for (q, &c) in children.iter().enumerate() {
                             let mut hq = [[0.0; 3]; crate::basis::MAX_LEN];
                             self.two_scale.push_add(q, h, &mut hq[..nb]);
-                            change += self.push_pull(c, &lobes::ZERO, &hq[..nb], got, level + 1);
+                            change += self.descend(c, &lobes::ZERO, &hq[..nb], got, level + 1, pull);
                         }
                         change
                     }
                 }
             }
         };
-        self.pull_node(id);
+        if pull {
+            self.pull_node(id);
+        }
         change
     }
 

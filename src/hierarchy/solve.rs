@@ -17,7 +17,7 @@ use super::coupling::Link;
 use super::lobes::{self, Lobes};
 use super::packed::{ClusterEntry, LinkChanges, PackedLinks};
 use super::push_pull::{Leaves, Nodes, Walk};
-use super::tree::{NodeId, Tree};
+use super::tree::{Kind, NodeId, Tree};
 use super::two_scale::TwoScale;
 use crate::budget;
 use crate::error::{Error, Result};
@@ -260,7 +260,10 @@ impl State {
                 a.read(&self.b, &leaves, self.nb, Side::Before);
             }
             self.gather(tree, packed, &mut gathered)?;
-            let change = self.push_pull(tree, &gathered);
+            // With the mixer, which changes the leaves before anything reads the nodes above,
+            // the sweep pushes only, and the pull follows the mixing.
+            let mixing = accelerated.is_some();
+            let change = if mixing { self.push(tree, &gathered) } else { self.push_pull(tree, &gathered) };
             stats.sweeps = sweep + 1;
             stats.last_change = change;
             if !change.is_finite() || change > 1e6 * first {
@@ -268,6 +271,9 @@ impl State {
             }
             // Stopping on the sweep's own result keeps the state one plain sweep of itself.
             if change <= stop {
+                if mixing {
+                    self.refresh(tree);
+                }
                 break;
             }
             if let Some(a) = accelerated.as_mut() {
@@ -295,7 +301,9 @@ impl State {
     fn bound_leaves(&mut self, tree: &Tree, packed: &mut PackedLinks, check: bool) -> Result<usize> {
         let (nb, n) = (self.nb, tree.nodes.len());
         let what = "the hierarchy's hemisphere bound";
-        let (mut white, leaves) = self.white(tree)?;
+        let mut white = self.white(tree)?;
+        let mut leaves = Vec::new();
+        tree.leaves_below(tree.root, &mut leaves);
         let kept = packed.furnace.take();
         let mut changed = std::mem::take(&mut packed.changed);
         let incremental = kept.is_some();
@@ -309,6 +317,9 @@ impl State {
         }
         let gathered = &rows;
         let zero = [[0.0; 3]; crate::basis::MAX_LEN];
+        // The push writes the leaves' `b` and means over the white state's (it reads none of
+        // them): the furnace's leaf means are the sums `S`.
+        white.b = budget::try_filled(n * nb, [0.0; 3], what)?;
         let walk = Walk {
             tree,
             nodes: Nodes::new(&mut white.b, &mut white.mean, &mut white.lobes, nb),
@@ -318,7 +329,7 @@ impl State {
             two_scale: &white.two_scale,
             nb,
         };
-        walk.push_pull(tree.root, &lobes::ZERO, &zero[..nb], gathered, 0);
+        walk.push(tree.root, &lobes::ZERO, &zero[..nb], gathered, 0);
         let mut bound = budget::try_filled(n, 1.0, what)?;
         for &id in &leaves {
             let face = tree.nodes[id as usize].surface().expect("leaves are surfaces").face;
@@ -332,30 +343,56 @@ impl State {
         Ok(gathered_rows)
     }
 
-    /// A state of this one's basis with every surface at `B = 1` (pulled: every surface node at
-    /// `b = (1, 0, ...)`, clusters' means and lobes those of white faces), and the tree's leaves;
-    /// no sources. [`crate::Error::OutOfMemory`] when it cannot be had.
-    fn white(&self, tree: &Tree) -> Result<(State, Vec<NodeId>)> {
-        let (nb, n) = (self.nb, tree.nodes.len());
+    /// The furnace's sources: a state of this one's basis with every surface at `B = 1`, so
+    /// that every node's mean is 1 (0 without area) and a cluster's lobes are the sum of its
+    /// faces' cosine lobes of intensity `A / pi`: what the pull of `b = (1, 0, ...)` from the
+    /// leaves gives, worked out over the clusters and faces alone (that pull through every
+    /// quadtree node was a third of a furnace on the moving-light box). Its `b` is empty: the
+    /// furnace reads only the sources' means and lobes ([`State::furnace_gather`]).
+    /// [`crate::Error::OutOfMemory`] when it cannot be had.
+    fn white(&self, tree: &Tree) -> Result<State> {
+        let n = tree.nodes.len();
         let what = "the hierarchy's hemisphere bound";
-        let mut white = State {
-            nb,
-            b: budget::try_filled(n * nb, [0.0; 3], what)?,
+        let mut mean = budget::try_filled(n, [0.0; 3], what)?;
+        for (m, node) in mean.iter_mut().zip(&tree.nodes) {
+            if node.area > 0.0 {
+                *m = [1.0; 3];
+            }
+        }
+        let mut lobes = budget::try_filled(n, lobes::ZERO, what)?;
+        // The clusters and faces, parents before children; then set from the faces up.
+        let mut order = Vec::new();
+        let mut stack = vec![tree.root];
+        while let Some(id) = stack.pop() {
+            order.push(id);
+            if tree.nodes[id as usize].is_cluster() {
+                stack.extend_from_slice(tree.children(id));
+            }
+        }
+        for &id in order.iter().rev() {
+            let node = &tree.nodes[id as usize];
+            let mut l = lobes::ZERO;
+            match &node.kind {
+                Kind::Cluster { children } => {
+                    children.iter().for_each(|&c| lobes::add(&mut l, &lobes[c as usize]))
+                }
+                Kind::Surface(s) => {
+                    let f = node.area / std::f64::consts::PI;
+                    lobes::add_lobe(&mut l, s.normal, mean[id as usize].map(|m| m * f));
+                }
+            }
+            lobes[id as usize] = l;
+        }
+        Ok(State {
+            nb: self.nb,
+            b: Vec::new(),
             sources: Vec::new(),
             has_sources: Vec::new(),
-            mean: budget::try_filled(n, [0.0; 3], what)?,
-            lobes: budget::try_filled(n, lobes::ZERO, what)?,
+            mean,
+            lobes,
             bound: Vec::new(),
             two_scale: self.two_scale.clone(),
-        };
-        let mut leaves = Vec::new();
-        tree.leaves_below(tree.root, &mut leaves);
-        // `Gamma_0 = 1`: `b^0 = 1` is `B = 1` over the leaf.
-        for &id in &leaves {
-            white.b[id as usize * nb] = [1.0; 3];
-        }
-        white.refresh(tree);
-        Ok((white, leaves))
+        })
     }
 
     /// What every node receives through its own links from the current state, into `out`
@@ -537,6 +574,14 @@ impl State {
         self.walk(tree).push_pull(tree.root, &lobes::ZERO, &zero[..nb], gathered, 0)
     }
 
+    /// [`State::push_pull`] without the pull ([`Walk::push`]): the nodes above the leaves wait
+    /// for a [`State::refresh`].
+    fn push(&mut self, tree: &Tree, gathered: &Gathered) -> f64 {
+        let zero = [[0.0; 3]; crate::basis::MAX_LEN];
+        let nb = self.nb;
+        self.walk(tree).push(tree.root, &lobes::ZERO, &zero[..nb], gathered, 0)
+    }
+
     /// The intensity lobes node `id` shoots through cluster links (W/sr by direction).
     pub fn lobes(&self, id: NodeId) -> &Lobes {
         &self.lobes[id as usize]
@@ -698,8 +743,10 @@ mod tests {
     use crate::scene::Settings;
     use crate::system::no_progress;
 
-    /// The furnace's own gather (no reads of the sources' rows) is the sweeps' gather of a state
-    /// at `B = 1`: on the decimated monastery, whose links are of all three kinds.
+    /// The furnace's white state ([`State::white`], worked out over the clusters and faces) is
+    /// the pull of `b = (1, 0, ...)` from every leaf, and the furnace's own gather on it (no
+    /// reads of the sources' rows) is the sweeps' gather of that pulled state: on the decimated
+    /// monastery, whose links are of all three kinds.
     #[test]
     fn the_furnace_gather_is_the_gather_of_a_white_state() {
         let path =
@@ -710,12 +757,27 @@ mod tests {
         let s = &h.stats;
         assert!(s.cluster_links > 0 && s.constant_links > 0 && s.surface_links > 0, "{s:?}");
         let (tree, packed) = (&h.hierarchy.tree, h.hierarchy.packed.as_ref().unwrap());
-        let (white, _) = State::new(tree).white(tree).unwrap();
+        let white = State::new(tree).white(tree).unwrap();
+        let mut pulled = State::new(tree);
+        let mut leaves = Vec::new();
+        tree.leaves_below(tree.root, &mut leaves);
+        for &id in &leaves {
+            pulled.b[id as usize * pulled.nb] = [1.0; 3];
+        }
+        pulled.refresh(tree);
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * (1.0 + a.abs());
+        for (x, y) in white.mean.iter().zip(&pulled.mean) {
+            assert!((0..3).all(|c| close(x[c], y[c])), "mean {x:?} vs pulled {y:?}");
+        }
+        let lit = pulled.lobes.iter().filter(|l| l[0][0] != 0.0).count();
+        assert!(lit > tree.faces.len(), "only {lit} lobes");
+        for (x, y) in white.lobes.iter().zip(&pulled.lobes) {
+            assert!((0..9).all(|k| (0..3).all(|c| close(x[k][c], y[k][c]))), "lobe {x:?} vs pulled {y:?}");
+        }
         let empty = || Gathered { h: Vec::new(), lobes: Vec::new(), constant: Vec::new() };
         let (mut swept, mut furnace) = (empty(), empty());
-        white.gather(tree, packed, &mut swept).unwrap();
+        pulled.gather(tree, packed, &mut swept).unwrap();
         white.furnace_gather(tree, packed, &mut furnace, None).unwrap();
-        let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * (1.0 + a.abs());
         let mut nonzero = 0;
         for (x, y) in swept.h.iter().zip(&furnace.h) {
             nonzero += usize::from(x[0] != 0.0);
