@@ -392,6 +392,64 @@ fn methods_table(settings: &Settings, quick: bool) {
     for ((name, _), [p25, median, p75]) in methods.iter().zip(quartiles) {
         println!("| {name} | {median:.4} | {p25:.4} | {p75:.4} | {:.2}x |", median / flat);
     }
+    hierarchy_phases(&scene);
+}
+
+/// Where the hierarchy's updated frames of `scene` go (`HierarchyStats`' phases), means over
+/// frames 2.. of one more run, as `Session` updates them (the pair tree kept).
+fn hierarchy_phases(scene: &Scene) {
+    use galerkin_radiosity::hierarchy::update::update_frame;
+    use galerkin_radiosity::hierarchy::{HierarchySettings, HierarchyStats, solve_frame};
+    let hs = HierarchySettings { keep_pair_tree: true, ..HierarchySettings::of(&scene.settings) };
+    type Phase = (&'static str, fn(&HierarchyStats) -> f64);
+    let phases: [Phase; 7] = [
+        ("the set-up: faces placed, lights and occluders, the last frame's tree and solution copied", |s| {
+            s.setup_seconds
+        }),
+        ("finding the touched pairs (the walk down the pair tree) and taking them out", |s| s.touch_seconds),
+        ("linking them again (of it, computing couplings: next row)", |s| s.first_link_seconds),
+        ("relinking after each solve", |s| s.relink_seconds),
+        ("packing the links for the solve", |s| s.pack_seconds),
+        ("the hemisphere bound's furnaces", |s| s.furnace_seconds),
+        ("the sweeps", |s| s.sweep_seconds),
+    ];
+    let (mut sums, mut compute, mut whole, mut sweeps, mut reused) = ([0.0; 7], 0.0, 0.0, 0.0, 0.0);
+    let frames: Vec<i64> = (scene.frames.0..=scene.frames.1).collect();
+    let mut h = solve_frame(scene, frames[0] as f64, &hs, &no_progress).unwrap();
+    for &f in &frames[1..] {
+        let t = std::time::Instant::now();
+        let next = update_frame(&mut h, scene, f as f64, &hs, &no_progress).unwrap();
+        whole += t.elapsed().as_secs_f64();
+        let s = &next.stats;
+        assert!(s.updated, "frame {f} was not updated");
+        for (sum, (_, of)) in sums.iter_mut().zip(&phases) {
+            *sum += of(s);
+        }
+        compute += s.compute_seconds;
+        sweeps += s.sweeps as f64;
+        reused += s.reused_casts as f64;
+        h = next;
+    }
+    let n = (frames.len() - 1) as f64;
+    println!(
+        "\nThe hierarchy's updated frames of the same box, one more run through `update_frame` (the pair tree kept, \
+         as a session updates), milliseconds per frame, means over frames 2..{} ({:.1} sweeps a frame; {:.0} cluster \
+         links a frame took the last frame's cast):\n",
+        frames.len(),
+        sweeps / n,
+        reused / n,
+    );
+    println!("| phase | ms per frame |");
+    println!("|---|---|");
+    for (i, ((name, _), sum)) in phases.iter().zip(sums).enumerate() {
+        println!("| {name} | {:.1} |", 1e3 * sum / n);
+        if i == 2 {
+            println!("| (of which computing the couplings) | ({:.1}) |", 1e3 * compute / n);
+        }
+    }
+    let listed: f64 = sums.iter().sum();
+    println!("| the rest (counts, the read-back) | {:.1} |", 1e3 * (whole - listed) / n);
+    println!("| the whole frame | {:.1} |", 1e3 * whole / n);
 }
 
 /// The flat methods side by side: docs/benchmarks.md's "animation" block.

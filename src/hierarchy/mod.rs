@@ -150,6 +150,20 @@ pub struct HierarchyStats {
     /// ([`coupling::Reuse`]).
     pub reused_casts: usize,
     pub solve_seconds: f64,
+    /// Where an updated frame's time goes, in wall seconds, its phases in turn: the set-up
+    /// (faces placed, the frame's lights and occluders, the last frame's tree and solution
+    /// copied), finding and taking out the touched pairs, the first round's linking and the
+    /// later rounds' (the relinks), packing the links for the solve, the hemisphere bound's
+    /// furnaces and the sweeps. The first three are of `link_seconds` (the set-up from the
+    /// lights on), the last three of `solve_seconds`. A frame from scratch has only the
+    /// linking, packing, furnaces and sweeps.
+    pub setup_seconds: f64,
+    pub touch_seconds: f64,
+    pub first_link_seconds: f64,
+    pub relink_seconds: f64,
+    pub pack_seconds: f64,
+    pub furnace_seconds: f64,
+    pub sweep_seconds: f64,
     /// Distinct corner points gathered, and the gather's time (0 without it).
     pub gather_points: usize,
     pub gather_seconds: f64,
@@ -359,7 +373,9 @@ fn link_and_solve(
         }
         state.grow(&hierarchy.tree)?;
         state.add_sources(&hierarchy.tree, &lit.emission, lit.lights.as_ref());
-        stats.link_seconds += t.elapsed().as_secs_f64();
+        let linking = t.elapsed().as_secs_f64();
+        stats.link_seconds += linking;
+        *(if round == 0 { &mut stats.first_link_seconds } else { &mut stats.relink_seconds }) += linking;
         let t = Instant::now();
         let (nodes, nb) = (hierarchy.tree.nodes.len(), hierarchy.tree.basis.len());
         let (links, tree) = (&hierarchy.links, &hierarchy.tree);
@@ -372,12 +388,17 @@ fn link_and_solve(
             &mut hierarchy.changes,
             &geometry,
         )?;
+        let packing = t.elapsed().as_secs_f64();
         let packed = hierarchy.packed.as_mut().expect("packed just now");
         let solved = state.solve_packed(&hierarchy.tree, packed, stop, hs, &cancel)?;
         stats.sweeps += solved.sweeps;
         stats.furnaces += 1;
         stats.furnace_rows += solved.furnace_rows;
-        stats.solve_seconds += t.elapsed().as_secs_f64();
+        let solving = t.elapsed().as_secs_f64();
+        stats.solve_seconds += solving;
+        stats.pack_seconds += packing;
+        stats.furnace_seconds += solved.furnace_seconds;
+        stats.sweep_seconds += solving - packing - solved.furnace_seconds;
     }
     Ok(())
 }

@@ -50,6 +50,8 @@ pub struct SolveStats {
     /// Rows the hemisphere bound's furnace gathered ([`State::bound_leaves`]; all the nodes, or
     /// the receivers whose links changed).
     pub furnace_rows: usize,
+    /// Wall seconds of the furnace (the rest of the solve is its sweeps).
+    pub furnace_seconds: f64,
     /// Area-weighted change of the leaves' mean radiosity in the last sweep (W).
     pub last_change: f64,
 }
@@ -239,8 +241,10 @@ impl State {
         hs: &super::HierarchySettings,
         cancel: &(dyn Fn() -> bool + Sync),
     ) -> Result<SolveStats> {
+        let t = std::time::Instant::now();
         let furnace_rows = self.bound_leaves(tree, packed, hs.check_furnace)?;
-        let mut stats = SolveStats { furnace_rows, ..Default::default() };
+        let furnace_seconds = t.elapsed().as_secs_f64();
+        let mut stats = SolveStats { furnace_rows, furnace_seconds, ..Default::default() };
         let packed = &*packed;
         // One buffer for every sweep's gathered light: made anew each sweep (190 MB on the full
         // monastery), its pages' first touches were a twentieth of an updated frame.

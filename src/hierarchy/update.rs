@@ -52,6 +52,7 @@ pub fn update_frame(
     hs: &HierarchySettings,
     progress: Progress,
 ) -> Result<HierarchicalFrame> {
+    let start = std::time::Instant::now();
     let basis = Basis::new(scene.settings.basis_order);
     let old = &previous.hierarchy.tree;
     let faces = build_elements_reusing(scene, frame, basis, &old.faces);
@@ -111,6 +112,7 @@ pub fn update_frame(
         casts: Default::default(),
     };
     let last_casts = std::mem::take(&mut previous.hierarchy.casts);
+    let setup_seconds = start.elapsed().as_secs_f64();
     // Nothing moved (an emission change alone): no pair is touched.
     let touch = (!moves.swept.is_empty()).then(|| Touch::new(&hierarchy.tree, &moves));
     let (touched, work) = match &touch {
@@ -124,6 +126,8 @@ pub fn update_frame(
         refined_from: work.len(),
         kept_links: hierarchy.links.len(),
         updated: true,
+        setup_seconds,
+        touch_seconds: start.elapsed().as_secs_f64() - setup_seconds,
         ..Default::default()
     };
     stats.link_seconds += t.elapsed().as_secs_f64();
