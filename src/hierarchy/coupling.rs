@@ -172,8 +172,44 @@ pub struct Casting {
 
 /// The casts of the cluster links an animation's frame computed, by pair, for the next frame
 /// to take where it may ([`Reuse`]); kept only by updated frames (a first frame computes
-/// millions on a large model).
-pub type Casts = super::pair_tree::PairMap<Cast>;
+/// millions on a large model). In order of computation, with an index by pair: filed straight
+/// into a map, moving 230 bytes a cast, they cost a third as much as the casts they spared.
+#[derive(Default)]
+pub struct Casts {
+    index: super::pair_tree::PairMap<u32>,
+    casts: Vec<Cast>,
+}
+
+impl Casts {
+    pub fn len(&self) -> usize {
+        self.casts.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.casts.is_empty()
+    }
+
+    /// Room for `more` casts, or [`crate::Error::OutOfMemory`].
+    pub fn try_reserve(&mut self, more: usize) -> crate::error::Result<()> {
+        let bytes = (self.len() + more) as u64 * (std::mem::size_of::<Cast>() + 16) as u64;
+        let fail = |_| crate::budget::out_of_memory("the cluster links' casts", bytes);
+        self.index.try_reserve(more).map_err(fail)?;
+        self.casts.try_reserve(more).map_err(fail)
+    }
+
+    /// Keeps `cast` as the pair `(a, b)`'s (replacing an earlier one).
+    pub fn insert(&mut self, a: NodeId, b: NodeId, cast: Cast) {
+        let slot = *self.index.entry(super::pair_tree::key(a, b)).or_insert(self.casts.len() as u32);
+        match self.casts.get_mut(slot as usize) {
+            Some(kept) => *kept = cast,
+            None => self.casts.push(cast),
+        }
+    }
+
+    fn get(&self, a: NodeId, b: NodeId) -> Option<&Cast> {
+        self.index.get(&super::pair_tree::key(a, b)).map(|&i| &self.casts[i as usize])
+    }
+}
 
 /// What a frame may take from the casts of the frame before ([`LinkContext::reuse`]).
 ///
@@ -215,7 +251,7 @@ impl<'a> Reuse<'a> {
         if holds(a) || holds(b) {
             return None;
         }
-        let cast = self.last.get(&super::pair_tree::key(a, b))?;
+        let cast = self.last.get(a, b)?;
         let end = |e: &[f32; 6], k: usize| DVec3::new(e[k] as f64, e[k + 1] as f64, e[k + 2] as f64);
         let crossed = cast.ends[..cast.rays.facing]
             .iter()

@@ -1048,15 +1048,11 @@ impl Hierarchy {
         stats: &mut RefineStats,
     ) -> Result<()> {
         let casts = &mut self.casts;
-        let more = part.iter().filter(|p| p.2.is_some()).count();
-        casts.try_reserve(more).map_err(|_| {
-            let bytes = (casts.len() + more) * (std::mem::size_of::<coupling::Cast>() + 8);
-            budget::out_of_memory("the cluster links' casts", bytes as u64)
-        })?;
+        casts.try_reserve(part.iter().filter(|p| p.2.is_some()).count())?;
         for (&(a, b, _), (_, _, cast)) in chunk.iter().zip(part.iter_mut()) {
             if let Some(c) = cast.take() {
                 stats.reused_casts += usize::from(c.reused);
-                casts.insert(super::pair_tree::key(a, b), c.cast);
+                casts.insert(a, b, c.cast);
             }
         }
         Ok(())

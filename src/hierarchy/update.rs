@@ -112,6 +112,8 @@ pub fn update_frame(
         casts: Default::default(),
     };
     let last_casts = std::mem::take(&mut previous.hierarchy.casts);
+    // About as many as the last frame's.
+    hierarchy.casts.try_reserve(last_casts.len())?;
     let setup_seconds = start.elapsed().as_secs_f64();
     // Nothing moved (an emission change alone): no pair is touched.
     let touch = (!moves.swept.is_empty()).then(|| Touch::new(&hierarchy.tree, &moves));
