@@ -221,10 +221,10 @@ impl Casts {
 /// would give, bit for bit. On the moving-light box about half of an updated frame's cluster
 /// pairs are touched this way: the light's box meets the shafts of the pairs around it.
 pub struct Reuse<'a> {
-    pub last: &'a Casts,
+    last: &'a Casts,
     /// Per node of the tree the move was found on: it holds a moved face (nodes made since
     /// hold none of the last frame's pairs).
-    pub holds: &'a [bool],
+    holds: &'a [bool],
     /// The moved objects' swept boxes, grown by more than an f32 end's rounding.
     swept: Vec<crate::geometry::Aabb>,
 }
