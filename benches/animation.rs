@@ -392,15 +392,16 @@ fn methods_table(settings: &Settings, quick: bool) {
     for ((name, _), [p25, median, p75]) in methods.iter().zip(quartiles) {
         println!("| {name} | {median:.4} | {p25:.4} | {p75:.4} | {:.2}x |", median / flat);
     }
-    hierarchy_phases(&scene);
+    hierarchy_phases(&scene, runs);
 }
 
-/// Where the hierarchy's updated frames of `scene` go (`HierarchyStats`' phases), means over
-/// frames 2.. of one more run, as `Session` updates them (the pair tree kept).
-fn hierarchy_phases(scene: &Scene) {
+/// Where the hierarchy's updated frames of `scene` go (`HierarchyStats`' phases), as `Session`
+/// updates them (the pair tree kept), with the last frame's cluster-link casts taken where a
+/// move cannot have changed them (the default) and without: means over frames 2.. of `runs`
+/// runs each, the two alternated (each first in every other run).
+fn hierarchy_phases(scene: &Scene, runs: usize) {
     use galerkin_radiosity::hierarchy::update::update_frame;
     use galerkin_radiosity::hierarchy::{HierarchySettings, HierarchyStats, solve_frame};
-    let hs = HierarchySettings { keep_pair_tree: true, ..HierarchySettings::of(&scene.settings) };
     type Phase = (&'static str, fn(&HierarchyStats) -> f64);
     let phases: [Phase; 7] = [
         ("the set-up: faces placed, lights and occluders, the last frame's tree and solution copied", |s| {
@@ -413,43 +414,71 @@ fn hierarchy_phases(scene: &Scene) {
         ("the hemisphere bound's furnaces", |s| s.furnace_seconds),
         ("the sweeps", |s| s.sweep_seconds),
     ];
-    let (mut sums, mut compute, mut whole, mut sweeps, mut reused) = ([0.0; 7], 0.0, 0.0, 0.0, 0.0);
+    /// Per phase, then computing couplings, the whole frame, sweeps and casts taken: sums.
+    #[derive(Default, Clone, Copy)]
+    struct Sums {
+        phases: [f64; 7],
+        compute: f64,
+        whole: f64,
+        sweeps: f64,
+        reused: f64,
+        frames: f64,
+    }
     let frames: Vec<i64> = (scene.frames.0..=scene.frames.1).collect();
-    let mut h = solve_frame(scene, frames[0] as f64, &hs, &no_progress).unwrap();
-    for &f in &frames[1..] {
-        let t = std::time::Instant::now();
-        let next = update_frame(&mut h, scene, f as f64, &hs, &no_progress).unwrap();
-        whole += t.elapsed().as_secs_f64();
-        let s = &next.stats;
-        assert!(s.updated, "frame {f} was not updated");
-        for (sum, (_, of)) in sums.iter_mut().zip(&phases) {
-            *sum += of(s);
+    let mut sums = [Sums::default(); 2];
+    for run in 0..runs {
+        for k in 0..2 {
+            let k = if run % 2 == 0 { k } else { 1 - k };
+            let hs = HierarchySettings {
+                keep_pair_tree: true,
+                reuse_casts: k == 0,
+                ..HierarchySettings::of(&scene.settings)
+            };
+            let sum = &mut sums[k];
+            let mut h = solve_frame(scene, frames[0] as f64, &hs, &no_progress).unwrap();
+            for &f in &frames[1..] {
+                let t = std::time::Instant::now();
+                let next = update_frame(&mut h, scene, f as f64, &hs, &no_progress).unwrap();
+                sum.whole += t.elapsed().as_secs_f64();
+                let s = &next.stats;
+                assert!(s.updated, "frame {f} was not updated");
+                for (x, (_, of)) in sum.phases.iter_mut().zip(&phases) {
+                    *x += of(s);
+                }
+                sum.compute += s.compute_seconds;
+                sum.sweeps += s.sweeps as f64;
+                sum.reused += s.reused_casts as f64;
+                sum.frames += 1.0;
+                h = next;
+            }
         }
-        compute += s.compute_seconds;
-        sweeps += s.sweeps as f64;
-        reused += s.reused_casts as f64;
-        h = next;
     }
-    let n = (frames.len() - 1) as f64;
+    let [on, off] = sums;
     println!(
-        "\nThe hierarchy's updated frames of the same box, one more run through `update_frame` (the pair tree kept, \
-         as a session updates), milliseconds per frame, means over frames 2..{} ({:.1} sweeps a frame; {:.0} cluster \
-         links a frame took the last frame's cast):\n",
+        "\nThe hierarchy's updated frames of the same box through `update_frame` (the pair tree kept, as a session \
+         updates), milliseconds per frame, means over frames 2..{} of {runs} runs each, with the last frame's \
+         cluster-link casts taken where a move cannot have changed them (the default; {:.0} a frame) and without, \
+         alternated ({:.1} sweeps a frame):\n",
         frames.len(),
-        sweeps / n,
-        reused / n,
+        on.reused / on.frames,
+        on.sweeps / on.frames,
     );
-    println!("| phase | ms per frame |");
-    println!("|---|---|");
-    for (i, ((name, _), sum)) in phases.iter().zip(sums).enumerate() {
-        println!("| {name} | {:.1} |", 1e3 * sum / n);
+    println!("| phase | ms per frame | without the casts |");
+    println!("|---|---|---|");
+    let ms = |x: f64, s: &Sums| 1e3 * x / s.frames;
+    for (i, (name, _)) in phases.iter().enumerate() {
+        println!("| {name} | {:.1} | {:.1} |", ms(on.phases[i], &on), ms(off.phases[i], &off));
         if i == 2 {
-            println!("| (of which computing the couplings) | ({:.1}) |", 1e3 * compute / n);
+            println!(
+                "| (of which computing the couplings) | ({:.1}) | ({:.1}) |",
+                ms(on.compute, &on),
+                ms(off.compute, &off)
+            );
         }
     }
-    let listed: f64 = sums.iter().sum();
-    println!("| the rest (counts, the read-back) | {:.1} |", 1e3 * (whole - listed) / n);
-    println!("| the whole frame | {:.1} |", 1e3 * whole / n);
+    let rest = |s: &Sums| ms(s.whole - s.phases.iter().sum::<f64>(), s);
+    println!("| the rest (counts, the read-back) | {:.1} | {:.1} |", rest(&on), rest(&off));
+    println!("| the whole frame | {:.1} | {:.1} |", ms(on.whole, &on), ms(off.whole, &off));
 }
 
 /// The flat methods side by side: docs/benchmarks.md's "animation" block.

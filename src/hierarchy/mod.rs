@@ -89,6 +89,11 @@ pub struct HierarchySettings {
     /// one that gathers them all: an internal error where they differ. For tests.
     #[doc(hidden)]
     pub check_furnace: bool,
+    /// An updated frame takes the last frame's casts of the cluster links a move cannot have
+    /// changed ([`coupling::Reuse`]; on by default, the same links either way). Off, for the
+    /// benches' side-by-side measure of what it saves.
+    #[doc(hidden)]
+    pub reuse_casts: bool,
 }
 
 impl HierarchySettings {
@@ -115,6 +120,7 @@ impl Default for HierarchySettings {
             keep_pair_tree: false,
             moves: true,
             check_furnace: false,
+            reuse_casts: true,
         }
     }
 }

@@ -139,7 +139,8 @@ pub fn update_frame(
     // the move cannot have changed them.
     let no_move = [];
     let holds = touch.as_ref().map_or(&no_move[..], |t| t.holds());
-    ctx.reuse = Some(coupling::Reuse::new(&last_casts, holds, &moves.swept, &hierarchy.tree));
+    ctx.reuse =
+        hs.reuse_casts.then(|| coupling::Reuse::new(&last_casts, holds, &moves.swept, &hierarchy.tree));
     super::link_and_solve(
         &mut hierarchy,
         &mut state,
