@@ -173,7 +173,8 @@ pub struct Casting {
 /// The casts of the cluster links an animation's frame computed, by pair, for the next frame
 /// to take where it may ([`Reuse`]); kept only by updated frames (a first frame computes
 /// millions on a large model). In order of computation, with an index by pair: filed straight
-/// into a map, moving 230 bytes a cast, they cost a third as much as the casts they spared.
+/// into a map, moving 230 bytes a cast, they took 1.8 ms of the moving-light box's frame, about
+/// what taking them spares.
 #[derive(Default)]
 pub struct Casts {
     index: super::pair_tree::PairMap<u32>,
