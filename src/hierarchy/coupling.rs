@@ -120,8 +120,8 @@ pub fn compute_as(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId, weight: 
     compute_cast(ctx, tree, a, b, weight).0
 }
 
-/// [`compute_as`], and for a cluster link whose segments were cast against occluders, the cast
-/// (for [`Casts`]) and whether it was the last frame's ([`Reuse`]).
+/// [`compute_as`], and for a cluster link of an update ([`LinkContext::reuse`]) whose segments
+/// were cast against occluders, the cast (for [`Casts`]) and whether it was the last frame's.
 pub fn compute_cast(
     ctx: &LinkContext,
     tree: &Tree,
@@ -140,17 +140,24 @@ pub fn compute_cast(
             (computed, None)
         }
         _ => {
-            let last = ctx.reuse.as_ref().and_then(|r| r.cast_of(a, b));
-            let reused = last.is_some();
-            let cast = last.unwrap_or_else(|| transmittance(ctx, tree, a, b));
-            let rays = &cast.rays;
+            // Casts are kept only where a next frame may take them: an update's, against occluders
+            // (a first frame's millions are neither converted nor copied).
+            let reuse = ctx.reuse.as_ref().filter(|_| ctx.occluders.is_some());
+            let (rays, casting) = match reuse.and_then(|r| r.cast_of(a, b)) {
+                Some(cast) => (cast.rays, Some(Casting { cast, reused: true })),
+                None => {
+                    let (rays, segments) = transmittance(ctx, tree, a, b);
+                    let cast = reuse.map(|_| Cast::new(&segments, rays));
+                    (rays, cast.map(|cast| Casting { cast, reused: false }))
+                }
+            };
             let t = rays.weighted;
             let computed = Computed {
                 coupling: (t > 0.0).then_some(Coupling::Clusters { transmittance: t as f32 }),
                 partial: rays.arrived > 0 && rays.arrived < rays.facing,
                 blocked: rays.facing > 0 && rays.arrived == 0,
             };
-            (computed, ctx.occluders.is_some().then_some(Casting { cast, reused }))
+            (computed, casting)
         }
     }
 }
@@ -162,6 +169,18 @@ pub struct Cast {
     /// against boxes grown by more than their rounding).
     ends: [[f32; 6]; CLUSTER_RAYS],
     rays: Rays,
+}
+
+impl Cast {
+    /// The cast of `rays` along `segments` (the first `rays.facing`).
+    fn new(segments: &[(DVec3, DVec3); CLUSTER_RAYS], rays: Rays) -> Self {
+        let f = |p: DVec3| [p.x as f32, p.y as f32, p.z as f32];
+        let ends = segments.map(|(x, y)| {
+            let (x, y) = (f(x), f(y));
+            [x[0], x[1], x[2], y[0], y[1], y[2]]
+        });
+        Cast { ends, rays }
+    }
 }
 
 /// A cluster link's cast as [`compute_cast`] made it: anew, or the last frame's (`reused`).
@@ -455,18 +474,17 @@ impl LightPoints {
 /// The transmittance of the pair `a`, `b`: [`kernel_weighted_combos`] between
 /// [`CLUSTER_RAYS`] points drawn below each (eq. 1 integrated over both ends against the
 /// centres' model).
-fn transmittance(ctx: &LinkContext, tree: &Tree, a: NodeId, b: NodeId) -> Cast {
+fn transmittance(
+    ctx: &LinkContext,
+    tree: &Tree,
+    a: NodeId,
+    b: NodeId,
+) -> (Rays, [(DVec3, DVec3); CLUSTER_RAYS]) {
     let (ca, cb) = (tree.node(a).centre, tree.node(b).centre);
     let mut rng = SplitMix(((a as u64) << 32) ^ b as u64 ^ 0x5851_F42D_4C95_7F2D);
     let xs: [End; CLUSTER_RAYS] = std::array::from_fn(|_| sample_point(tree, a, &mut rng));
     let ys: [End; CLUSTER_RAYS] = std::array::from_fn(|_| sample_point(tree, b, &mut rng));
-    let (rays, segments) = kernel_weighted_combos(ctx.occluders, ca, cb, &xs, &ys);
-    let f = |p: DVec3| [p.x as f32, p.y as f32, p.z as f32];
-    let ends = segments.map(|(x, y)| {
-        let (x, y) = (f(x), f(y));
-        [x[0], x[1], x[2], y[0], y[1], y[2]]
-    });
-    Cast { ends, rays }
+    kernel_weighted_combos(ctx.occluders, ca, cb, &xs, &ys)
 }
 
 /// [`kernel_weighted_rays`] over every pairing of the points `xs` (below the node at `ca`) with

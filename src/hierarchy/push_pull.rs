@@ -109,36 +109,13 @@ pub(super) struct Walk<'a> {
 
 impl Walk<'_> {
     /// Pushes what the subtree of `id` received (with `inherited` lobes and `pushed`
-    /// coefficients from above) to its leaves, sets `b = e + rho H` there and pulls; returns
-    /// the leaves' area-weighted change of mean radiosity (summed in the same order whatever the
-    /// threads, so that the solve stops at the same sweep).
-    pub fn push_pull(
-        &self,
-        id: NodeId,
-        inherited: &Lobes,
-        pushed: &[[f64; 3]],
-        got: &Gathered,
-        level: usize,
-    ) -> f64 {
-        self.descend(id, inherited, pushed, got, level, true)
-    }
-
-    /// [`Walk::push_pull`] without the pull: only the leaves' `b` and means are written, the
-    /// nodes above them left as they were until a [`Walk::pull`]. For a sweep that the mixer
-    /// changes before anything reads it (it pulled twice), and for the furnace, which reads the
-    /// leaves alone.
+    /// coefficients from above) to its leaves, sets `b = e + rho H` there and, with `pull`,
+    /// pulls; returns the leaves' area-weighted change of mean radiosity (summed in the same
+    /// order whatever the threads, so that the solve stops at the same sweep). Without `pull`
+    /// only the leaves' `b` and means are written, the nodes above them left as they were until
+    /// a [`Walk::pull`]: for a sweep that the mixer changes before anything reads it (it pulled
+    /// twice), and for the furnace, which reads the leaves alone.
     pub fn push(
-        &self,
-        id: NodeId,
-        inherited: &Lobes,
-        pushed: &[[f64; 3]],
-        got: &Gathered,
-        level: usize,
-    ) -> f64 {
-        self.descend(id, inherited, pushed, got, level, false)
-    }
-
-    fn descend(
         &self,
         id: NodeId,
         inherited: &Lobes,
@@ -169,13 +146,11 @@ impl Walk<'_> {
                 }
                 let flat = &*flat;
                 if level < PARALLEL_LEVELS {
-                    let parts: Vec<f64> = children
-                        .par_iter()
-                        .map(|&c| self.descend(c, &l, flat, got, level + 1, pull))
-                        .collect();
+                    let parts: Vec<f64> =
+                        children.par_iter().map(|&c| self.push(c, &l, flat, got, level + 1, pull)).collect();
                     parts.iter().sum()
                 } else {
-                    children.iter().map(|&c| self.descend(c, &l, flat, got, level + 1, pull)).sum()
+                    children.iter().map(|&c| self.push(c, &l, flat, got, level + 1, pull)).sum()
                 }
             }
             Kind::Surface(s) => {
@@ -223,7 +198,7 @@ impl Walk<'_> {
                         for (q, &c) in children.iter().enumerate() {
                             let mut hq = [[0.0; 3]; crate::basis::MAX_LEN];
                             self.two_scale.push_add(q, h, &mut hq[..nb]);
-                            change += self.descend(c, &lobes::ZERO, &hq[..nb], got, level + 1, pull);
+                            change += self.push(c, &lobes::ZERO, &hq[..nb], got, level + 1, pull);
                         }
                         change
                     }
@@ -237,7 +212,7 @@ impl Walk<'_> {
     }
 
     /// Sets every node of the subtree of `id` above its leaves from its children (the pull half
-    /// of [`Walk::push_pull`], without its pushes).
+    /// of [`Walk::push`], without its pushes).
     pub fn pull(&self, id: NodeId, level: usize) {
         let children = self.tree.children(id);
         if level < PARALLEL_LEVELS && self.tree.nodes[id as usize].is_cluster() {

@@ -241,8 +241,10 @@ impl State {
         hs: &super::HierarchySettings,
         cancel: &(dyn Fn() -> bool + Sync),
     ) -> Result<SolveStats> {
+        let mut leaves = Vec::new();
+        tree.leaves_below(tree.root, &mut leaves);
         let t = std::time::Instant::now();
-        let furnace_rows = self.bound_leaves(tree, packed, hs.check_furnace)?;
+        let furnace_rows = self.bound_leaves(tree, &leaves, packed, hs.check_furnace)?;
         let furnace_seconds = t.elapsed().as_secs_f64();
         let mut stats = SolveStats { furnace_rows, furnace_seconds, ..Default::default() };
         let packed = &*packed;
@@ -250,8 +252,6 @@ impl State {
         // monastery), its pages' first touches were a twentieth of an updated frame.
         let mut gathered = Gathered::empty();
         let first = self.source_power(tree).max(1e-300);
-        let mut leaves = Vec::new();
-        tree.leaves_below(tree.root, &mut leaves);
         // Without room for the mixer's columns the plain sweeps still converge, only slower.
         let depth = hs.anderson_depth;
         let mut accelerated =
@@ -267,7 +267,7 @@ impl State {
             // With the mixer, which changes the leaves before anything reads the nodes above,
             // the sweep pushes only, and the pull follows the mixing.
             let mixing = accelerated.is_some();
-            let change = if mixing { self.push(tree, &gathered) } else { self.push_pull(tree, &gathered) };
+            let change = self.push(tree, &gathered, !mixing);
             stats.sweeps = sweep + 1;
             stats.last_change = change;
             if !change.is_finite() || change > 1e6 * first {
@@ -301,13 +301,17 @@ impl State {
     /// only at the receivers whose links changed since ([`PackedLinks::changed`]): the furnace
     /// ran before every solve, two or three a frame, and its gather over every cluster link was
     /// most of it on the 30k-triangle monastery (27-48 ms of 50-70). `check`: gather every row
-    /// too, and fail where a kept one differs. Returns the rows gathered.
-    fn bound_leaves(&mut self, tree: &Tree, packed: &mut PackedLinks, check: bool) -> Result<usize> {
+    /// too, and fail where a kept one differs. `leaves`: the tree's. Returns the rows gathered.
+    fn bound_leaves(
+        &mut self,
+        tree: &Tree,
+        leaves: &[NodeId],
+        packed: &mut PackedLinks,
+        check: bool,
+    ) -> Result<usize> {
         let (nb, n) = (self.nb, tree.nodes.len());
         let what = "the hierarchy's hemisphere bound";
         let mut white = self.white(tree)?;
-        let mut leaves = Vec::new();
-        tree.leaves_below(tree.root, &mut leaves);
         let kept = packed.furnace.take();
         let mut changed = std::mem::take(&mut packed.changed);
         let incremental = kept.is_some();
@@ -333,9 +337,9 @@ impl State {
             two_scale: &white.two_scale,
             nb,
         };
-        walk.push(tree.root, &lobes::ZERO, &zero[..nb], gathered, 0);
+        walk.push(tree.root, &lobes::ZERO, &zero[..nb], gathered, 0, false);
         let mut bound = budget::try_filled(n, 1.0, what)?;
-        for &id in &leaves {
+        for &id in leaves {
             let face = tree.nodes[id as usize].surface().expect("leaves are surfaces").face;
             let rho = tree.reflectance[face as usize].iter().copied().fold(0.0, f64::max);
             // (The channels alike: the furnace's sources are grey.)
@@ -570,20 +574,13 @@ impl State {
         }
     }
 
-    /// Pushes `gathered` to the leaves, sets `b = e + rho H` there and pulls; returns the leaves'
-    /// area-weighted change of mean radiosity.
-    fn push_pull(&mut self, tree: &Tree, gathered: &Gathered) -> f64 {
+    /// Pushes `gathered` to the leaves, sets `b = e + rho H` there and, with `pull`, pulls
+    /// (without, the nodes above the leaves wait for a [`State::refresh`]; [`Walk::push`]);
+    /// returns the leaves' area-weighted change of mean radiosity.
+    fn push(&mut self, tree: &Tree, gathered: &Gathered, pull: bool) -> f64 {
         let zero = [[0.0; 3]; crate::basis::MAX_LEN];
         let nb = self.nb;
-        self.walk(tree).push_pull(tree.root, &lobes::ZERO, &zero[..nb], gathered, 0)
-    }
-
-    /// [`State::push_pull`] without the pull ([`Walk::push`]): the nodes above the leaves wait
-    /// for a [`State::refresh`].
-    fn push(&mut self, tree: &Tree, gathered: &Gathered) -> f64 {
-        let zero = [[0.0; 3]; crate::basis::MAX_LEN];
-        let nb = self.nb;
-        self.walk(tree).push(tree.root, &lobes::ZERO, &zero[..nb], gathered, 0)
+        self.walk(tree).push(tree.root, &lobes::ZERO, &zero[..nb], gathered, 0, pull)
     }
 
     /// The intensity lobes node `id` shoots through cluster links (W/sr by direction).
