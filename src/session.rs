@@ -576,6 +576,7 @@ impl Session {
         // An animation's updates coarsen where a move has passed (`hierarchy::pair_tree`); a still
         // scene's hierarchy need not keep what only a move could change.
         settings.keep_pair_tree = placed.is_animation() || self.animated;
+        settings.keep_gather = settings.keep_pair_tree;
         settings.moves = placed.is_animation() || self.animated || !self.still;
         // A later frame starts from the last one's hierarchy and solution, unless an update
         // failed on its way (it took the links) or the surfaces were replaced since.
@@ -603,6 +604,8 @@ impl Session {
             pairs: h.links,
             links_recomputed: h.links - h.kept_links,
             gather_seconds: h.gather_seconds,
+            gather_moments: (h.gather_kept + h.gather_computed) as usize,
+            gather_recomputed: h.gather_computed as usize,
             full_rebuild: !h.updated,
             preview,
             ..Default::default()

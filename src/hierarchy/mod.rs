@@ -79,6 +79,10 @@ pub struct HierarchySettings {
     /// next frame's update can coarsen where a move no longer needs fine links; off, updates
     /// only refine. [`crate::session::Session`] keeps it for scenes of more than one frame.
     pub keep_pair_tree: bool,
+    /// Keep the corner gather's values of each point's sources, so that the next frame's gather
+    /// takes those its changes cannot have altered ([`gather::KeptGather`]; at most an eighth of
+    /// the memory budget, and 512 MB). [`crate::session::Session`] keeps them for animations.
+    pub keep_gather: bool,
     /// Something may move in a later frame, which an update must then relink: off for a scene of
     /// one frame promised still ([`crate::session::Session::set_still`], as the CLI bakes one
     /// frame), whose hierarchy then does not store its idle pairs ([`refine::Hierarchy::idle`];
@@ -118,6 +122,7 @@ impl Default for HierarchySettings {
             light_links: true,
             corner_gather: false,
             keep_pair_tree: false,
+            keep_gather: false,
             moves: true,
             check_furnace: false,
             reuse_casts: true,
@@ -172,6 +177,10 @@ pub struct HierarchyStats {
     pub sweep_seconds: f64,
     /// Distinct corner points gathered, and the gather's time (0 without it).
     pub gather_points: usize,
+    /// The gather's sources (feet's included) whose values were the last frame's
+    /// ([`gather::KeptGather`]), and those computed.
+    pub gather_kept: u64,
+    pub gather_computed: u64,
     pub gather_seconds: f64,
     /// The frame was updated from the frame before ([`update`]), not solved from scratch: its
     /// faces that moved, the pairs it linked again, and the links it kept as they were.
@@ -201,6 +210,9 @@ pub struct HierarchicalFrame {
     /// `B` and the light received `H` at every face corner per object, gathered ([`gather`]);
     /// `None`: from the leaves.
     pub corners: Option<(crate::gather::CornerValues, crate::gather::CornerValues)>,
+    /// What the corner gather kept for the next frame's ([`gather::KeptGather`]; with
+    /// [`HierarchySettings::keep_gather`]).
+    pub kept_gather: Option<gather::KeptGather>,
 }
 
 /// Solves `scene` at `frame` on the hierarchy, from scratch. Runs on the current rayon pool;
@@ -242,7 +254,7 @@ pub fn solve_frame(
     let rule = GaussLegendre::new(scene.settings.quadrature_order);
     let ctx = link_context(scene, hs, &rule, lit.occluders.as_ref());
     link_and_solve(&mut hierarchy, &mut state, &ctx, &lit, hs, Start::Root, &mut stats, progress)?;
-    finish(hierarchy, state, stats, &lit, scene, frame, hs, progress)
+    finish(hierarchy, state, stats, &lit, scene, frame, hs, None, progress)
 }
 
 /// Each face's reflectance, in `faces`' order.
@@ -409,7 +421,8 @@ fn link_and_solve(
     Ok(())
 }
 
-/// The frame's counts and, with `hs.corner_gather`, its gathered corners.
+/// The frame's counts and, with `hs.corner_gather`, its gathered corners (taking what `kept`,
+/// the last frame's gather, holds where the frame's changes spare it).
 #[allow(clippy::too_many_arguments)]
 fn finish(
     hierarchy: Hierarchy,
@@ -419,6 +432,7 @@ fn finish(
     scene: &Scene,
     frame: f64,
     hs: &HierarchySettings,
+    kept: Option<(&gather::KeptGather, gather::Changes)>,
     progress: Progress,
 ) -> Result<HierarchicalFrame> {
     stats.nodes = hierarchy.tree.nodes.len();
@@ -444,17 +458,25 @@ fn finish(
     stats.link_bytes = (std::mem::size_of::<coupling::Link>() + 4) * stats.links + 4 * blocks;
     stats.pair_tree = hierarchy.splits.len();
     stats.pair_tree_bytes = hierarchy.splits.bytes();
-    let corners = if hs.corner_gather {
+    let (mut corners, mut kept_gather) = (None, None);
+    if hs.corner_gather {
         let t = Instant::now();
         let inputs = gather::Inputs::new(&hierarchy, &state, lit);
-        let (radiosity, irradiance, points) = gather::corners(&inputs, scene, frame, progress)?;
-        stats.gather_points = points;
+        let cap = if hs.keep_gather {
+            gather::KeptGather::cap(crate::budget::budget_bytes(scene.settings.memory_budget_mb))
+        } else {
+            0
+        };
+        let keeping = gather::Keeping { from: kept, cap };
+        let g = gather::corners_keeping(&inputs, scene, frame, progress, gather::Mode::Fast, keeping)?;
+        stats.gather_points = g.counts.points;
+        stats.gather_kept = g.reuse.kept;
+        stats.gather_computed = g.reuse.computed;
         stats.gather_seconds = t.elapsed().as_secs_f64();
-        Some((radiosity, irradiance))
-    } else {
-        None
-    };
-    Ok(HierarchicalFrame { hierarchy, state, stats, corners })
+        corners = Some((g.radiosity, g.irradiance));
+        kept_gather = g.kept;
+    }
+    Ok(HierarchicalFrame { hierarchy, state, stats, corners, kept_gather })
 }
 
 impl HierarchicalFrame {

@@ -10,6 +10,8 @@
 //! a moved face if a node below it does. So it reaches every touched leaf, and its cost grows
 //! with the pairs near the move rather than with the scene.
 
+use glam::DVec3;
+
 use super::pair_tree::{self, Splits};
 use super::refine::Hierarchy;
 use super::tree::{NodeId, Tree};
@@ -81,6 +83,16 @@ impl<'a> Touch<'a> {
     /// Per node: it holds a moved face.
     pub fn holds(&self) -> &[bool] {
         &self.holds
+    }
+
+    /// Nothing between the point `x` and the node `id` can have changed: no face at or below
+    /// `id` moved, and no swept box meets the box around `x` and everything below `id` (which
+    /// holds every shaft from `x` to a part of it). For [`crate::hierarchy::gather`]'s kept
+    /// values; `false` for a node made after this test.
+    pub fn spares(&self, x: DVec3, id: NodeId) -> bool {
+        let Some(&below) = self.below.get(id as usize) else { return false };
+        let reach = below.grow(x).inflated(self.eps);
+        !self.holds[id as usize] && !self.moves.swept.iter().any(|s| s.overlaps(&reach))
     }
 
     /// The pair `(a, b)` may have changed ([the module's rule](self)).

@@ -25,7 +25,8 @@
 //! over them (the walk finds them, a hash lookup per stored pair removes them), coarsen a
 //! subtree only partly touched (its untouched links are kept as they are, so a shadow's fine
 //! links outside the swept shafts stay), expand moving links in the seed's series, remove the
-//! quadtree nodes no link uses, or update the corner gather by what changed.
+//! quadtree nodes no link uses. The corner gather takes the last frame's values of each point's
+//! sources where the move spares them ([`super::gather::KeptGather`]).
 
 use crate::basis::Basis;
 use crate::error::{Error, Result};
@@ -33,10 +34,10 @@ use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
 use crate::system::{Progress, build_elements_reusing};
 
-use super::coupling;
 use super::refine::{Hierarchy, Oracle};
 use super::touch::{Moves, Touch, neutral};
 use super::{HierarchicalFrame, HierarchySettings, HierarchyStats, Lighting, Start};
+use super::{coupling, gather};
 
 /// Solves `scene` at `frame` from `previous`, the solution of another frame of the same scene
 /// (the same objects and faces): what a frame of an animation costs on the hierarchy.
@@ -151,7 +152,10 @@ pub fn update_frame(
         &mut stats,
         progress,
     )?;
-    super::finish(hierarchy, state, stats, &lit, scene, frame, hs, progress)
+    // The last frame's gather, where this frame's changes spare it.
+    let last_gather = previous.kept_gather.take();
+    let kept = last_gather.as_ref().map(|k| (k, gather::Changes { touch: touch.as_ref() }));
+    super::finish(hierarchy, state, stats, &lit, scene, frame, hs, kept, progress)
 }
 
 /// Takes out of `hierarchy` every stored pair `touch` says the move may have changed and, with

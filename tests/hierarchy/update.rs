@@ -210,6 +210,49 @@ fn casts_a_move_cannot_change_are_taken_from_the_frame_before() {
     }
 }
 
+/// An updated frame's corner gather takes the last frame's values of the sources a move
+/// cannot have changed (`gather::KeptGather`), and gathers exactly what a fresh gather of the
+/// same solution gathers, bit for bit: on the moving-light box (the light under the ceiling
+/// crosses the shafts of the ceiling's sources) and on the demo animation (a block sliding on
+/// the floor, with the feet of its corners on it).
+#[test]
+fn a_kept_gather_equals_a_fresh_gather() {
+    use galerkin_radiosity::hierarchy::gather::{self, Mode};
+    let order2 = Settings { basis_order: 2, ..settings() };
+    // (In the small demo box both the light and the block move: most shafts meet a swept box.)
+    for (name, scene, most) in
+        [("moving light", cornell_box_moving_light(4, 6, order2), true), ("demo", animated(), false)]
+    {
+        let hs = HierarchySettings {
+            keep_pair_tree: true,
+            keep_gather: true,
+            corner_gather: true,
+            ..Default::default()
+        };
+        let mut h = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
+        assert_eq!(h.stats.gather_kept, 0, "{name}: a first frame has no frame before");
+        for frame in 2..=5 {
+            let f = frame as f64;
+            let next = update_frame(&mut h, &scene, f, &hs, &no_progress).unwrap();
+            let s = &next.stats;
+            assert!(s.moved_faces > 0);
+            assert!(
+                s.gather_kept > if most { s.gather_computed } else { 0 } && s.gather_computed > 0,
+                "{name} frame {frame}: {} sources kept, {} computed",
+                s.gather_kept,
+                s.gather_computed
+            );
+            let lit = Lighting::new(&scene, f, &next.hierarchy.tree.faces);
+            let inputs = gather::Inputs::new(&next.hierarchy, &next.state, &lit);
+            let fresh = gather::corners_with(&inputs, &scene, f, &no_progress, Mode::Fast).unwrap();
+            let (radiosity, irradiance) = next.corners.as_ref().expect("gathered");
+            assert_eq!(radiosity, &fresh.radiosity, "{name} frame {frame}: B");
+            assert_eq!(irradiance, &fresh.irradiance, "{name} frame {frame}: H");
+            h = next;
+        }
+    }
+}
+
 /// The update's warm start changes only where the solve begins: the same links solved from the
 /// sources alone give the same solution.
 #[test]

@@ -11,10 +11,10 @@
 
 use glam::DVec3;
 
+use super::kept::{How, Memo};
 use super::sources::{Linked, Via};
 use super::surface::{Rays, Source};
 use super::{Counters, FAR_RATIO, Gather, Received, Receiver};
-use crate::basis::MAX_LEN as MAX_NB;
 use crate::geometry::Rect;
 use crate::hierarchy::coupling::{Coupling, SplitMix, kernel_weighted_rays, sample_point};
 use crate::hierarchy::tree::NodeId;
@@ -39,20 +39,21 @@ impl Gather<'_> {
 
     /// Adds the far source `source`'s light at the point to `got`, with its own rays: a surface's
     /// moments by the Gauss rule, a cluster's intensity times the point's transmittance.
-    pub(super) fn far_cast(&self, rx: &Receiver, source: NodeId, got: &mut Received) {
+    pub(super) fn far_cast(&self, rx: &Receiver, source: NodeId, got: &mut Received, memo: &mut Memo) {
         let tree = self.inputs.tree;
         let node = tree.node(source);
         match node.surface() {
             Some(s) => {
                 let nb = tree.basis.len();
-                let mut m = [0.0; MAX_NB];
-                let far = rx.x.distance(node.centre) >= FAR_RATIO * node.radius;
-                let rule = if far { &self.far_rule } else { &self.rule };
-                let src = Source { face: s.face, patch: &s.patch };
-                self.gauss(rx, src, &Rect::UNIT, rule, Rays::Bvh, &mut m[..nb]);
+                let m = memo.values(source, How::Far, |m| {
+                    let far = rx.x.distance(node.centre) >= FAR_RATIO * node.radius;
+                    let rule = if far { &self.far_rule } else { &self.rule };
+                    let src = Source { face: s.face, patch: &s.patch };
+                    self.gauss(rx, src, &Rect::UNIT, rule, Rays::Bvh, &mut m[..nb]);
+                });
                 got.add(self.light(source, &m[..nb]), m[0]);
             }
-            None => got.add(self.cluster_cast(rx, source), 0.0),
+            None => got.add(self.cluster_cast(rx, source, memo), 0.0),
         }
     }
 
@@ -89,13 +90,13 @@ impl Gather<'_> {
     /// The cluster `source`'s light at the point with the point's own transmittance: rays from
     /// the point to points of the cluster facing it (the link's own transmittance is between the
     /// two nodes, blind to the shadows inside the receiving node).
-    pub(super) fn cluster_cast(&self, rx: &Receiver, source: NodeId) -> [f64; 3] {
+    pub(super) fn cluster_cast(&self, rx: &Receiver, source: NodeId, memo: &mut Memo) -> [f64; 3] {
         let light = self.cluster_light(rx, source);
         // The intensity first: a dark cluster costs no rays.
         if light == [0.0; 3] {
             return light;
         }
-        let t = self.point_transmittance(rx, source);
+        let t = memo.values(source, How::Cluster, |v| v[0] = self.point_transmittance(rx, source))[0];
         light.map(|l| l * t)
     }
 

@@ -52,6 +52,7 @@
 
 mod exhaustive;
 mod far;
+mod kept;
 mod near;
 mod polygon;
 mod rank;
@@ -77,6 +78,9 @@ use crate::solids::Solids;
 use crate::system::Progress;
 use crate::visibility::Occluders;
 use sources::Sources;
+
+use kept::Memo;
+pub use kept::{Changes, KeptGather, Reuse};
 
 /// A source (sub-)rectangle is integrated by the Gauss rule once the distance from the corner to
 /// its centre is this many times its bounding radius; closer, it is split in four (as
@@ -199,6 +203,19 @@ pub struct Gathered {
     /// The light received `H` per object per corner.
     pub irradiance: CornerValues,
     pub counts: Counts,
+    /// Sources whose values were taken from the frame before, and computed ([`KeptGather`]).
+    pub reuse: Reuse,
+    /// What this gather keeps for the next frame, when asked to.
+    pub kept: Option<KeptGather>,
+}
+
+/// What a gather may take from the frame before, and whether it keeps its own values.
+#[derive(Clone, Copy, Default)]
+pub struct Keeping<'a> {
+    /// The last frame's kept values and what changed since.
+    pub from: Option<(&'a KeptGather, Changes<'a>)>,
+    /// Keep this frame's, at most this many bytes (0: keep nothing).
+    pub cap: usize,
 }
 
 /// `B` and the light received `H` (`B = E + rho H`) at every face corner of `scene` (placed at
@@ -223,7 +240,22 @@ pub fn corners_with(
     progress: Progress,
     mode: Mode,
 ) -> Result<Gathered> {
+    corners_keeping(inputs, scene, frame, progress, mode, Keeping::default())
+}
+
+/// [`corners_with`], taking what `keeping` holds from the frame before where it still holds and
+/// keeping this frame's values for the next ([`KeptGather`]): the same values as a fresh
+/// gather, bit for bit.
+pub fn corners_keeping(
+    inputs: &Inputs,
+    scene: &Scene,
+    frame: f64,
+    progress: Progress,
+    mode: Mode,
+    keeping: Keeping,
+) -> Result<Gathered> {
     let tree = inputs.tree;
+    let nb = tree.basis.len();
     let (points, point_of_corner, corners_per_object) = corner_points(
         scene,
         frame,
@@ -247,30 +279,49 @@ pub fn corners_with(
         .is_some()
         .then(|| Solids::new(&tree.faces, scene.objects.len()))
         .filter(|s| !s.is_empty());
-    let values: Vec<[[f64; 3]; 2]> = points
+    // Points keep their values while the kept bytes stay under the cap (which points is a
+    // matter of the threads' timing; the values are the same either way).
+    let kept_bytes = AtomicU64::new(0);
+    let gathered: Vec<([[f64; 3]; 2], Option<kept::KeptPoint>, Reuse)> = points
         .par_iter()
-        .map(|p| {
+        .enumerate()
+        .map(|(k, p)| {
             stop.done.fetch_add(1, Ordering::Relaxed);
             if stop.stopped() {
-                return [[0.0; 3]; 2];
+                return ([[0.0; 3]; 2], None, Reuse::default());
             }
-            match p.at {
-                Some(at) => gather.point(at, p.normal, solids.as_ref(), true),
-                None => [p.exitance(scene, frame), [0.0; 3]],
-            }
+            let Some(at) = p.at else {
+                return ([p.exitance(scene, frame), [0.0; 3]], None, Reuse::default());
+            };
+            let previous = keeping.from.and_then(|(kept, changes)| Some((kept.point(k, mode, nb)?, changes)));
+            let mut memo = Memo::new(previous.map(|p| p.0), previous.map(|p| p.1), nb, keeping.cap > 0);
+            let values = gather.point(at, p.normal, solids.as_ref(), true, &mut memo);
+            let reuse = memo.reuse;
+            let kept = memo.into_kept().filter(|kp| {
+                let bytes = kp.bytes() as u64;
+                kept_bytes.fetch_add(bytes, Ordering::Relaxed) + bytes <= keeping.cap as u64
+            });
+            (values, kept, reuse)
         })
         .collect();
     stop.outcome()?;
+    let reuse = gathered.iter().fold(Reuse::default(), |a, (_, _, r)| Reuse {
+        kept: a.kept + r.kept,
+        computed: a.computed + r.computed,
+    });
     let per_object = |which: usize| {
         let mut out = Vec::with_capacity(corners_per_object.len());
-        let mut it = point_of_corner.iter().map(|&k| values[k][which]);
+        let mut it = point_of_corner.iter().map(|&k| gathered[k].0[which]);
         for &n in &corners_per_object {
             out.push(it.by_ref().take(n).collect());
         }
         out
     };
     let counts = gather.counters.counts(points.len());
-    Ok(Gathered { radiosity: per_object(0), irradiance: per_object(1), counts })
+    let (radiosity, irradiance) = (per_object(0), per_object(1));
+    let kept =
+        (keeping.cap > 0).then(|| KeptGather::new(mode, nb, gathered.into_iter().map(|g| g.1).collect()));
+    Ok(Gathered { radiosity, irradiance, counts, reuse, kept })
 }
 
 /// The point being gathered: where it is and which face it is on (its rays skip that face).
@@ -338,6 +389,7 @@ impl<'a> Gather<'a> {
         normal: Option<DVec3>,
         solids: Option<&Solids>,
         feet: bool,
+        memo: &mut Memo,
     ) -> [[f64; 3]; 2] {
         let tree = self.inputs.tree;
         let face = &tree.faces[f];
@@ -350,6 +402,7 @@ impl<'a> Gather<'a> {
                 return [emission, [0.0; 3]];
             }
         }
+        memo.at(x, n);
         let rx = Receiver { x, n, face: f as u32, radius: face.patch.bounding_sphere().1 };
         let feet = feet.then_some(solids);
         let (leaf, _, _) = tree.leaf_at(f, s, t);
@@ -367,9 +420,9 @@ impl<'a> Gather<'a> {
                     // linked with the cluster of a model's faces casts the model's own shadows on
                     // them).
                     Mode::Exhaustive if tree.node(linked.source).is_cluster() => {
-                        got.add(self.cluster_cast(&rx, linked.source), 0.0)
+                        got.add(self.cluster_cast(&rx, linked.source, memo), 0.0)
                     }
-                    Mode::Exhaustive => self.surface_source(&rx, linked.source, feet, &mut got),
+                    Mode::Exhaustive => self.surface_source(&rx, linked.source, feet, &mut got, memo),
                 }
                 !self.stop.stopped()
             },
@@ -381,7 +434,7 @@ impl<'a> Gather<'a> {
             },
         );
         got.add(tails, 0.0);
-        self.settle(&rx, &mut ranked, direct.iter().sum(), feet, &mut got);
+        self.settle(&rx, &mut ranked, direct.iter().sum(), feet, &mut got, memo);
         if self.stop.stopped() {
             return [[0.0; 3]; 2];
         }

@@ -26,6 +26,7 @@
 //! and one a source saved 5.5% of the rays (docs/benchmarks.md, "The hierarchy's corner gather
 //! at scale").
 
+use super::kept::{How, Memo};
 use super::polygon;
 use super::sources::Linked;
 use super::surface::{Rays, Source};
@@ -101,18 +102,21 @@ impl Gather<'_> {
 
     /// Adds the surface source `source`'s light at the point to `got` by one Gauss sum with rays
     /// through the BVH, scaled to the exact form factor when `near`.
-    fn coarse_cast(&self, rx: &Receiver, source: NodeId, near: bool, got: &mut Received) {
+    fn coarse_cast(&self, rx: &Receiver, source: NodeId, near: bool, got: &mut Received, memo: &mut Memo) {
         let tree = self.inputs.tree;
         let s = tree.node(source).surface().expect("a surface");
         let nb = tree.basis.len();
-        let mut m = [0.0; MAX_NB];
-        let src = Source { face: s.face, patch: &s.patch };
-        let rule = if near { &self.rule } else { &self.far_rule };
-        let sum = self.gauss(rx, src, &Rect::UNIT, rule, Rays::Bvh, &mut m[..nb]);
-        if near {
-            let f = polygon::form_factor(rx.x, rx.n, &s.patch.corners, s.normal);
-            scale_to(&mut m[..nb], sum, f);
-        }
+        let how = if near { How::CoarseNear } else { How::Coarse };
+        let m = memo.values(source, how, |m| {
+            let m = &mut m[..nb];
+            let src = Source { face: s.face, patch: &s.patch };
+            let rule = if near { &self.rule } else { &self.far_rule };
+            let sum = self.gauss(rx, src, &Rect::UNIT, rule, Rays::Bvh, m);
+            if near {
+                let f = polygon::form_factor(rx.x, rx.n, &s.patch.corners, s.normal);
+                scale_to(m, sum, f);
+            }
+        });
         got.add(self.light(source, &m[..nb]), m[0]);
     }
 
@@ -127,6 +131,7 @@ impl Gather<'_> {
         direct: f64,
         feet: Option<Option<&Solids>>,
         got: &mut Received,
+        memo: &mut Memo,
     ) {
         let tree = self.inputs.tree;
         ranked.sort_unstable_by(|a, b| b.weight.total_cmp(&a.weight));
@@ -138,10 +143,10 @@ impl Gather<'_> {
             if r.touched || rest > bar || self.inputs.occluders.is_none() {
                 if r.near {
                     Counters::add(&self.counters.near, 1);
-                    self.surface_source(rx, source, feet, got);
+                    self.surface_source(rx, source, feet, got, memo);
                 } else {
                     Counters::add(&self.counters.far_cast, 1);
-                    self.far_cast(rx, source, got);
+                    self.far_cast(rx, source, got, memo);
                 }
                 if self.stop.stopped() {
                     return;
@@ -163,7 +168,7 @@ impl Gather<'_> {
                 }
             } else {
                 Counters::add(&self.counters.coarse, 1);
-                self.coarse_cast(rx, source, r.near, got);
+                self.coarse_cast(rx, source, r.near, got, memo);
             }
             rest -= r.weight;
         }

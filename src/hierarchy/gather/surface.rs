@@ -5,6 +5,7 @@
 
 use glam::DVec3;
 
+use super::kept::{How, Memo};
 use super::{Counters, Gather, Mode, Received, Receiver};
 use crate::basis::MAX_LEN as MAX_NB;
 use crate::gather::penumbra::Corners;
@@ -53,20 +54,25 @@ impl Gather<'_> {
         source: NodeId,
         feet: Option<Option<&Solids>>,
         got: &mut Received,
+        memo: &mut Memo,
     ) {
         let tree = self.inputs.tree;
         let node = tree.node(source);
         let s = node.surface().expect("a surface link's ends are surfaces");
         let nb = tree.basis.len();
-        let mut m = [0.0; MAX_NB];
         let touch = feet.and_then(|_| self.touch(rx, node.radius, s));
-        let mut weight = 0.0;
-        let ball = touch.map(|t| (t.radius, &mut weight));
-        let src = Source { face: s.face, patch: &s.patch };
-        match self.mode {
-            Mode::Exhaustive => self.exhaustive_moments(rx, src, &mut m[..nb], ball),
-            Mode::Fast => self.near_moments(rx, src, &mut m[..nb], ball),
-        }
+        let how = if touch.is_some() { How::NearFoot } else { How::Near };
+        // The moments, then the ball's form factor.
+        let v = memo.values(source, how, |v| {
+            let (m, weight) = v.split_at_mut(nb);
+            let ball = touch.map(|t| (t.radius, &mut weight[0]));
+            let src = Source { face: s.face, patch: &s.patch };
+            match self.mode {
+                Mode::Exhaustive => self.exhaustive_moments(rx, src, m, ball),
+                Mode::Fast => self.near_moments(rx, src, m, ball),
+            }
+        });
+        let (m, weight) = (&v[..nb], v[nb]);
         let b = self.inputs.state.coefficients(source);
         let mut h = [0.0; 3];
         for l in 0..nb {
@@ -79,7 +85,9 @@ impl Gather<'_> {
         if let (Some(t), Some(solids), true) = (touch, feet, weight > 0.0) {
             Counters::add(&self.counters.feet, 1);
             let (fs, ft) = s.domain.map(t.s, t.t);
-            let [foot, _] = self.point((s.face as usize, fs, ft), None, solids, false);
+            let mut at_foot = memo.foot(source);
+            let [foot, _] = self.point((s.face as usize, fs, ft), None, solids, false, &mut at_foot);
+            memo.keep_foot(source, at_foot);
             got.add(foot.map(|b| weight * b), 0.0);
         }
     }

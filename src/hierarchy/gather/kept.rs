@@ -1,0 +1,242 @@
+//! What a frame's corner gather keeps for the next one (issue 21 item 3): per corner point, the
+//! part of each source's light that depends on geometry alone.
+//!
+//! A source cast from the point gives moments `m^l = integral_S g V Gamma_l dA` (a surface, and
+//! with a foot the form factor of its ball), or a transmittance (a cluster). They depend on the
+//! point, the source's patch and the occluders in the shaft between them, never on the solution:
+//! the frame's light is `sum_l m^l b_S^l` with this frame's `b`. So a later frame takes a
+//! source's kept values again where
+//! - the point is where it was (its face did not move: the same position and normal, bit for
+//!   bit),
+//! - the source did not move (no face at or below it moved), and
+//! - no moved face's swept box meets the box around the point and the source
+//!   ([`crate::hierarchy::touch::Touch::spares`]). Every occluder query of the source's
+//!   integration, down to its smallest part, is a shaft inside that box, and the shaft's
+//!   candidates must meet its box; so the same triangles are candidates, the same rays are
+//!   cast and meet the same ones, and the values are what a fresh gather computes, bit for bit.
+//!
+//! The ranking that decides how each source is taken ([`super::rank`]) reads the solution, so
+//! it runs every frame; a source is keyed by its node and by how it was taken ([`How`]), and a
+//! kept value is taken only for the same way. A foot ([`super::surface`]) is a point of its own:
+//! its gather keeps its sources alike, below the source it stands on.
+//!
+//! On the moving-light box (the demo scene) a fresh gather was about 70% of an updated frame,
+//! and the light's own sources, which always change, 12% of the gather's casting.
+
+use glam::DVec3;
+
+use super::Mode;
+use crate::hierarchy::touch::Touch;
+use crate::hierarchy::tree::NodeId;
+
+/// At most this many bytes are kept, whatever the memory budget: points past it are gathered
+/// afresh next frame.
+const MAX_BYTES: usize = 512 << 20;
+
+/// How a source was taken from the point: its kept values hold only for the same way.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub(super) enum How {
+    /// A surface by [`super::near`]'s recursion (or the exhaustive one), without and with a
+    /// foot's ball (the ball's form factor after the moments).
+    Near,
+    NearFoot,
+    /// A surface whole by the Gauss rule with rays through the BVH ([`super::far`]).
+    Far,
+    /// A surface by one Gauss sum with rays, by the far rule and by the near one scaled to the
+    /// exact form factor ([`super::rank`]'s coarse cast).
+    Coarse,
+    CoarseNear,
+    /// A cluster by its transmittance from the point.
+    Cluster,
+}
+
+/// The gather's kept values of every corner point of a frame.
+pub struct KeptGather {
+    mode: Mode,
+    /// Values per source: the moments and one more (a ball's form factor, a transmittance).
+    stride: usize,
+    /// Per corner point (in [`crate::gather::corner_points`]' order); `None` past the cap, or
+    /// for a point with no sources (buried, an emitter's own).
+    points: Vec<Option<KeptPoint>>,
+    bytes: usize,
+}
+
+impl KeptGather {
+    pub(super) fn new(mode: Mode, nb: usize, points: Vec<Option<KeptPoint>>) -> Self {
+        let bytes = points.iter().flatten().map(KeptPoint::bytes).sum();
+        Self { mode, stride: nb + 1, points, bytes }
+    }
+
+    /// The kept point `k` for a gather in `mode` with `nb` basis functions.
+    pub(super) fn point(&self, k: usize, mode: Mode, nb: usize) -> Option<&KeptPoint> {
+        if mode != self.mode || nb + 1 != self.stride {
+            return None;
+        }
+        self.points.get(k)?.as_ref()
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        self.bytes
+    }
+
+    /// The cap on the bytes a gather keeps under a memory budget of `budget` bytes (`None`:
+    /// none known): an eighth of it, at most [`MAX_BYTES`].
+    pub fn cap(budget: Option<u64>) -> usize {
+        budget.map_or(MAX_BYTES, |b| (b / 8).min(MAX_BYTES as u64) as usize)
+    }
+}
+
+/// One point's kept values: where it was, and per source (sorted by node and way) its values.
+pub(super) struct KeptPoint {
+    x: DVec3,
+    n: DVec3,
+    keys: Vec<(NodeId, How, u32)>,
+    values: Vec<f64>,
+    /// The feet's own points, by the source they stand on.
+    feet: Vec<(NodeId, KeptPoint)>,
+}
+
+impl KeptPoint {
+    fn new(x: DVec3, n: DVec3) -> Self {
+        Self { x, n, keys: Vec::new(), values: Vec::new(), feet: Vec::new() }
+    }
+
+    fn find(&self, source: NodeId, how: How, stride: usize) -> Option<&[f64]> {
+        let k = self.keys.binary_search_by(|&(s, h, _)| (s, h).cmp(&(source, how))).ok()?;
+        let at = self.keys[k].2 as usize * stride;
+        Some(&self.values[at..at + stride])
+    }
+
+    fn foot(&self, source: NodeId) -> Option<&KeptPoint> {
+        let k = self.feet.binary_search_by_key(&source, |(s, _)| *s).ok()?;
+        Some(&self.feet[k].1)
+    }
+
+    pub(super) fn bytes(&self) -> usize {
+        let own = std::mem::size_of::<Self>()
+            + self.keys.capacity() * std::mem::size_of::<(NodeId, How, u32)>()
+            + self.values.capacity() * 8;
+        own + self.feet.iter().map(|(_, f)| 4 + f.bytes()).sum::<usize>()
+    }
+}
+
+/// What the frame's moves changed, for telling which kept values still hold: `None` when
+/// nothing moved (an emission change alone).
+#[derive(Clone, Copy)]
+pub struct Changes<'a> {
+    pub touch: Option<&'a Touch<'a>>,
+}
+
+impl Changes<'_> {
+    fn spares(&self, x: DVec3, source: NodeId) -> bool {
+        self.touch.is_none_or(|t| t.spares(x, source))
+    }
+}
+
+/// Counts of one gather's sources: taken from the frame before, and computed.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Reuse {
+    pub kept: u64,
+    pub computed: u64,
+}
+
+/// One point's gather: its kept values from the frame before (already checked to be at the
+/// same place), and the values it keeps for the next frame.
+pub(super) struct Memo<'k> {
+    previous: Option<&'k KeptPoint>,
+    changes: Option<Changes<'k>>,
+    stride: usize,
+    keeping: Option<KeptPoint>,
+    pub reuse: Reuse,
+}
+
+impl<'k> Memo<'k> {
+    /// A point's memo: `previous` is the point's kept values, taken where `changes` spares them;
+    /// with `keep`, it keeps this frame's.
+    pub fn new(previous: Option<&'k KeptPoint>, changes: Option<Changes<'k>>, nb: usize, keep: bool) -> Self {
+        Self {
+            previous,
+            changes,
+            stride: nb + 1,
+            keeping: keep.then(|| KeptPoint::new(DVec3::NAN, DVec3::NAN)),
+            reuse: Reuse::default(),
+        }
+    }
+
+    /// The point's place: kept values of a point elsewhere are not taken.
+    pub fn at(&mut self, x: DVec3, n: DVec3) {
+        if self.previous.is_some_and(|p| p.x != x || p.n != n) {
+            self.previous = None;
+        }
+        if let Some(k) = &mut self.keeping {
+            (k.x, k.n) = (x, n);
+        }
+    }
+
+    /// The values of `source` taken as `how`, `stride` of them: the kept ones where they hold,
+    /// else `compute`d (into zeros).
+    pub fn values(
+        &mut self,
+        source: NodeId,
+        how: How,
+        compute: impl FnOnce(&mut [f64]),
+    ) -> [f64; crate::basis::MAX_LEN + 1] {
+        let mut v = [0.0; crate::basis::MAX_LEN + 1];
+        let stride = self.stride;
+        let kept = match (self.previous, self.changes) {
+            (Some(p), Some(c)) => p.find(source, how, stride).filter(|_| c.spares(p.x, source)),
+            _ => None,
+        };
+        match kept {
+            Some(k) => {
+                v[..stride].copy_from_slice(k);
+                self.reuse.kept += 1;
+            }
+            None => {
+                compute(&mut v[..stride]);
+                self.reuse.computed += 1;
+            }
+        }
+        if let Some(k) = &mut self.keeping {
+            k.keys.push((source, how, k.keys.len() as u32));
+            k.values.extend_from_slice(&v[..stride]);
+        }
+        v
+    }
+
+    /// The memo of the foot on `source`.
+    pub fn foot(&self, source: NodeId) -> Memo<'k> {
+        let previous = self.previous.and_then(|p| p.foot(source));
+        Memo {
+            previous,
+            changes: self.changes,
+            stride: self.stride,
+            keeping: self.keeping.as_ref().map(|_| KeptPoint::new(DVec3::NAN, DVec3::NAN)),
+            reuse: Reuse::default(),
+        }
+    }
+
+    /// Keeps the foot on `source`'s gather, done with `foot`.
+    pub fn keep_foot(&mut self, source: NodeId, foot: Memo) {
+        self.reuse.kept += foot.reuse.kept;
+        self.reuse.computed += foot.reuse.computed;
+        if let (Some(k), Some(f)) = (&mut self.keeping, foot.into_kept()) {
+            k.feet.push((source, f));
+        }
+    }
+
+    /// The point's kept values, sorted for the next frame's lookups; `None` when not keeping or
+    /// when it took no source.
+    pub fn into_kept(self) -> Option<KeptPoint> {
+        let mut k = self.keeping?;
+        if k.keys.is_empty() && k.feet.is_empty() {
+            return None;
+        }
+        k.keys.sort_unstable_by_key(|&(s, h, _)| (s, h));
+        k.feet.sort_unstable_by_key(|(s, _)| *s);
+        k.keys.shrink_to_fit();
+        k.values.shrink_to_fit();
+        Some(k)
+    }
+}
