@@ -95,6 +95,11 @@ impl<'a> Touch<'a> {
         !self.holds[id as usize] && !self.moves.swept.iter().any(|s| s.overlaps(&reach))
     }
 
+    /// No face at or below `id` moved (`false` for a node made after this test).
+    pub fn unmoved(&self, id: NodeId) -> bool {
+        self.holds.get(id as usize).is_some_and(|&h| !h)
+    }
+
     /// The pair `(a, b)` may have changed ([the module's rule](self)).
     pub fn pair(&self, a: NodeId, b: NodeId) -> bool {
         self.test(&self.boxes, a, b)

@@ -87,19 +87,46 @@ impl KeptGather {
     }
 }
 
-/// One point's kept values: where it was, and per source (sorted by node and way) its values.
+/// One point's kept values: where it was, per source cast (sorted by node and way) its values,
+/// and per surface source ranked (in the order the sources were listed) its unoccluded values.
 pub(super) struct KeptPoint {
     x: DVec3,
     n: DVec3,
     keys: Vec<(NodeId, How, u32)>,
     values: Vec<f64>,
+    ranked: Vec<NodeId>,
+    ranked_values: Vec<f64>,
+    /// `ranked` sorted, with each one's index, for a source listed out of its last order.
+    ranked_index: Vec<(NodeId, u32)>,
     /// The feet's own points, by the source they stand on.
     feet: Vec<(NodeId, KeptPoint)>,
 }
 
 impl KeptPoint {
     fn new(x: DVec3, n: DVec3) -> Self {
-        Self { x, n, keys: Vec::new(), values: Vec::new(), feet: Vec::new() }
+        Self {
+            x,
+            n,
+            keys: Vec::new(),
+            values: Vec::new(),
+            ranked: Vec::new(),
+            ranked_values: Vec::new(),
+            ranked_index: Vec::new(),
+            feet: Vec::new(),
+        }
+    }
+
+    /// The ranked values of `source`, looked for at `cursor` first (the sources are listed in
+    /// the same order frame after frame, unless links changed), which moves past it.
+    fn ranked_at(&self, source: NodeId, cursor: &mut usize, stride: usize) -> Option<&[f64]> {
+        let k = if self.ranked.get(*cursor) == Some(&source) {
+            *cursor
+        } else {
+            let i = self.ranked_index.binary_search_by_key(&source, |&(s, _)| s).ok()?;
+            self.ranked_index[i].1 as usize
+        };
+        *cursor = k + 1;
+        Some(&self.ranked_values[k * stride..(k + 1) * stride])
     }
 
     fn find(&self, source: NodeId, how: How, stride: usize) -> Option<&[f64]> {
@@ -116,7 +143,10 @@ impl KeptPoint {
     pub(super) fn bytes(&self) -> usize {
         let own = std::mem::size_of::<Self>()
             + self.keys.capacity() * std::mem::size_of::<(NodeId, How, u32)>()
-            + self.values.capacity() * 8;
+            + self.values.capacity() * 8
+            + self.ranked.capacity() * 4
+            + self.ranked_values.capacity() * 8
+            + self.ranked_index.capacity() * 8;
         own + self.feet.iter().map(|(_, f)| 4 + f.bytes()).sum::<usize>()
     }
 }
@@ -131,6 +161,10 @@ pub struct Changes<'a> {
 impl Changes<'_> {
     fn spares(&self, x: DVec3, source: NodeId) -> bool {
         self.touch.is_none_or(|t| t.spares(x, source))
+    }
+
+    fn unmoved(&self, source: NodeId) -> bool {
+        self.touch.is_none_or(|t| t.unmoved(source))
     }
 }
 
@@ -148,6 +182,8 @@ pub(super) struct Memo<'k> {
     changes: Option<Changes<'k>>,
     stride: usize,
     keeping: Option<KeptPoint>,
+    /// Where in the previous point's ranked sources the next is looked for.
+    cursor: usize,
     pub reuse: Reuse,
 }
 
@@ -160,6 +196,7 @@ impl<'k> Memo<'k> {
             changes,
             stride: nb + 1,
             keeping: keep.then(|| KeptPoint::new(DVec3::NAN, DVec3::NAN)),
+            cursor: 0,
             reuse: Reuse::default(),
         }
     }
@@ -205,6 +242,31 @@ impl<'k> Memo<'k> {
         v
     }
 
+    /// The surface `source`'s values for the ranking, unoccluded (no occluder is read: they hold
+    /// while neither the point nor the source moved), `stride` of them: the kept ones, else
+    /// `compute`d.
+    pub fn ranked(
+        &mut self,
+        source: NodeId,
+        compute: impl FnOnce(&mut [f64]),
+    ) -> [f64; crate::basis::MAX_LEN + 1] {
+        let mut v = [0.0; crate::basis::MAX_LEN + 1];
+        let stride = self.stride;
+        let kept = match (self.previous, self.changes) {
+            (Some(p), Some(c)) if c.unmoved(source) => p.ranked_at(source, &mut self.cursor, stride),
+            _ => None,
+        };
+        match kept {
+            Some(k) => v[..stride].copy_from_slice(k),
+            None => compute(&mut v[..stride]),
+        }
+        if let Some(k) = &mut self.keeping {
+            k.ranked.push(source);
+            k.ranked_values.extend_from_slice(&v[..stride]);
+        }
+        v
+    }
+
     /// The memo of the foot on `source`.
     pub fn foot(&self, source: NodeId) -> Memo<'k> {
         let previous = self.previous.and_then(|p| p.foot(source));
@@ -213,6 +275,7 @@ impl<'k> Memo<'k> {
             changes: self.changes,
             stride: self.stride,
             keeping: self.keeping.as_ref().map(|_| KeptPoint::new(DVec3::NAN, DVec3::NAN)),
+            cursor: 0,
             reuse: Reuse::default(),
         }
     }
@@ -230,13 +293,17 @@ impl<'k> Memo<'k> {
     /// when it took no source.
     pub fn into_kept(self) -> Option<KeptPoint> {
         let mut k = self.keeping?;
-        if k.keys.is_empty() && k.feet.is_empty() {
+        if k.keys.is_empty() && k.feet.is_empty() && k.ranked.is_empty() {
             return None;
         }
+        k.ranked_index = k.ranked.iter().enumerate().map(|(i, &s)| (s, i as u32)).collect();
+        k.ranked_index.sort_unstable();
         k.keys.sort_unstable_by_key(|&(s, h, _)| (s, h));
         k.feet.sort_unstable_by_key(|(s, _)| *s);
         k.keys.shrink_to_fit();
         k.values.shrink_to_fit();
+        k.ranked.shrink_to_fit();
+        k.ranked_values.shrink_to_fit();
         Some(k)
     }
 }

@@ -415,7 +415,7 @@ impl<'a> Gather<'a> {
             |linked| {
                 Counters::add(&self.counters.sources, 1);
                 match self.mode {
-                    Mode::Fast => ranked.extend(self.rank(&rx, linked, feet.is_some())),
+                    Mode::Fast => ranked.extend(self.rank(&rx, linked, feet.is_some(), memo)),
                     // A surface source is integrated from the point whatever the link (a light
                     // linked with the cluster of a model's faces casts the model's own shadows on
                     // them).

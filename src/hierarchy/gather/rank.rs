@@ -31,7 +31,6 @@ use super::polygon;
 use super::sources::Linked;
 use super::surface::{Rays, Source};
 use super::{Counters, Gather, Received, Receiver};
-use crate::basis::MAX_LEN as MAX_NB;
 use crate::gather::behind_plane;
 use crate::geometry::Rect;
 use crate::hierarchy::tree::NodeId;
@@ -57,31 +56,41 @@ pub(super) struct Ranked {
 
 impl Gather<'_> {
     /// The source `linked` of the point valued, `None` when it can bring nothing.
-    pub(super) fn rank(&self, rx: &Receiver, linked: Linked, feet: bool) -> Option<Ranked> {
+    pub(super) fn rank(&self, rx: &Receiver, linked: Linked, feet: bool, memo: &mut Memo) -> Option<Ranked> {
         let tree = self.inputs.tree;
         let node = tree.node(linked.source);
         let (mut near, mut touched) = (false, false);
         let (unoccluded, form_factor) = match node.surface() {
             Some(s) => {
-                if behind_plane(rx.x, rx.n, &s.patch, node.radius) {
+                let nb = tree.basis.len();
+                // The unoccluded moments, then what the source is to the point: behind its plane
+                // (-1), else near (1) and touched (2) added.
+                let v = memo.ranked(linked.source, |v| {
+                    if behind_plane(rx.x, rx.n, &s.patch, node.radius) {
+                        v[nb] = -1.0;
+                        return;
+                    }
+                    let near = self.is_near(rx, linked.source);
+                    // A source the point touches takes its part next to the point from the foot,
+                    // however dark its own polynomial (a sliver the solve barely lights).
+                    let touched = near && feet && self.touch(rx, node.radius, s).is_some();
+                    let m = &mut v[..nb];
+                    let src = Source { face: s.face, patch: &s.patch };
+                    let rule = if near { &self.rule } else { &self.far_rule };
+                    let sum = self.gauss(rx, src, &Rect::UNIT, rule, Rays::Among(&[]), m);
+                    if near {
+                        // Next to the point the Gauss nodes miss most of the kernel: its exact
+                        // integral instead, shared out as they share it.
+                        let f = polygon::form_factor(rx.x, rx.n, &s.patch.corners, s.normal);
+                        scale_to(m, sum, f);
+                    }
+                    v[nb] = f64::from(u8::from(near) + 2 * u8::from(touched));
+                });
+                if v[nb] < 0.0 {
                     return None;
                 }
-                near = self.is_near(rx, linked.source);
-                // A source the point touches takes its part next to the point from the foot,
-                // however dark its own polynomial (a sliver the solve barely lights).
-                touched = near && feet && self.touch(rx, node.radius, s).is_some();
-                let nb = tree.basis.len();
-                let mut m = [0.0; MAX_NB];
-                let src = Source { face: s.face, patch: &s.patch };
-                let rule = if near { &self.rule } else { &self.far_rule };
-                let sum = self.gauss(rx, src, &Rect::UNIT, rule, Rays::Among(&[]), &mut m[..nb]);
-                if near {
-                    // Next to the point the Gauss nodes miss most of the kernel: its exact
-                    // integral instead, shared out as they share it.
-                    let f = polygon::form_factor(rx.x, rx.n, &s.patch.corners, s.normal);
-                    scale_to(&mut m[..nb], sum, f);
-                }
-                (self.light(linked.source, &m[..nb]), m[0])
+                (near, touched) = (v[nb] % 2.0 == 1.0, v[nb] >= 2.0);
+                (self.light(linked.source, &v[..nb]), v[0])
             }
             None => (self.cluster_light(rx, linked.source), 0.0),
         };
