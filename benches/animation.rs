@@ -12,7 +12,9 @@
 //! scratch, and how far the updated frames' face means are from the fresh ones.
 //! `-- --hierarchy` prints the hierarchy's tables alone (about 1 min). The last table measures
 //! how an update finds the pairs a move touched: a scan of every stored pair against the walk
-//! down the pair tree ([`galerkin_radiosity::hierarchy::touch`]).
+//! down the pair tree ([`galerkin_radiosity::hierarchy::touch`]). `-- --methods` prints the
+//! moving-light box's frames on the flat path against the hierarchy, `-- --gather` the same with
+//! the corner gather on.
 
 use galerkin_radiosity::scene::{Scene, Settings};
 use galerkin_radiosity::scenes;
@@ -139,6 +141,10 @@ fn run_hierarchy(scene: &Scene) -> HierRun {
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let hierarchy_only = std::env::args().any(|a| a == "--hierarchy");
+    if std::env::args().any(|a| a == "--gather") {
+        gather_table(quick);
+        return;
+    }
     if std::env::args().any(|a| a == "--methods") {
         let settings = Settings { basis_order: 2, corner_gather: false, ..Settings::default() };
         methods_table(&settings, quick);
@@ -479,6 +485,83 @@ fn hierarchy_phases(scene: &Scene, runs: usize) {
     let rest = |s: &Sums| ms(s.whole - s.phases.iter().sum::<f64>(), s);
     println!("| the rest (counts, the read-back) | {:.1} | {:.1} |", rest(&on), rest(&off));
     println!("| the whole frame | {:.1} | {:.1} |", ms(on.whole, &on), ms(off.whole, &off));
+}
+
+/// Issue 21's first row, a frame with its corner gather: the moving-light box's updated frames
+/// with the corner gather on, on the flat path (a session, the default method) and on the
+/// hierarchy (`update_frame`, as a session updates) with its gather keeping each point's source
+/// values for the next frame (`HierarchySettings::keep_gather`, the default for animations) and
+/// without, the three alternated run by run (docs/benchmarks.md's "box-gather" block;
+/// `-- --gather`).
+fn gather_table(quick: bool) {
+    use galerkin_radiosity::hierarchy::update::update_frame;
+    use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
+    let (frames, runs) = if quick { (4, 1) } else { (24, 3) };
+    let settings = Settings { basis_order: 2, corner_gather: true, ..Settings::default() };
+    let scene = scenes::cornell_box_moving_light(if quick { 6 } else { 14 }, frames, settings);
+    let names = [
+        "flat, the default method",
+        "hierarchy, the gather kept (the default)",
+        "hierarchy, gathered afresh",
+    ];
+    // Per method: each updated frame's seconds and its gather's, and the sources kept and computed.
+    let mut frame_s = vec![Vec::new(); 3];
+    let mut gather_s = vec![Vec::new(); 3];
+    let mut sources = [[0u64; 2]; 3];
+    for run in 0..runs {
+        for k in 0..3 {
+            let k = (k + run) % 3;
+            if k == 0 {
+                let mut session = Session::new(scene.clone(), Method::Incremental).unwrap();
+                for f in scene.frames.0..=scene.frames.1 {
+                    let s = session.solve_frame(f as f64, &no_progress).unwrap();
+                    if f > scene.frames.0 {
+                        assert!(!s.full_rebuild, "flat frame {f} was built afresh");
+                        frame_s[0].push(s.seconds);
+                        gather_s[0].push(s.gather_seconds);
+                    }
+                }
+                continue;
+            }
+            let hs = HierarchySettings {
+                keep_pair_tree: true,
+                keep_gather: k == 1,
+                ..HierarchySettings::of(&scene.settings)
+            };
+            let mut h = solve_frame(&scene, scene.frames.0 as f64, &hs, &no_progress).unwrap();
+            for f in scene.frames.0 + 1..=scene.frames.1 {
+                let t = std::time::Instant::now();
+                let next = update_frame(&mut h, &scene, f as f64, &hs, &no_progress).unwrap();
+                frame_s[k].push(t.elapsed().as_secs_f64());
+                let st = &next.stats;
+                assert!(st.updated, "frame {f} was not updated");
+                gather_s[k].push(st.gather_seconds);
+                sources[k][0] += st.gather_kept;
+                sources[k][1] += st.gather_computed;
+                h = next;
+            }
+        }
+    }
+    println!(
+        "\nThe moving-light box ({} patches, order 2, the corner gather on), {frames} frames per run, the three \
+         alternated over {runs} runs; seconds per updated frame over every run's frames 2..{frames}, {} threads:\n",
+        scene.face_count(),
+        rayon::current_num_threads()
+    );
+    println!(
+        "| method | median s/frame | p25 | p75 | of it the gather (median) | sources taken from the frame before |"
+    );
+    println!("|---|---|---|---|---|---|");
+    for k in 0..3 {
+        let [p25, median, p75] = [0.25, 0.5, 0.75].map(|q| quantile(&mut frame_s[k], q));
+        let g = quantile(&mut gather_s[k], 0.5);
+        let [kept, computed] = sources[k];
+        let share = match k {
+            0 => "-".to_owned(),
+            _ => format!("{:.0}%", 100.0 * kept as f64 / (kept + computed).max(1) as f64),
+        };
+        println!("| {} | {median:.4} | {p25:.4} | {p75:.4} | {g:.4} | {share} |", names[k]);
+    }
 }
 
 /// The flat methods side by side: docs/benchmarks.md's "animation" block.

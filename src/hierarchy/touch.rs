@@ -45,6 +45,19 @@ impl Moves {
     }
 }
 
+/// What a value computed from a point towards a node reads of the occluders.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reach {
+    /// Segments from the point to the node, each tested against every triangle (through the
+    /// BVH): only triangles that meet the convex hull of the point and the node's box can
+    /// change it.
+    Hull,
+    /// Shaft queries between the point and parts of the node, whose candidate lists (kept or
+    /// not by conservative plane tests, and deciding how a part is integrated) hold only
+    /// triangles that meet the box around the point and the node.
+    Box,
+}
+
 /// The touch test of one move on one tree.
 pub struct Touch<'a> {
     moves: &'a Moves,
@@ -85,14 +98,25 @@ impl<'a> Touch<'a> {
         &self.holds
     }
 
-    /// Nothing between the point `x` and the node `id` can have changed: no face at or below
-    /// `id` moved, and no swept box meets the box around `x` and everything below `id` (which
-    /// holds every shaft from `x` to a part of it). For [`crate::hierarchy::gather`]'s kept
-    /// values; `false` for a node made after this test.
-    pub fn spares(&self, x: DVec3, id: NodeId) -> bool {
+    /// Nothing between the point `x` and the node `id` can have changed for what `reach` reads:
+    /// no face at or below `id` moved, and no swept box meets the region around `x` and
+    /// everything below `id` that `reach` says. For [`crate::hierarchy::gather`]'s kept values;
+    /// `false` for a node made after this test.
+    pub fn spares(&self, x: DVec3, id: NodeId, reach: Reach) -> bool {
         let Some(&below) = self.below.get(id as usize) else { return false };
-        let reach = below.grow(x).inflated(self.eps);
-        !self.holds[id as usize] && !self.moves.swept.iter().any(|s| s.overlaps(&reach))
+        if self.holds[id as usize] {
+            return false;
+        }
+        let point = Aabb { min: x, max: x };
+        match reach {
+            Reach::Box => {
+                let reach = below.grow(x).inflated(self.eps);
+                !self.moves.swept.iter().any(|s| s.overlaps(&reach))
+            }
+            Reach::Hull => {
+                !self.moves.swept.iter().any(|s| Shaft::between_may_contain_box(&point, &below, s, self.eps))
+            }
+        }
     }
 
     /// No face at or below `id` moved (`false` for a node made after this test).

@@ -9,11 +9,16 @@
 //! - the point is where it was (its face did not move: the same position and normal, bit for
 //!   bit),
 //! - the source did not move (no face at or below it moved), and
-//! - no moved face's swept box meets the box around the point and the source
-//!   ([`crate::hierarchy::touch::Touch::spares`]). Every occluder query of the source's
-//!   integration, down to its smallest part, is a shaft inside that box, and the shaft's
-//!   candidates must meet its box; so the same triangles are candidates, the same rays are
-//!   cast and meet the same ones, and the values are what a fresh gather computes, bit for bit.
+//! - no moved face's swept box, the bounds of its old and new place, meets what the source's
+//!   integration reads ([`crate::hierarchy::touch::Touch::spares`]). Taken whole by the Gauss
+//!   rule (a far or coarse cast, a cluster's transmittance), a source casts segments from the
+//!   point to points on it, each tested against every triangle: a triangle outside the convex
+//!   hull of the point and the source's box meets none of them ([`Reach::Hull`]). Integrated
+//!   by [`super::near`]'s recursion, it also reads shaft queries, whose candidate lists decide
+//!   how each part is taken; a shaft's planes are conservative, and may keep a triangle outside
+//!   the hull, but never one outside the box around the point and the source ([`Reach::Box`]).
+//!   So the same rays meet the same triangles, the same lists are found, and the values are
+//!   what a fresh gather computes, bit for bit.
 //!
 //! The ranking that decides how each source is taken ([`super::rank`]) reads the solution, so
 //! it runs every frame; a source is keyed by its node and by how it was taken ([`How`]), and a
@@ -26,7 +31,7 @@
 use glam::DVec3;
 
 use super::Mode;
-use crate::hierarchy::touch::Touch;
+use crate::hierarchy::touch::{Reach, Touch};
 use crate::hierarchy::tree::NodeId;
 
 /// At most this many bytes are kept, whatever the memory budget: points past it are gathered
@@ -116,6 +121,21 @@ impl KeptPoint {
         }
     }
 
+    /// An empty point with room for as many values as `previous` holds (a point keeps about
+    /// the same sources frame after frame: growing the vectors and shrinking them after was a
+    /// tenth of an updated frame's gather).
+    fn like(previous: Option<&KeptPoint>) -> Self {
+        let mut k = Self::new(DVec3::NAN, DVec3::NAN);
+        if let Some(p) = previous {
+            k.keys.reserve_exact(p.keys.len());
+            k.values.reserve_exact(p.values.len());
+            k.ranked.reserve_exact(p.ranked.len());
+            k.ranked_values.reserve_exact(p.ranked_values.len());
+            k.feet.reserve_exact(p.feet.len());
+        }
+        k
+    }
+
     /// The ranked values of `source`, looked for at `cursor` first (the sources are listed in
     /// the same order frame after frame, unless links changed), which moves past it.
     fn ranked_at(&self, source: NodeId, cursor: &mut usize, stride: usize) -> Option<&[f64]> {
@@ -159,8 +179,12 @@ pub struct Changes<'a> {
 }
 
 impl Changes<'_> {
-    fn spares(&self, x: DVec3, source: NodeId) -> bool {
-        self.touch.is_none_or(|t| t.spares(x, source))
+    fn spares(&self, x: DVec3, source: NodeId, how: How) -> bool {
+        let reach = match how {
+            How::Near | How::NearFoot => Reach::Box,
+            How::Far | How::Coarse | How::CoarseNear | How::Cluster => Reach::Hull,
+        };
+        self.touch.is_none_or(|t| t.spares(x, source, reach))
     }
 
     fn unmoved(&self, source: NodeId) -> bool {
@@ -195,7 +219,7 @@ impl<'k> Memo<'k> {
             previous,
             changes,
             stride: nb + 1,
-            keeping: keep.then(|| KeptPoint::new(DVec3::NAN, DVec3::NAN)),
+            keeping: keep.then(|| KeptPoint::like(previous)),
             cursor: 0,
             reuse: Reuse::default(),
         }
@@ -222,7 +246,7 @@ impl<'k> Memo<'k> {
         let mut v = [0.0; crate::basis::MAX_LEN + 1];
         let stride = self.stride;
         let kept = match (self.previous, self.changes) {
-            (Some(p), Some(c)) => p.find(source, how, stride).filter(|_| c.spares(p.x, source)),
+            (Some(p), Some(c)) => p.find(source, how, stride).filter(|_| c.spares(p.x, source, how)),
             _ => None,
         };
         match kept {
@@ -274,7 +298,7 @@ impl<'k> Memo<'k> {
             previous,
             changes: self.changes,
             stride: self.stride,
-            keeping: self.keeping.as_ref().map(|_| KeptPoint::new(DVec3::NAN, DVec3::NAN)),
+            keeping: self.keeping.as_ref().map(|_| KeptPoint::like(previous)),
             cursor: 0,
             reuse: Reuse::default(),
         }
@@ -300,10 +324,7 @@ impl<'k> Memo<'k> {
         k.ranked_index.sort_unstable();
         k.keys.sort_unstable_by_key(|&(s, h, _)| (s, h));
         k.feet.sort_unstable_by_key(|(s, _)| *s);
-        k.keys.shrink_to_fit();
-        k.values.shrink_to_fit();
-        k.ranked.shrink_to_fit();
-        k.ranked_values.shrink_to_fit();
+        // (A first frame's vectors grew by doubling: at most twice what they hold.)
         Some(k)
     }
 }
