@@ -181,6 +181,8 @@ pub struct HierarchyStats {
     /// ([`gather::KeptGather`]), and those computed.
     pub gather_kept: u64,
     pub gather_computed: u64,
+    /// Bytes the gather keeps for the next frame.
+    pub kept_gather_bytes: usize,
     pub gather_seconds: f64,
     /// The frame was updated from the frame before ([`update`]), not solved from scratch: its
     /// faces that moved, the pairs it linked again, and the links it kept as they were.
@@ -474,6 +476,7 @@ fn finish(
         stats.gather_computed = g.reuse.computed;
         stats.gather_seconds = t.elapsed().as_secs_f64();
         corners = Some((g.radiosity, g.irradiance));
+        stats.kept_gather_bytes = g.kept.as_ref().map_or(0, |k| k.bytes());
         kept_gather = g.kept;
     }
     Ok(HierarchicalFrame { hierarchy, state, stats, corners, kept_gather })

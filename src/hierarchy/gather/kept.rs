@@ -55,11 +55,22 @@ pub(super) enum How {
     Cluster,
 }
 
+impl How {
+    /// Values kept for a source taken this way, with `nb` basis functions: the moments (and a
+    /// ball's form factor), or a transmittance.
+    pub(super) fn len(self, nb: usize) -> usize {
+        match self {
+            How::NearFoot => nb + 1,
+            How::Near | How::Far | How::Coarse | How::CoarseNear => nb,
+            How::Cluster => 1,
+        }
+    }
+}
+
 /// The gather's kept values of every corner point of a frame.
 pub struct KeptGather {
     mode: Mode,
-    /// Values per source: the moments and one more (a ball's form factor, a transmittance).
-    stride: usize,
+    nb: usize,
     /// Per corner point (in [`crate::gather::corner_points`]' order); `None` past the cap, or
     /// for a point with no sources (buried, an emitter's own).
     points: Vec<Option<KeptPoint>>,
@@ -69,12 +80,12 @@ pub struct KeptGather {
 impl KeptGather {
     pub(super) fn new(mode: Mode, nb: usize, points: Vec<Option<KeptPoint>>) -> Self {
         let bytes = points.iter().flatten().map(KeptPoint::bytes).sum();
-        Self { mode, stride: nb + 1, points, bytes }
+        Self { mode, nb, points, bytes }
     }
 
     /// The kept point `k` for a gather in `mode` with `nb` basis functions.
     pub(super) fn point(&self, k: usize, mode: Mode, nb: usize) -> Option<&KeptPoint> {
-        if mode != self.mode || nb + 1 != self.stride {
+        if mode != self.mode || nb != self.nb {
             return None;
         }
         self.points.get(k)?.as_ref()
@@ -93,14 +104,16 @@ impl KeptGather {
 }
 
 /// One point's kept values: where it was, per source cast (sorted by node and way) its values,
-/// and per surface source ranked (in the order the sources were listed) its unoccluded values.
+/// and per surface source ranked (in the order the sources were listed) its unoccluded form
+/// factor and what it is to the point ([`Memo::ranked`]).
 pub(super) struct KeptPoint {
     x: DVec3,
     n: DVec3,
+    /// Per source cast, where its values ([`How::len`] of them) start in `values`.
     keys: Vec<(NodeId, How, u32)>,
     values: Vec<f64>,
     ranked: Vec<NodeId>,
-    ranked_values: Vec<f64>,
+    ranked_values: Vec<[f64; 2]>,
     /// `ranked` sorted, with each one's index, for a source listed out of its last order.
     ranked_index: Vec<(NodeId, u32)>,
     /// The feet's own points, by the source they stand on.
@@ -108,37 +121,26 @@ pub(super) struct KeptPoint {
 }
 
 impl KeptPoint {
-    fn new(x: DVec3, n: DVec3) -> Self {
-        Self {
-            x,
-            n,
-            keys: Vec::new(),
-            values: Vec::new(),
-            ranked: Vec::new(),
-            ranked_values: Vec::new(),
-            ranked_index: Vec::new(),
-            feet: Vec::new(),
-        }
-    }
-
     /// An empty point with room for as many values as `previous` holds (a point keeps about
     /// the same sources frame after frame: growing the vectors and shrinking them after was a
     /// tenth of an updated frame's gather).
     fn like(previous: Option<&KeptPoint>) -> Self {
-        let mut k = Self::new(DVec3::NAN, DVec3::NAN);
-        if let Some(p) = previous {
-            k.keys.reserve_exact(p.keys.len());
-            k.values.reserve_exact(p.values.len());
-            k.ranked.reserve_exact(p.ranked.len());
-            k.ranked_values.reserve_exact(p.ranked_values.len());
-            k.feet.reserve_exact(p.feet.len());
+        let room = |n: fn(&KeptPoint) -> usize| previous.map_or(0, n);
+        Self {
+            x: DVec3::NAN,
+            n: DVec3::NAN,
+            keys: Vec::with_capacity(room(|p| p.keys.len())),
+            values: Vec::with_capacity(room(|p| p.values.len())),
+            ranked: Vec::with_capacity(room(|p| p.ranked.len())),
+            ranked_values: Vec::with_capacity(room(|p| p.ranked.len())),
+            ranked_index: Vec::new(),
+            feet: Vec::with_capacity(room(|p| p.feet.len())),
         }
-        k
     }
 
     /// The ranked values of `source`, looked for at `cursor` first (the sources are listed in
     /// the same order frame after frame, unless links changed), which moves past it.
-    fn ranked_at(&self, source: NodeId, cursor: &mut usize, stride: usize) -> Option<&[f64]> {
+    fn ranked_at(&self, source: NodeId, cursor: &mut usize) -> Option<[f64; 2]> {
         let k = if self.ranked.get(*cursor) == Some(&source) {
             *cursor
         } else {
@@ -146,13 +148,13 @@ impl KeptPoint {
             self.ranked_index[i].1 as usize
         };
         *cursor = k + 1;
-        Some(&self.ranked_values[k * stride..(k + 1) * stride])
+        Some(self.ranked_values[k])
     }
 
-    fn find(&self, source: NodeId, how: How, stride: usize) -> Option<&[f64]> {
+    fn find(&self, source: NodeId, how: How, len: usize) -> Option<&[f64]> {
         let k = self.keys.binary_search_by(|&(s, h, _)| (s, h).cmp(&(source, how))).ok()?;
-        let at = self.keys[k].2 as usize * stride;
-        Some(&self.values[at..at + stride])
+        let at = self.keys[k].2 as usize;
+        Some(&self.values[at..at + len])
     }
 
     fn foot(&self, source: NodeId) -> Option<&KeptPoint> {
@@ -165,7 +167,7 @@ impl KeptPoint {
             + self.keys.capacity() * std::mem::size_of::<(NodeId, How, u32)>()
             + self.values.capacity() * 8
             + self.ranked.capacity() * 4
-            + self.ranked_values.capacity() * 8
+            + self.ranked_values.capacity() * 16
             + self.ranked_index.capacity() * 8;
         own + self.feet.iter().map(|(_, f)| 4 + f.bytes()).sum::<usize>()
     }
@@ -204,25 +206,22 @@ pub struct Reuse {
 pub(super) struct Memo<'k> {
     previous: Option<&'k KeptPoint>,
     changes: Option<Changes<'k>>,
-    stride: usize,
+    nb: usize,
     keeping: Option<KeptPoint>,
     /// Where in the previous point's ranked sources the next is looked for.
     cursor: usize,
     pub reuse: Reuse,
 }
 
+/// A source's values, at most the moments and one more.
+pub(super) type Values = [f64; crate::basis::MAX_LEN + 1];
+
 impl<'k> Memo<'k> {
     /// A point's memo: `previous` is the point's kept values, taken where `changes` spares them;
     /// with `keep`, it keeps this frame's.
     pub fn new(previous: Option<&'k KeptPoint>, changes: Option<Changes<'k>>, nb: usize, keep: bool) -> Self {
-        Self {
-            previous,
-            changes,
-            stride: nb + 1,
-            keeping: keep.then(|| KeptPoint::like(previous)),
-            cursor: 0,
-            reuse: Reuse::default(),
-        }
+        let keeping = keep.then(|| KeptPoint::like(previous));
+        Self { previous, changes, nb, keeping, cursor: 0, reuse: Reuse::default() }
     }
 
     /// The point's place: kept values of a point elsewhere are not taken.
@@ -235,58 +234,44 @@ impl<'k> Memo<'k> {
         }
     }
 
-    /// The values of `source` taken as `how`, `stride` of them: the kept ones where they hold,
-    /// else `compute`d (into zeros).
-    pub fn values(
-        &mut self,
-        source: NodeId,
-        how: How,
-        compute: impl FnOnce(&mut [f64]),
-    ) -> [f64; crate::basis::MAX_LEN + 1] {
+    /// The values of `source` taken as `how` ([`How::len`] of them): the kept ones where they
+    /// hold, else `compute`d (into zeros).
+    pub fn values(&mut self, source: NodeId, how: How, compute: impl FnOnce(&mut [f64])) -> Values {
         let mut v = [0.0; crate::basis::MAX_LEN + 1];
-        let stride = self.stride;
+        let len = how.len(self.nb);
         let kept = match (self.previous, self.changes) {
-            (Some(p), Some(c)) => p.find(source, how, stride).filter(|_| c.spares(p.x, source, how)),
+            (Some(p), Some(c)) => p.find(source, how, len).filter(|_| c.spares(p.x, source, how)),
             _ => None,
         };
         match kept {
             Some(k) => {
-                v[..stride].copy_from_slice(k);
+                v[..len].copy_from_slice(k);
                 self.reuse.kept += 1;
             }
             None => {
-                compute(&mut v[..stride]);
+                compute(&mut v[..len]);
                 self.reuse.computed += 1;
             }
         }
         if let Some(k) = &mut self.keeping {
-            k.keys.push((source, how, k.keys.len() as u32));
-            k.values.extend_from_slice(&v[..stride]);
+            k.keys.push((source, how, k.values.len() as u32));
+            k.values.extend_from_slice(&v[..len]);
         }
         v
     }
 
-    /// The surface `source`'s values for the ranking, unoccluded (no occluder is read: they hold
-    /// while neither the point nor the source moved), `stride` of them: the kept ones, else
-    /// `compute`d.
-    pub fn ranked(
-        &mut self,
-        source: NodeId,
-        compute: impl FnOnce(&mut [f64]),
-    ) -> [f64; crate::basis::MAX_LEN + 1] {
-        let mut v = [0.0; crate::basis::MAX_LEN + 1];
-        let stride = self.stride;
+    /// The surface `source`'s two values for the ranking (its unoccluded form factor and what it
+    /// is to the point), which read no occluder: the kept ones while neither the point nor the
+    /// source moved, else `compute`d.
+    pub fn ranked(&mut self, source: NodeId, compute: impl FnOnce() -> [f64; 2]) -> [f64; 2] {
         let kept = match (self.previous, self.changes) {
-            (Some(p), Some(c)) if c.unmoved(source) => p.ranked_at(source, &mut self.cursor, stride),
+            (Some(p), Some(c)) if c.unmoved(source) => p.ranked_at(source, &mut self.cursor),
             _ => None,
         };
-        match kept {
-            Some(k) => v[..stride].copy_from_slice(k),
-            None => compute(&mut v[..stride]),
-        }
+        let v = kept.unwrap_or_else(compute);
         if let Some(k) = &mut self.keeping {
             k.ranked.push(source);
-            k.ranked_values.extend_from_slice(&v[..stride]);
+            k.ranked_values.push(v);
         }
         v
     }
@@ -294,14 +279,8 @@ impl<'k> Memo<'k> {
     /// The memo of the foot on `source`.
     pub fn foot(&self, source: NodeId) -> Memo<'k> {
         let previous = self.previous.and_then(|p| p.foot(source));
-        Memo {
-            previous,
-            changes: self.changes,
-            stride: self.stride,
-            keeping: self.keeping.as_ref().map(|_| KeptPoint::like(previous)),
-            cursor: 0,
-            reuse: Reuse::default(),
-        }
+        let keeping = self.keeping.as_ref().map(|_| KeptPoint::like(previous));
+        Memo { previous, changes: self.changes, nb: self.nb, keeping, cursor: 0, reuse: Reuse::default() }
     }
 
     /// Keeps the foot on `source`'s gather, done with `foot`.
@@ -324,7 +303,13 @@ impl<'k> Memo<'k> {
         k.ranked_index.sort_unstable();
         k.keys.sort_unstable_by_key(|&(s, h, _)| (s, h));
         k.feet.sort_unstable_by_key(|(s, _)| *s);
-        // (A first frame's vectors grew by doubling: at most twice what they hold.)
+        // A first frame's vectors grew by doubling; a later frame's were sized from the last.
+        if k.values.capacity() > k.values.len() + k.values.len() / 4 {
+            k.keys.shrink_to_fit();
+            k.values.shrink_to_fit();
+            k.ranked.shrink_to_fit();
+            k.ranked_values.shrink_to_fit();
+        }
         Some(k)
     }
 }

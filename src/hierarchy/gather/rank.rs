@@ -31,6 +31,7 @@ use super::polygon;
 use super::sources::Linked;
 use super::surface::{Rays, Source};
 use super::{Counters, Gather, Received, Receiver};
+use crate::basis::MAX_LEN as MAX_NB;
 use crate::gather::behind_plane;
 use crate::geometry::Rect;
 use crate::hierarchy::tree::NodeId;
@@ -50,8 +51,10 @@ pub(super) struct Ranked {
     /// The ranking: the form factor times the mean radiosity, summed over the channels (a
     /// cluster's unoccluded light).
     weight: f64,
-    /// What the source would bring unoccluded: `H` and the form factor.
-    unoccluded: ([f64; 3], f64),
+    /// A cluster's unoccluded light `H` at the point.
+    cluster_light: [f64; 3],
+    /// A surface's unoccluded form factor.
+    form_factor: f64,
 }
 
 impl Gather<'_> {
@@ -59,54 +62,64 @@ impl Gather<'_> {
     pub(super) fn rank(&self, rx: &Receiver, linked: Linked, feet: bool, memo: &mut Memo) -> Option<Ranked> {
         let tree = self.inputs.tree;
         let node = tree.node(linked.source);
-        let (mut near, mut touched) = (false, false);
-        let (unoccluded, form_factor) = match node.surface() {
-            Some(s) => {
-                let nb = tree.basis.len();
-                // The unoccluded moments, then what the source is to the point: behind its plane
-                // (-1), else near (1) and touched (2) added.
-                let v = memo.ranked(linked.source, |v| {
-                    if behind_plane(rx.x, rx.n, &s.patch, node.radius) {
-                        v[nb] = -1.0;
-                        return;
-                    }
-                    let near = self.is_near(rx, linked.source);
-                    // A source the point touches takes its part next to the point from the foot,
-                    // however dark its own polynomial (a sliver the solve barely lights).
-                    let touched = near && feet && self.touch(rx, node.radius, s).is_some();
-                    let m = &mut v[..nb];
-                    let src = Source { face: s.face, patch: &s.patch };
-                    let rule = if near { &self.rule } else { &self.far_rule };
-                    let sum = self.gauss(rx, src, &Rect::UNIT, rule, Rays::Among(&[]), m);
-                    if near {
-                        // Next to the point the Gauss nodes miss most of the kernel: its exact
-                        // integral instead, shared out as they share it.
-                        let f = polygon::form_factor(rx.x, rx.n, &s.patch.corners, s.normal);
-                        scale_to(m, sum, f);
-                    }
-                    v[nb] = f64::from(u8::from(near) + 2 * u8::from(touched));
-                });
-                if v[nb] < 0.0 {
-                    return None;
-                }
-                (near, touched) = (v[nb] % 2.0 == 1.0, v[nb] >= 2.0);
-                (self.light(linked.source, &v[..nb]), v[0])
-            }
-            None => (self.cluster_light(rx, linked.source), 0.0),
+        let Some(s) = node.surface() else {
+            let light = self.cluster_light(rx, linked.source);
+            let weight = light.iter().sum();
+            return (weight > 0.0).then_some(Ranked {
+                linked,
+                near: false,
+                touched: false,
+                weight,
+                cluster_light: light,
+                form_factor: 0.0,
+            });
         };
+        // The unoccluded form factor, and what the source is to the point: behind its plane
+        // (-1), else near (1) and touched (2) added.
+        let [form_factor, what] = memo.ranked(linked.source, || {
+            if behind_plane(rx.x, rx.n, &s.patch, node.radius) {
+                return [0.0, -1.0];
+            }
+            let near = self.is_near(rx, linked.source);
+            // A source the point touches takes its part next to the point from the foot,
+            // however dark its own polynomial (a sliver the solve barely lights).
+            let touched = near && feet && self.touch(rx, node.radius, s).is_some();
+            let m = self.unoccluded(rx, linked.source, near);
+            [m[0], f64::from(u8::from(near) + 2 * u8::from(touched))]
+        });
+        if what < 0.0 {
+            return None;
+        }
+        let (near, touched) = (what % 2.0 == 1.0, what >= 2.0);
         // The ranking by the form factor times the mean radiosity: the moments' light can come
         // out negative where the nodes share a near source's form factor out badly.
-        let weight = match node.surface() {
-            Some(_) => form_factor * self.inputs.state.mean[linked.source as usize].iter().sum::<f64>(),
-            None => unoccluded.iter().sum(),
-        };
+        let weight = form_factor * self.inputs.state.mean[linked.source as usize].iter().sum::<f64>();
         (weight > 0.0 || form_factor > 0.0 || touched).then_some(Ranked {
             linked,
             near,
             touched,
             weight,
-            unoccluded: (unoccluded, form_factor),
+            cluster_light: [0.0; 3],
+            form_factor,
         })
+    }
+
+    /// The surface node `source`'s moments at the point without occluders: a Gauss sum, and
+    /// `near` the point, scaled to the exact polygon form factor (next to the point the Gauss
+    /// nodes miss most of the kernel; they only share it out).
+    fn unoccluded(&self, rx: &Receiver, source: NodeId, near: bool) -> [f64; MAX_NB] {
+        let tree = self.inputs.tree;
+        let s = tree.node(source).surface().expect("a surface");
+        let nb = tree.basis.len();
+        let mut m = [0.0; MAX_NB];
+        let src = Source { face: s.face, patch: &s.patch };
+        let rule = if near { &self.rule } else { &self.far_rule };
+        let sum = self.gauss(rx, src, &Rect::UNIT, rule, Rays::Among(&[]), &mut m[..nb]);
+        if near {
+            let f = polygon::form_factor(rx.x, rx.n, &s.patch.corners, s.normal);
+            scale_to(&mut m[..nb], sum, f);
+        }
+        m
     }
 
     /// Adds the surface source `source`'s light at the point to `got` by one Gauss sum with rays
@@ -161,7 +174,7 @@ impl Gather<'_> {
                     return;
                 }
             } else if tree.node(source).is_cluster() {
-                let (h, form_factor) = self.link_estimate(r.linked, r.unoccluded);
+                let (h, form_factor) = self.link_estimate(r.linked, (r.cluster_light, 0.0));
                 got.add(h, form_factor);
             } else if rest <= 0.0 {
                 // Nothing left brings light: one ray for the form factor (the hemisphere bound).
@@ -173,7 +186,8 @@ impl Gather<'_> {
                     o.visible_from(rx.x, (rx.face, s.face), &[s.patch.point(0.5, 0.5)], &mut seen);
                 }
                 if seen[0] {
-                    got.add(r.unoccluded.0, r.unoccluded.1);
+                    let m = self.unoccluded(rx, source, r.near);
+                    got.add(self.light(source, &m[..tree.basis.len()]), r.form_factor);
                 }
             } else {
                 Counters::add(&self.counters.coarse, 1);
