@@ -80,6 +80,8 @@ TABLES: dict[str, Table | None] = {
                          "cargo bench --bench animation -- --methods --quick", "about 1 min"),
     "box-phases": Table("cargo bench --bench animation -- --methods", 1,
                         "cargo bench --bench animation -- --methods --quick", "(the same run)"),
+    "box-gather": Table("cargo bench --bench animation -- --gather", 0,
+                        "cargo bench --bench animation -- --gather --quick", "about 1 min"),
     "solve-mixing": Table("cargo bench --bench animation", 2,
                           "cargo bench --bench animation -- --quick", "(the same run)"),
     "touch-walk": Table("cargo bench --bench animation", 3,
