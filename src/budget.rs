@@ -231,6 +231,11 @@ const HIERARCHY_FULL_LINKS: f64 = 20_000.0;
 /// a table of 17-byte slots at most 7/8 full).
 const HIERARCHY_PAIR_TREE_PER_LINK: u64 = 130;
 
+/// Bytes an animation's hierarchical corner gather keeps per face corner for the next frame
+/// (`hierarchy::gather::KeptGather`), at most its cap: measured 9 KB on the 1,079-patch
+/// moving-light box at order 2, 91 KB on the decimated monastery (its sources are many more).
+const HIERARCHY_KEPT_GATHER_PER_CORNER: u64 = 100 << 10;
+
 /// What a hierarchical bake ([`crate::session::Method::Hierarchical`]) will need. Its links grow
 /// about linearly with the faces, not with their pairs, and how many there are is known only
 /// once the oracle has decided them: the links are `faces x` [`HIERARCHY_LINKS_PER_FACE`] scaled
@@ -242,8 +247,9 @@ const HIERARCHY_PAIR_TREE_PER_LINK: u64 = 130;
 /// and one per full link (the quadrants split where the light asks for them: 2,785 leaves for
 /// 3,279 links on the modelled Cornell box), each its record, moments, the solve's three
 /// coefficient vectors and its mixer's columns. An animation (a scene of more than one frame)
-/// also keeps the pair tree ([`HIERARCHY_PAIR_TREE_PER_LINK`]), and an update holds the last
-/// frame's nodes and solution beside the new ones. Elements and results as [`estimate`]. Against the measured peaks: the full monastery at
+/// also keeps the pair tree ([`HIERARCHY_PAIR_TREE_PER_LINK`]) and, with the corner gather, its
+/// sources' values ([`HIERARCHY_KEPT_GATHER_PER_CORNER`], within their cap of an eighth of the
+/// budget), and an update holds the last frame's nodes and solution beside the new ones. Elements and results as [`estimate`]. Against the measured peaks: the full monastery at
 /// order 1, 2.2 GB (4.3 GB estimated without the gather); a 9,912-face crop of it, 104 MB
 /// (0.33 GB).
 pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
@@ -274,9 +280,16 @@ pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
         size_of::<crate::hierarchy::tree::Node>() as u64 + 16 + nb * 8 + 3 * nb * 3 * 8 + mixer + 64;
     let copies = if animated { 2 } else { 1 };
     let elements = flat.elements.saturating_add(nodes.saturating_mul(per_node).saturating_mul(copies));
-    // The hierarchy's corner gather keeps nothing per corner between points but its values,
-    // which the results count.
-    Estimate { links, gather: 0, elements, results: flat.results }
+    // The corner gather keeps nothing between points but its values, which the results count;
+    // an animation's keeps its sources' values for the next frame, within their cap.
+    let gather = if animated && s.corner_gather {
+        let corners: u64 = scene.objects.iter().flat_map(|o| &o.faces).map(|f| f.len() as u64).sum();
+        let cap = crate::hierarchy::gather::KeptGather::cap(budget_bytes(s.memory_budget_mb)) as u64;
+        corners.saturating_mul(HIERARCHY_KEPT_GATHER_PER_CORNER).min(cap)
+    } else {
+        0
+    };
+    Estimate { links, gather, elements, results: flat.results }
 }
 
 /// [`check`] for [`crate::session::Method::Hierarchical`], with [`hierarchical_estimate`].

@@ -214,15 +214,20 @@ fn casts_a_move_cannot_change_are_taken_from_the_frame_before() {
 /// cannot have changed (`gather::KeptGather`), and gathers exactly what a fresh gather of the
 /// same solution gathers, bit for bit: on the moving-light box (the light under the ceiling
 /// crosses the shafts of the ceiling's sources) and on the demo animation (a block sliding on
-/// the floor, with the feet of its corners on it).
+/// the floor, with the feet of its corners on it); and under a memory budget whose cap lets most
+/// points keep nothing (they are gathered afresh).
 #[test]
 fn a_kept_gather_equals_a_fresh_gather() {
     use galerkin_radiosity::hierarchy::gather::{self, Mode};
     let order2 = Settings { basis_order: 2, ..settings() };
+    // A memory budget of 1 MB caps the kept values at 128 KiB: most points keep nothing.
+    let capped = Settings { memory_budget_mb: 1, ..order2.clone() };
     // (In the small demo box both the light and the block move: most shafts meet a swept box.)
-    for (name, scene, most) in
-        [("moving light", cornell_box_moving_light(4, 6, order2), true), ("demo", animated(), false)]
-    {
+    for (name, scene, most) in [
+        ("moving light", cornell_box_moving_light(4, 6, order2), true),
+        ("demo", animated(), false),
+        ("moving light, capped", cornell_box_moving_light(4, 6, capped), false),
+    ] {
         let hs = HierarchySettings {
             keep_pair_tree: true,
             keep_gather: true,
@@ -241,6 +246,13 @@ fn a_kept_gather_equals_a_fresh_gather() {
                 "{name} frame {frame}: {} sources kept, {} computed",
                 s.gather_kept,
                 s.gather_computed
+            );
+            let budget = galerkin_radiosity::budget::budget_bytes(scene.settings.memory_budget_mb);
+            let cap = gather::KeptGather::cap(budget);
+            assert!(
+                s.kept_gather_bytes > 0 && s.kept_gather_bytes <= cap,
+                "{name}: {} bytes",
+                s.kept_gather_bytes
             );
             let lit = Lighting::new(&scene, f, &next.hierarchy.tree.faces);
             let inputs = gather::Inputs::new(&next.hierarchy, &next.state, &lit);
