@@ -11,7 +11,7 @@
 
 use glam::DVec3;
 
-use super::kept::{How, Memo};
+use super::kept::{How, Memo, Slot};
 use super::sources::{Linked, Via};
 use super::surface::{Rays, Source};
 use super::{Counters, FAR_RATIO, Gather, Received, Receiver};
@@ -39,13 +39,19 @@ impl Gather<'_> {
 
     /// Adds the far source `source`'s light at the point to `got`, with its own rays: a surface's
     /// moments by the Gauss rule, a cluster's intensity times the point's transmittance.
-    pub(super) fn far_cast(&self, rx: &Receiver, source: NodeId, got: &mut Received, memo: &mut Memo) {
+    pub(super) fn far_cast(
+        &self,
+        rx: &Receiver,
+        (source, slot): (NodeId, Slot),
+        got: &mut Received,
+        memo: &mut Memo,
+    ) {
         let tree = self.inputs.tree;
         let node = tree.node(source);
         match node.surface() {
             Some(s) => {
                 let nb = tree.basis.len();
-                let m = memo.values(source, How::Far, |m| {
+                let m = memo.values(slot, source, How::Far, |m| {
                     let far = rx.x.distance(node.centre) >= FAR_RATIO * node.radius;
                     let rule = if far { &self.far_rule } else { &self.rule };
                     let src = Source { face: s.face, patch: &s.patch };
@@ -53,7 +59,7 @@ impl Gather<'_> {
                 });
                 got.add(self.light(source, &m[..nb]), m[0]);
             }
-            None => got.add(self.cluster_cast(rx, source, memo), 0.0),
+            None => got.add(self.cluster_cast(rx, (source, slot), memo), 0.0),
         }
     }
 
@@ -90,13 +96,18 @@ impl Gather<'_> {
     /// The cluster `source`'s light at the point with the point's own transmittance: rays from
     /// the point to points of the cluster facing it (the link's own transmittance is between the
     /// two nodes, blind to the shadows inside the receiving node).
-    pub(super) fn cluster_cast(&self, rx: &Receiver, source: NodeId, memo: &mut Memo) -> [f64; 3] {
+    pub(super) fn cluster_cast(
+        &self,
+        rx: &Receiver,
+        (source, slot): (NodeId, Slot),
+        memo: &mut Memo,
+    ) -> [f64; 3] {
         let light = self.cluster_light(rx, source);
         // The intensity first: a dark cluster costs no rays.
         if light == [0.0; 3] {
             return light;
         }
-        let t = memo.values(source, How::Cluster, |v| v[0] = self.point_transmittance(rx, source))[0];
+        let t = memo.values(slot, source, How::Cluster, |v| v[0] = self.point_transmittance(rx, source))[0];
         light.map(|l| l * t)
     }
 

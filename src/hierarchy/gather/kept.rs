@@ -39,7 +39,7 @@ use crate::hierarchy::tree::NodeId;
 const MAX_BYTES: usize = 512 << 20;
 
 /// How a source was taken from the point: its kept values hold only for the same way.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum How {
     /// A surface by [`super::near`]'s recursion (or the exhaustive one), without and with a
     /// foot's ball (the ball's form factor after the moments).
@@ -103,22 +103,25 @@ impl KeptGather {
     }
 }
 
-/// One point's kept values: where it was, per source cast (sorted by node and way) its values,
-/// and per surface source ranked (in the order the sources were listed) its unoccluded form
-/// factor and what it is to the point ([`Memo::ranked`]).
+/// One point's kept values: where it was, and per source it listed (in the order it listed
+/// them) its ranking values ([`Memo::listed`]) and how it was cast, if it was, with its values.
 pub(super) struct KeptPoint {
     x: DVec3,
     n: DVec3,
-    /// Per source cast, where its values ([`How::len`] of them) start in `values`.
-    keys: Vec<(NodeId, How, u32)>,
+    sources: Vec<NodeId>,
+    ranked: Vec<[f64; 2]>,
+    /// Per source: how it was cast ([`NOT_CAST`] if it was not) and where its values
+    /// ([`How::len`] of them) start in `values`.
+    casts: Vec<(u8, u32)>,
     values: Vec<f64>,
-    ranked: Vec<NodeId>,
-    ranked_values: Vec<[f64; 2]>,
-    /// `ranked` sorted, with each one's index, for a source listed out of its last order.
-    ranked_index: Vec<(NodeId, u32)>,
+    /// `sources` sorted, with each one's slot, for a source listed out of its last order.
+    index: Vec<(NodeId, u32)>,
     /// The feet's own points, by the source they stand on.
     feet: Vec<(NodeId, KeptPoint)>,
 }
+
+/// [`KeptPoint::casts`]' mark of a source taken without rays from the point.
+const NOT_CAST: u8 = u8::MAX;
 
 impl KeptPoint {
     /// An empty point with room for as many values as `previous` holds (a point keeps about
@@ -129,32 +132,26 @@ impl KeptPoint {
         Self {
             x: DVec3::NAN,
             n: DVec3::NAN,
-            keys: Vec::with_capacity(room(|p| p.keys.len())),
+            sources: Vec::with_capacity(room(|p| p.sources.len())),
+            ranked: Vec::with_capacity(room(|p| p.sources.len())),
+            casts: Vec::with_capacity(room(|p| p.sources.len())),
             values: Vec::with_capacity(room(|p| p.values.len())),
-            ranked: Vec::with_capacity(room(|p| p.ranked.len())),
-            ranked_values: Vec::with_capacity(room(|p| p.ranked.len())),
-            ranked_index: Vec::new(),
+            index: Vec::new(),
             feet: Vec::with_capacity(room(|p| p.feet.len())),
         }
     }
 
-    /// The ranked values of `source`, looked for at `cursor` first (the sources are listed in
-    /// the same order frame after frame, unless links changed), which moves past it.
-    fn ranked_at(&self, source: NodeId, cursor: &mut usize) -> Option<[f64; 2]> {
-        let k = if self.ranked.get(*cursor) == Some(&source) {
+    /// The slot of `source`, looked for at `cursor` first (the sources are listed in the same
+    /// order frame after frame, unless links changed), which moves past it.
+    fn slot_of(&self, source: NodeId, cursor: &mut usize) -> Option<usize> {
+        let k = if self.sources.get(*cursor) == Some(&source) {
             *cursor
         } else {
-            let i = self.ranked_index.binary_search_by_key(&source, |&(s, _)| s).ok()?;
-            self.ranked_index[i].1 as usize
+            let i = self.index.binary_search_by_key(&source, |&(s, _)| s).ok()?;
+            self.index[i].1 as usize
         };
         *cursor = k + 1;
-        Some(self.ranked_values[k])
-    }
-
-    fn find(&self, source: NodeId, how: How, len: usize) -> Option<&[f64]> {
-        let k = self.keys.binary_search_by(|&(s, h, _)| (s, h).cmp(&(source, how))).ok()?;
-        let at = self.keys[k].2 as usize;
-        Some(&self.values[at..at + len])
+        Some(k)
     }
 
     fn foot(&self, source: NodeId) -> Option<&KeptPoint> {
@@ -164,11 +161,11 @@ impl KeptPoint {
 
     pub(super) fn bytes(&self) -> usize {
         let own = std::mem::size_of::<Self>()
-            + self.keys.capacity() * std::mem::size_of::<(NodeId, How, u32)>()
+            + self.sources.capacity() * 4
+            + self.ranked.capacity() * 16
+            + self.casts.capacity() * 8
             + self.values.capacity() * 8
-            + self.ranked.capacity() * 4
-            + self.ranked_values.capacity() * 16
-            + self.ranked_index.capacity() * 8;
+            + self.index.capacity() * 8;
         own + self.feet.iter().map(|(_, f)| 4 + f.bytes()).sum::<usize>()
     }
 }
@@ -208,13 +205,25 @@ pub(super) struct Memo<'k> {
     changes: Option<Changes<'k>>,
     nb: usize,
     keeping: Option<KeptPoint>,
-    /// Where in the previous point's ranked sources the next is looked for.
+    /// Where in the previous point's sources the next is looked for.
     cursor: usize,
     pub reuse: Reuse,
 }
 
 /// A source's values, at most the moments and one more.
 pub(super) type Values = [f64; crate::basis::MAX_LEN + 1];
+
+/// Where a listed source sits in the previous point's kept values and in this point's.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Slot {
+    previous: u32,
+    own: u32,
+}
+
+impl Slot {
+    /// A source of a gather that neither takes nor keeps values (the exhaustive one).
+    pub const NONE: Slot = Slot { previous: u32::MAX, own: u32::MAX };
+}
 
 impl<'k> Memo<'k> {
     /// A point's memo: `previous` is the point's kept values, taken where `changes` spares them;
@@ -234,13 +243,46 @@ impl<'k> Memo<'k> {
         }
     }
 
-    /// The values of `source` taken as `how` ([`How::len`] of them): the kept ones where they
-    /// hold, else `compute`d (into zeros).
-    pub fn values(&mut self, source: NodeId, how: How, compute: impl FnOnce(&mut [f64])) -> Values {
+    /// Lists `source` among the point's, with its two values for the ranking (a surface's
+    /// unoccluded form factor and what it is to the point), which read no occluder: the kept
+    /// ones while neither the point nor the source moved, else `compute`d. Returns its slot,
+    /// for [`Memo::values`].
+    pub fn listed(&mut self, source: NodeId, compute: impl FnOnce() -> [f64; 2]) -> ([f64; 2], Slot) {
+        let previous = self.previous.and_then(|p| Some((p, p.slot_of(source, &mut self.cursor)?)));
+        let unmoved = self.changes.is_some_and(|c| c.unmoved(source));
+        let ranked = match previous {
+            Some((p, k)) if unmoved => p.ranked[k],
+            _ => compute(),
+        };
+        let own = match &mut self.keeping {
+            Some(k) => {
+                k.sources.push(source);
+                k.ranked.push(ranked);
+                k.casts.push((NOT_CAST, 0));
+                k.sources.len() as u32 - 1
+            }
+            None => u32::MAX,
+        };
+        (ranked, Slot { previous: previous.map_or(u32::MAX, |(_, k)| k as u32), own })
+    }
+
+    /// The values of the source at `slot` taken as `how` ([`How::len`] of them): the kept ones
+    /// where they hold, else `compute`d (into zeros).
+    pub fn values(
+        &mut self,
+        slot: Slot,
+        source: NodeId,
+        how: How,
+        compute: impl FnOnce(&mut [f64]),
+    ) -> Values {
         let mut v = [0.0; crate::basis::MAX_LEN + 1];
         let len = how.len(self.nb);
         let kept = match (self.previous, self.changes) {
-            (Some(p), Some(c)) => p.find(source, how, len).filter(|_| c.spares(p.x, source, how)),
+            (Some(p), Some(c)) if slot.previous != u32::MAX => {
+                let (was, at) = p.casts[slot.previous as usize];
+                (was == how as u8 && c.spares(p.x, source, how))
+                    .then(|| &p.values[at as usize..at as usize + len])
+            }
             _ => None,
         };
         match kept {
@@ -253,25 +295,9 @@ impl<'k> Memo<'k> {
                 self.reuse.computed += 1;
             }
         }
-        if let Some(k) = &mut self.keeping {
-            k.keys.push((source, how, k.values.len() as u32));
+        if let (Some(k), true) = (&mut self.keeping, slot.own != u32::MAX) {
+            k.casts[slot.own as usize] = (how as u8, k.values.len() as u32);
             k.values.extend_from_slice(&v[..len]);
-        }
-        v
-    }
-
-    /// The surface `source`'s two values for the ranking (its unoccluded form factor and what it
-    /// is to the point), which read no occluder: the kept ones while neither the point nor the
-    /// source moved, else `compute`d.
-    pub fn ranked(&mut self, source: NodeId, compute: impl FnOnce() -> [f64; 2]) -> [f64; 2] {
-        let kept = match (self.previous, self.changes) {
-            (Some(p), Some(c)) if c.unmoved(source) => p.ranked_at(source, &mut self.cursor),
-            _ => None,
-        };
-        let v = kept.unwrap_or_else(compute);
-        if let Some(k) = &mut self.keeping {
-            k.ranked.push(source);
-            k.ranked_values.push(v);
         }
         v
     }
@@ -292,23 +318,22 @@ impl<'k> Memo<'k> {
         }
     }
 
-    /// The point's kept values, sorted for the next frame's lookups; `None` when not keeping or
-    /// when it took no source.
+    /// The point's kept values, indexed for the next frame's lookups; `None` when not keeping or
+    /// when it listed no source.
     pub fn into_kept(self) -> Option<KeptPoint> {
         let mut k = self.keeping?;
-        if k.keys.is_empty() && k.feet.is_empty() && k.ranked.is_empty() {
+        if k.sources.is_empty() && k.feet.is_empty() {
             return None;
         }
-        k.ranked_index = k.ranked.iter().enumerate().map(|(i, &s)| (s, i as u32)).collect();
-        k.ranked_index.sort_unstable();
-        k.keys.sort_unstable_by_key(|&(s, h, _)| (s, h));
+        k.index = k.sources.iter().enumerate().map(|(i, &s)| (s, i as u32)).collect();
+        k.index.sort_unstable();
         k.feet.sort_unstable_by_key(|(s, _)| *s);
         // A first frame's vectors grew by doubling; a later frame's were sized from the last.
         if k.values.capacity() > k.values.len() + k.values.len() / 4 {
-            k.keys.shrink_to_fit();
-            k.values.shrink_to_fit();
+            k.sources.shrink_to_fit();
             k.ranked.shrink_to_fit();
-            k.ranked_values.shrink_to_fit();
+            k.casts.shrink_to_fit();
+            k.values.shrink_to_fit();
         }
         Some(k)
     }

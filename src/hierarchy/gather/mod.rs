@@ -81,8 +81,8 @@ use crate::system::Progress;
 use crate::visibility::Occluders;
 use sources::Sources;
 
-use kept::Memo;
 pub use kept::{Changes, KeptGather, Reuse};
+use kept::{Memo, Slot};
 
 /// A source (sub-)rectangle is integrated by the Gauss rule once the distance from the corner to
 /// its centre is this many times its bounding radius; closer, it is split in four (as
@@ -422,9 +422,11 @@ impl<'a> Gather<'a> {
                     // linked with the cluster of a model's faces casts the model's own shadows on
                     // them).
                     Mode::Exhaustive if tree.node(linked.source).is_cluster() => {
-                        got.add(self.cluster_cast(&rx, linked.source, memo), 0.0)
+                        got.add(self.cluster_cast(&rx, (linked.source, Slot::NONE), memo), 0.0)
                     }
-                    Mode::Exhaustive => self.surface_source(&rx, linked.source, feet, &mut got, memo),
+                    Mode::Exhaustive => {
+                        self.surface_source(&rx, (linked.source, Slot::NONE), feet, &mut got, memo)
+                    }
                 }
                 !self.stop.stopped()
             },

@@ -26,7 +26,7 @@
 //! and one a source saved 5.5% of the rays (docs/benchmarks.md, "The hierarchy's corner gather
 //! at scale").
 
-use super::kept::{How, Memo};
+use super::kept::{How, Memo, Slot};
 use super::polygon;
 use super::sources::Linked;
 use super::surface::{Rays, Source};
@@ -44,6 +44,8 @@ const ESTIMATED_SHARE: f64 = 0.1;
 /// A source of a point valued without rays.
 pub(super) struct Ranked {
     linked: Linked,
+    /// Its place among the point's kept values.
+    slot: Slot,
     /// A surface near the point ([`super::NEAR_RATIO`]): cast by [`super::near`].
     near: bool,
     /// A near surface the point touches: always cast (with its foot).
@@ -63,10 +65,12 @@ impl Gather<'_> {
         let tree = self.inputs.tree;
         let node = tree.node(linked.source);
         let Some(s) = node.surface() else {
+            let (_, slot) = memo.listed(linked.source, || [0.0; 2]);
             let light = self.cluster_light(rx, linked.source);
             let weight = light.iter().sum();
             return (weight > 0.0).then_some(Ranked {
                 linked,
+                slot,
                 near: false,
                 touched: false,
                 weight,
@@ -76,7 +80,7 @@ impl Gather<'_> {
         };
         // The unoccluded form factor, and what the source is to the point: behind its plane
         // (-1), else near (1) and touched (2) added.
-        let [form_factor, what] = memo.ranked(linked.source, || {
+        let ([form_factor, what], slot) = memo.listed(linked.source, || {
             if behind_plane(rx.x, rx.n, &s.patch, node.radius) {
                 return [0.0, -1.0];
             }
@@ -96,6 +100,7 @@ impl Gather<'_> {
         let weight = form_factor * self.inputs.state.mean[linked.source as usize].iter().sum::<f64>();
         (weight > 0.0 || form_factor > 0.0 || touched).then_some(Ranked {
             linked,
+            slot,
             near,
             touched,
             weight,
@@ -124,12 +129,19 @@ impl Gather<'_> {
 
     /// Adds the surface source `source`'s light at the point to `got` by one Gauss sum with rays
     /// through the BVH, scaled to the exact form factor when `near`.
-    fn coarse_cast(&self, rx: &Receiver, source: NodeId, near: bool, got: &mut Received, memo: &mut Memo) {
+    fn coarse_cast(
+        &self,
+        rx: &Receiver,
+        (source, slot): (NodeId, Slot),
+        near: bool,
+        got: &mut Received,
+        memo: &mut Memo,
+    ) {
         let tree = self.inputs.tree;
         let s = tree.node(source).surface().expect("a surface");
         let nb = tree.basis.len();
         let how = if near { How::CoarseNear } else { How::Coarse };
-        let m = memo.values(source, how, |m| {
+        let m = memo.values(slot, source, how, |m| {
             let m = &mut m[..nb];
             let src = Source { face: s.face, patch: &s.patch };
             let rule = if near { &self.rule } else { &self.far_rule };
@@ -165,10 +177,10 @@ impl Gather<'_> {
             if r.touched || rest > bar || self.inputs.occluders.is_none() {
                 if r.near {
                     Counters::add(&self.counters.near, 1);
-                    self.surface_source(rx, source, feet, got, memo);
+                    self.surface_source(rx, (source, r.slot), feet, got, memo);
                 } else {
                     Counters::add(&self.counters.far_cast, 1);
-                    self.far_cast(rx, source, got, memo);
+                    self.far_cast(rx, (source, r.slot), got, memo);
                 }
                 if self.stop.stopped() {
                     return;
@@ -191,7 +203,7 @@ impl Gather<'_> {
                 }
             } else {
                 Counters::add(&self.counters.coarse, 1);
-                self.coarse_cast(rx, source, r.near, got, memo);
+                self.coarse_cast(rx, (source, r.slot), r.near, got, memo);
             }
             rest -= r.weight;
         }

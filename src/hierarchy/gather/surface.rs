@@ -5,7 +5,7 @@
 
 use glam::DVec3;
 
-use super::kept::{How, Memo};
+use super::kept::{How, Memo, Slot};
 use super::{Counters, Gather, Mode, Received, Receiver};
 use crate::basis::MAX_LEN as MAX_NB;
 use crate::gather::penumbra::Corners;
@@ -51,7 +51,7 @@ impl Gather<'_> {
     pub(super) fn surface_source(
         &self,
         rx: &Receiver,
-        source: NodeId,
+        (source, slot): (NodeId, Slot),
         feet: Option<Option<&Solids>>,
         got: &mut Received,
         memo: &mut Memo,
@@ -63,7 +63,7 @@ impl Gather<'_> {
         let touch = feet.and_then(|_| self.touch(rx, node.radius, s));
         let how = if touch.is_some() { How::NearFoot } else { How::Near };
         // The moments, then the ball's form factor.
-        let v = memo.values(source, how, |v| {
+        let v = memo.values(slot, source, how, |v| {
             let (m, weight) = v.split_at_mut(nb);
             let ball = touch.map(|t| (t.radius, &mut weight[0]));
             let src = Source { face: s.face, patch: &s.patch };
