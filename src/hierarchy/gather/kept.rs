@@ -207,6 +207,8 @@ pub(super) struct Memo<'k> {
     keeping: Option<KeptPoint>,
     /// Where in the previous point's sources the next is looked for.
     cursor: usize,
+    /// Every source so far sat in the previous point's list where it sits in this one's.
+    same_order: bool,
     pub reuse: Reuse,
 }
 
@@ -230,7 +232,7 @@ impl<'k> Memo<'k> {
     /// with `keep`, it keeps this frame's.
     pub fn new(previous: Option<&'k KeptPoint>, changes: Option<Changes<'k>>, nb: usize, keep: bool) -> Self {
         let keeping = keep.then(|| KeptPoint::like(previous));
-        Self { previous, changes, nb, keeping, cursor: 0, reuse: Reuse::default() }
+        Self { previous, changes, nb, keeping, cursor: 0, same_order: true, reuse: Reuse::default() }
     }
 
     /// The point's place: kept values of a point elsewhere are not taken.
@@ -256,6 +258,7 @@ impl<'k> Memo<'k> {
         };
         let own = match &mut self.keeping {
             Some(k) => {
+                self.same_order &= previous.is_some_and(|(_, at)| at == k.sources.len());
                 k.sources.push(source);
                 k.ranked.push(ranked);
                 k.casts.push((NOT_CAST, 0));
@@ -306,7 +309,15 @@ impl<'k> Memo<'k> {
     pub fn foot(&self, source: NodeId) -> Memo<'k> {
         let previous = self.previous.and_then(|p| p.foot(source));
         let keeping = self.keeping.as_ref().map(|_| KeptPoint::like(previous));
-        Memo { previous, changes: self.changes, nb: self.nb, keeping, cursor: 0, reuse: Reuse::default() }
+        Memo {
+            previous,
+            changes: self.changes,
+            nb: self.nb,
+            keeping,
+            cursor: 0,
+            same_order: true,
+            reuse: Reuse::default(),
+        }
     }
 
     /// Keeps the foot on `source`'s gather, done with `foot`.
@@ -325,8 +336,14 @@ impl<'k> Memo<'k> {
         if k.sources.is_empty() && k.feet.is_empty() {
             return None;
         }
-        k.index = k.sources.iter().enumerate().map(|(i, &s)| (s, i as u32)).collect();
-        k.index.sort_unstable();
+        // The same sources in the same order as the last frame's (the common case): its index.
+        match self.previous {
+            Some(p) if self.same_order && p.sources.len() == k.sources.len() => k.index.clone_from(&p.index),
+            _ => {
+                k.index = k.sources.iter().enumerate().map(|(i, &s)| (s, i as u32)).collect();
+                k.index.sort_unstable();
+            }
+        }
         k.feet.sort_unstable_by_key(|(s, _)| *s);
         // A first frame's vectors grew by doubling; a later frame's were sized from the last.
         if k.values.capacity() > k.values.len() + k.values.len() / 4 {

@@ -438,7 +438,7 @@ impl<'a> Gather<'a> {
             },
         );
         got.add(tails, 0.0);
-        self.settle(&rx, &mut ranked, direct.iter().sum(), feet, &mut got, memo);
+        self.settle(&rx, &ranked, direct.iter().sum(), feet, &mut got, memo);
         if self.stop.stopped() {
             return [[0.0; 3]; 2];
         }
