@@ -215,6 +215,9 @@ pub struct HierarchicalFrame {
     /// What the corner gather kept for the next frame's ([`gather::KeptGather`]; with
     /// [`HierarchySettings::keep_gather`]).
     pub kept_gather: Option<gather::KeptGather>,
+    /// When this frame passed on an earlier frame's kept gather without gathering (a preview):
+    /// what moved since that frame, which the next gather's kept values must have been spared.
+    pub moved_since_gather: Option<touch::Moves>,
 }
 
 /// Solves `scene` at `frame` on the hierarchy, from scratch. Runs on the current rayon pool;
@@ -479,7 +482,7 @@ fn finish(
         stats.kept_gather_bytes = g.kept.as_ref().map_or(0, |k| k.bytes());
         kept_gather = g.kept;
     }
-    Ok(HierarchicalFrame { hierarchy, state, stats, corners, kept_gather })
+    Ok(HierarchicalFrame { hierarchy, state, stats, corners, kept_gather, moved_since_gather: None })
 }
 
 impl HierarchicalFrame {

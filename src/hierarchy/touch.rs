@@ -20,6 +20,7 @@ use crate::system::Element;
 use crate::visibility::shaft::Shaft;
 
 /// What a frame changes in the tree it inherits.
+#[derive(Clone, Debug, Default)]
 pub struct Moves {
     /// Per face of the tree: it moved (its patch changed).
     pub faces: Vec<bool>,
@@ -28,6 +29,21 @@ pub struct Moves {
 }
 
 impl Moves {
+    /// Adds `later`'s moves to these (moves over several frames, as one): a face moved if it
+    /// moved in either, and a swept box that meets one of these grows it (a moving object's
+    /// boxes frame after frame share its place between them), else joins them.
+    pub fn add(&mut self, later: &Moves) {
+        for (a, &b) in self.faces.iter_mut().zip(&later.faces) {
+            *a |= b;
+        }
+        for &x in &later.swept {
+            match self.swept.iter_mut().find(|s| s.overlaps(&x)) {
+                Some(s) => *s = s.union(x),
+                None => self.swept.push(x),
+            }
+        }
+    }
+
     /// Per object with moved faces, the box around their old and new patches.
     pub fn swept_bounds(old: &[Element], new: &[Element]) -> Vec<Aabb> {
         let mut out: Vec<(u32, Aabb)> = Vec::new();

@@ -152,10 +152,23 @@ pub fn update_frame(
         &mut stats,
         progress,
     )?;
-    // The last frame's gather, where this frame's changes spare it.
+    // The last gathered frame's values, where what moved since spares them: this frame's moves,
+    // and those of the frames between that passed them on without gathering (previews).
     let last_gather = previous.kept_gather.take();
-    let kept = last_gather.as_ref().map(|k| (k, gather::Changes { touch: touch.as_ref() }));
-    super::finish(hierarchy, state, stats, &lit, scene, frame, hs, kept, progress)
+    let since = previous.moved_since_gather.take().map(|mut m| {
+        m.add(&moves);
+        m
+    });
+    let since_touch = since.as_ref().filter(|m| !m.swept.is_empty()).map(|m| Touch::new(&hierarchy.tree, m));
+    let changes =
+        gather::Changes { touch: if since.is_some() { since_touch.as_ref() } else { touch.as_ref() } };
+    let kept = last_gather.as_ref().map(|k| (k, changes));
+    let mut next = super::finish(hierarchy, state, stats, &lit, scene, frame, hs, kept, progress)?;
+    if !hs.corner_gather && last_gather.is_some() {
+        next.kept_gather = last_gather;
+        next.moved_since_gather = Some(since.unwrap_or(moves));
+    }
+    Ok(next)
 }
 
 /// Takes out of `hierarchy` every stored pair `touch` says the move may have changed and, with

@@ -265,6 +265,44 @@ fn a_kept_gather_equals_a_fresh_gather() {
     }
 }
 
+/// Frames that do not gather (a session's previews, while the timeline is scrubbed) pass the
+/// last gathered frame's values on with what moved since: the next gathered frame takes those
+/// that all the moves since spared, and still gathers what a fresh gather of its solution gives,
+/// bit for bit (taking them against the last move alone would not: the light moved over three
+/// frames).
+#[test]
+fn a_kept_gather_outlasts_frames_without_a_gather() {
+    use galerkin_radiosity::hierarchy::gather::{self, Mode};
+    let scene = cornell_box_moving_light(4, 8, Settings { basis_order: 2, ..settings() });
+    let gathering = HierarchySettings {
+        keep_pair_tree: true,
+        keep_gather: true,
+        corner_gather: true,
+        ..Default::default()
+    };
+    let preview = HierarchySettings { corner_gather: false, ..gathering };
+    let mut h = solve_frame(&scene, 1.0, &gathering, &no_progress).unwrap();
+    for frame in [2, 3] {
+        h = update_frame(&mut h, &scene, frame as f64, &preview, &no_progress).unwrap();
+        assert!(h.corners.is_none() && h.kept_gather.is_some() && h.moved_since_gather.is_some());
+    }
+    // The frame before's, then a refinement of it (nothing moves): both gather.
+    for frame in [4, 4] {
+        let f = frame as f64;
+        let next = update_frame(&mut h, &scene, f, &gathering, &no_progress).unwrap();
+        let s = &next.stats;
+        assert!(s.gather_kept > 0 && s.gather_computed > 0 || s.moved_faces == 0, "{} kept", s.gather_kept);
+        let lit = Lighting::new(&scene, f, &next.hierarchy.tree.faces);
+        let inputs = gather::Inputs::new(&next.hierarchy, &next.state, &lit);
+        let fresh = gather::corners_with(&inputs, &scene, f, &no_progress, Mode::Fast).unwrap();
+        let (radiosity, _) = next.corners.as_ref().expect("gathered");
+        assert_eq!(radiosity, &fresh.radiosity, "frame {frame}");
+        assert!(next.moved_since_gather.is_none());
+        h = next;
+    }
+    assert_eq!(h.stats.gather_computed, 0, "a refinement with nothing moved computes nothing");
+}
+
 /// The update's warm start changes only where the solve begins: the same links solved from the
 /// sources alone give the same solution.
 #[test]
