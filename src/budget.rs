@@ -249,7 +249,7 @@ const HIERARCHY_KEPT_GATHER_PER_CORNER: u64 = 100 << 10;
 /// coefficient vectors and its mixer's columns. An animation (a scene of more than one frame)
 /// also keeps the pair tree ([`HIERARCHY_PAIR_TREE_PER_LINK`]) and, with the corner gather, its
 /// sources' values ([`HIERARCHY_KEPT_GATHER_PER_CORNER`], within their cap of an eighth of the
-/// budget), and an update holds the last frame's nodes and solution beside the new ones. Elements and results as [`estimate`]. Against the measured peaks: the full monastery at
+/// budget, twice: the last frame's and the next), and an update holds the last frame's nodes and solution beside the new ones. Elements and results as [`estimate`]. Against the measured peaks: the full monastery at
 /// order 1, 2.2 GB (4.3 GB estimated without the gather); a 9,912-face crop of it, 104 MB
 /// (0.33 GB).
 pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
@@ -281,11 +281,12 @@ pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
     let copies = if animated { 2 } else { 1 };
     let elements = flat.elements.saturating_add(nodes.saturating_mul(per_node).saturating_mul(copies));
     // The corner gather keeps nothing between points but its values, which the results count;
-    // an animation's keeps its sources' values for the next frame, within their cap.
+    // an animation's keeps its sources' values for the next frame, within their cap, and holds
+    // the last frame's while it makes them.
     let gather = if animated && s.corner_gather {
         let corners: u64 = scene.objects.iter().flat_map(|o| &o.faces).map(|f| f.len() as u64).sum();
         let cap = crate::hierarchy::gather::KeptGather::cap(budget_bytes(s.memory_budget_mb)) as u64;
-        corners.saturating_mul(HIERARCHY_KEPT_GATHER_PER_CORNER).min(cap)
+        2 * corners.saturating_mul(HIERARCHY_KEPT_GATHER_PER_CORNER).min(cap)
     } else {
         0
     };
