@@ -105,22 +105,32 @@ impl KeptGather {
 
 /// One point's kept values: where it was, and per source it listed (in the order it listed
 /// them) its ranking values ([`Memo::listed`]) and how it was cast, if it was, with its values.
+/// About 20 bytes a source, and the values of those cast.
 pub(super) struct KeptPoint {
     x: DVec3,
     n: DVec3,
     sources: Vec<NodeId>,
-    ranked: Vec<[f64; 2]>,
-    /// Per source: how it was cast ([`NOT_CAST`] if it was not) and where its values
-    /// ([`How::len`] of them) start in `values`.
-    casts: Vec<(u8, u32)>,
+    /// Per source: its unoccluded form factor.
+    form_factors: Vec<f64>,
+    /// Per source: what it is to the point, how it was cast and where its values start.
+    entries: Vec<Entry>,
     values: Vec<f64>,
-    /// `sources` sorted, with each one's slot, for a source listed out of its last order.
-    index: Vec<(NodeId, u32)>,
     /// The feet's own points, by the source they stand on.
     feet: Vec<(NodeId, KeptPoint)>,
 }
 
-/// [`KeptPoint::casts`]' mark of a source taken without rays from the point.
+/// A listed source's record beside its form factor.
+#[derive(Clone, Copy)]
+struct Entry {
+    /// The ranking's second value ([`Memo::listed`]), exact in a byte.
+    what: i8,
+    /// How it was cast ([`NOT_CAST`] if it was not).
+    how: u8,
+    /// Where its values ([`How::len`] of them) start in `values`.
+    at: u32,
+}
+
+/// [`Entry::how`] of a source taken without rays from the point.
 const NOT_CAST: u8 = u8::MAX;
 
 impl KeptPoint {
@@ -133,25 +143,11 @@ impl KeptPoint {
             x: DVec3::NAN,
             n: DVec3::NAN,
             sources: Vec::with_capacity(room(|p| p.sources.len())),
-            ranked: Vec::with_capacity(room(|p| p.sources.len())),
-            casts: Vec::with_capacity(room(|p| p.sources.len())),
+            form_factors: Vec::with_capacity(room(|p| p.sources.len())),
+            entries: Vec::with_capacity(room(|p| p.sources.len())),
             values: Vec::with_capacity(room(|p| p.values.len())),
-            index: Vec::new(),
             feet: Vec::with_capacity(room(|p| p.feet.len())),
         }
-    }
-
-    /// The slot of `source`, looked for at `cursor` first (the sources are listed in the same
-    /// order frame after frame, unless links changed), which moves past it.
-    fn slot_of(&self, source: NodeId, cursor: &mut usize) -> Option<usize> {
-        let k = if self.sources.get(*cursor) == Some(&source) {
-            *cursor
-        } else {
-            let i = self.index.binary_search_by_key(&source, |&(s, _)| s).ok()?;
-            self.index[i].1 as usize
-        };
-        *cursor = k + 1;
-        Some(k)
     }
 
     fn foot(&self, source: NodeId) -> Option<&KeptPoint> {
@@ -162,11 +158,37 @@ impl KeptPoint {
     pub(super) fn bytes(&self) -> usize {
         let own = std::mem::size_of::<Self>()
             + self.sources.capacity() * 4
-            + self.ranked.capacity() * 16
-            + self.casts.capacity() * 8
-            + self.values.capacity() * 8
-            + self.index.capacity() * 8;
+            + self.form_factors.capacity() * 8
+            + self.entries.capacity() * std::mem::size_of::<Entry>()
+            + self.values.capacity() * 8;
         own + self.feet.iter().map(|(_, f)| 4 + f.bytes()).sum::<usize>()
+    }
+}
+
+/// Where a point's sources sat in its last frame's list: at the cursor, as a rule (the sources
+/// are listed in the same order frame after frame unless links changed), else found through an
+/// index of that list, sorted the first time a source is out of order.
+struct Finder {
+    cursor: usize,
+    index: Option<Vec<(NodeId, u32)>>,
+}
+
+impl Finder {
+    fn slot_of(&mut self, previous: &KeptPoint, source: NodeId) -> Option<usize> {
+        let k = if previous.sources.get(self.cursor) == Some(&source) {
+            self.cursor
+        } else {
+            let index = self.index.get_or_insert_with(|| {
+                let mut index: Vec<(NodeId, u32)> =
+                    previous.sources.iter().enumerate().map(|(i, &s)| (s, i as u32)).collect();
+                index.sort_unstable();
+                index
+            });
+            let i = index.binary_search_by_key(&source, |&(s, _)| s).ok()?;
+            index[i].1 as usize
+        };
+        self.cursor = k + 1;
+        Some(k)
     }
 }
 
@@ -205,10 +227,7 @@ pub(super) struct Memo<'k> {
     changes: Option<Changes<'k>>,
     nb: usize,
     keeping: Option<KeptPoint>,
-    /// Where in the previous point's sources the next is looked for.
-    cursor: usize,
-    /// Every source so far sat in the previous point's list where it sits in this one's.
-    same_order: bool,
+    finder: Finder,
     pub reuse: Reuse,
 }
 
@@ -232,7 +251,7 @@ impl<'k> Memo<'k> {
     /// with `keep`, it keeps this frame's.
     pub fn new(previous: Option<&'k KeptPoint>, changes: Option<Changes<'k>>, nb: usize, keep: bool) -> Self {
         let keeping = keep.then(|| KeptPoint::like(previous));
-        Self { previous, changes, nb, keeping, cursor: 0, same_order: true, reuse: Reuse::default() }
+        Self { previous, changes, nb, keeping, finder: Finder { cursor: 0, index: None }, reuse: Reuse::default() }
     }
 
     /// The point's place: kept values of a point elsewhere are not taken.
@@ -250,18 +269,18 @@ impl<'k> Memo<'k> {
     /// ones while neither the point nor the source moved, else `compute`d. Returns its slot,
     /// for [`Memo::values`].
     pub fn listed(&mut self, source: NodeId, compute: impl FnOnce() -> [f64; 2]) -> ([f64; 2], Slot) {
-        let previous = self.previous.and_then(|p| Some((p, p.slot_of(source, &mut self.cursor)?)));
+        let previous = self.previous.and_then(|p| Some((p, self.finder.slot_of(p, source)?)));
         let unmoved = self.changes.is_some_and(|c| c.unmoved(source));
         let ranked = match previous {
-            Some((p, k)) if unmoved => p.ranked[k],
+            Some((p, k)) if unmoved => [p.form_factors[k], f64::from(p.entries[k].what)],
             _ => compute(),
         };
         let own = match &mut self.keeping {
             Some(k) => {
-                self.same_order &= previous.is_some_and(|(_, at)| at == k.sources.len());
                 k.sources.push(source);
-                k.ranked.push(ranked);
-                k.casts.push((NOT_CAST, 0));
+                k.form_factors.push(ranked[0]);
+                // (The ranking's second value is -1 or a sum of two flags.)
+                k.entries.push(Entry { what: ranked[1] as i8, how: NOT_CAST, at: 0 });
                 k.sources.len() as u32 - 1
             }
             None => u32::MAX,
@@ -282,9 +301,9 @@ impl<'k> Memo<'k> {
         let len = how.len(self.nb);
         let kept = match (self.previous, self.changes) {
             (Some(p), Some(c)) if slot.previous != u32::MAX => {
-                let (was, at) = p.casts[slot.previous as usize];
-                (was == how as u8 && c.spares(p.x, source, how))
-                    .then(|| &p.values[at as usize..at as usize + len])
+                let e = p.entries[slot.previous as usize];
+                let at = e.at as usize;
+                (e.how == how as u8 && c.spares(p.x, source, how)).then(|| &p.values[at..at + len])
             }
             _ => None,
         };
@@ -299,7 +318,8 @@ impl<'k> Memo<'k> {
             }
         }
         if let (Some(k), true) = (&mut self.keeping, slot.own != u32::MAX) {
-            k.casts[slot.own as usize] = (how as u8, k.values.len() as u32);
+            let e = &mut k.entries[slot.own as usize];
+            (e.how, e.at) = (how as u8, k.values.len() as u32);
             k.values.extend_from_slice(&v[..len]);
         }
         v
@@ -309,15 +329,7 @@ impl<'k> Memo<'k> {
     pub fn foot(&self, source: NodeId) -> Memo<'k> {
         let previous = self.previous.and_then(|p| p.foot(source));
         let keeping = self.keeping.as_ref().map(|_| KeptPoint::like(previous));
-        Memo {
-            previous,
-            changes: self.changes,
-            nb: self.nb,
-            keeping,
-            cursor: 0,
-            same_order: true,
-            reuse: Reuse::default(),
-        }
+        Memo::new(previous, self.changes, self.nb, keeping.is_some())
     }
 
     /// Keeps the foot on `source`'s gather, done with `foot`.
@@ -329,27 +341,18 @@ impl<'k> Memo<'k> {
         }
     }
 
-    /// The point's kept values, indexed for the next frame's lookups; `None` when not keeping or
-    /// when it listed no source.
+    /// The point's kept values; `None` when not keeping or when it listed no source.
     pub fn into_kept(self) -> Option<KeptPoint> {
         let mut k = self.keeping?;
         if k.sources.is_empty() && k.feet.is_empty() {
             return None;
         }
-        // The same sources in the same order as the last frame's (the common case): its index.
-        match self.previous {
-            Some(p) if self.same_order && p.sources.len() == k.sources.len() => k.index.clone_from(&p.index),
-            _ => {
-                k.index = k.sources.iter().enumerate().map(|(i, &s)| (s, i as u32)).collect();
-                k.index.sort_unstable();
-            }
-        }
         k.feet.sort_unstable_by_key(|(s, _)| *s);
         // A first frame's vectors grew by doubling; a later frame's were sized from the last.
         if k.values.capacity() > k.values.len() + k.values.len() / 4 {
             k.sources.shrink_to_fit();
-            k.ranked.shrink_to_fit();
-            k.casts.shrink_to_fit();
+            k.form_factors.shrink_to_fit();
+            k.entries.shrink_to_fit();
             k.values.shrink_to_fit();
         }
         Some(k)
