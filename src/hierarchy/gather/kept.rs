@@ -111,10 +111,10 @@ pub(super) struct KeptPoint {
     n: DVec3,
     sources: Vec<NodeId>,
     /// Per source: its unoccluded form factor.
-    form_factors: Vec<f64>,
+    form_factors: Vec<f32>,
     /// Per source: what it is to the point, how it was cast and where its values start.
     entries: Vec<Entry>,
-    values: Vec<f64>,
+    values: Vec<f32>,
     /// The feet's own points, by the source they stand on.
     feet: Vec<(NodeId, KeptPoint)>,
 }
@@ -158,9 +158,9 @@ impl KeptPoint {
     pub(super) fn bytes(&self) -> usize {
         let own = std::mem::size_of::<Self>()
             + self.sources.capacity() * 4
-            + self.form_factors.capacity() * 8
+            + self.form_factors.capacity() * 4
             + self.entries.capacity() * std::mem::size_of::<Entry>()
-            + self.values.capacity() * 8;
+            + self.values.capacity() * 4;
         own + self.feet.iter().map(|(_, f)| 4 + f.bytes()).sum::<usize>()
     }
 }
@@ -234,6 +234,13 @@ pub(super) struct Memo<'k> {
 /// A source's values, at most the moments and one more.
 pub(super) type Values = [f64; crate::basis::MAX_LEN + 1];
 
+/// A value as it is kept: in f32, which a fresh gather rounds to alike, so that kept values are
+/// the fresh ones bit for bit. (The corners are written in f32; a moment's rounding, 6e-8 of it,
+/// is below what they resolve, and halves what is kept.)
+fn to_f32(x: f64) -> f32 {
+    x as f32
+}
+
 /// Where a listed source sits in the previous point's kept values and in this point's.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Slot {
@@ -272,13 +279,16 @@ impl<'k> Memo<'k> {
         let previous = self.previous.and_then(|p| Some((p, self.finder.slot_of(p, source)?)));
         let unmoved = self.changes.is_some_and(|c| c.unmoved(source));
         let ranked = match previous {
-            Some((p, k)) if unmoved => [p.form_factors[k], f64::from(p.entries[k].what)],
-            _ => compute(),
+            Some((p, k)) if unmoved => [f64::from(p.form_factors[k]), f64::from(p.entries[k].what)],
+            _ => {
+                let [form_factor, what] = compute();
+                [to_f32(form_factor) as f64, what]
+            }
         };
         let own = match &mut self.keeping {
             Some(k) => {
                 k.sources.push(source);
-                k.form_factors.push(ranked[0]);
+                k.form_factors.push(ranked[0] as f32);
                 // (The ranking's second value is -1 or a sum of two flags.)
                 k.entries.push(Entry { what: ranked[1] as i8, how: NOT_CAST, at: 0 });
                 k.sources.len() as u32 - 1
@@ -309,18 +319,23 @@ impl<'k> Memo<'k> {
         };
         match kept {
             Some(k) => {
-                v[..len].copy_from_slice(k);
+                for (v, &k) in v.iter_mut().zip(k) {
+                    *v = f64::from(k);
+                }
                 self.reuse.kept += 1;
             }
             None => {
                 compute(&mut v[..len]);
+                for v in &mut v[..len] {
+                    *v = to_f32(*v) as f64;
+                }
                 self.reuse.computed += 1;
             }
         }
         if let (Some(k), true) = (&mut self.keeping, slot.own != u32::MAX) {
             let e = &mut k.entries[slot.own as usize];
             (e.how, e.at) = (how as u8, k.values.len() as u32);
-            k.values.extend_from_slice(&v[..len]);
+            k.values.extend(v[..len].iter().map(|&v| v as f32));
         }
         v
     }
