@@ -232,9 +232,9 @@ const HIERARCHY_FULL_LINKS: f64 = 20_000.0;
 const HIERARCHY_PAIR_TREE_PER_LINK: u64 = 130;
 
 /// Bytes an animation's hierarchical corner gather keeps per face corner for the next frame
-/// (`hierarchy::gather::KeptGather`), at most its cap: measured 9 KB on the 1,079-patch
-/// moving-light box at order 2, 91 KB on the decimated monastery (its sources are many more).
-const HIERARCHY_KEPT_GATHER_PER_CORNER: u64 = 100 << 10;
+/// (`hierarchy::gather::KeptGather`), at most its cap: measured 4 KB on the 1,079-patch
+/// moving-light box at order 2, 41 KB on the decimated monastery (its sources are many more).
+const HIERARCHY_KEPT_GATHER_PER_CORNER: u64 = 48 << 10;
 
 /// What a hierarchical bake ([`crate::session::Method::Hierarchical`]) will need. Its links grow
 /// about linearly with the faces, not with their pairs, and how many there are is known only

@@ -105,7 +105,7 @@ impl KeptGather {
 
 /// One point's kept values: where it was, and per source it listed (in the order it listed
 /// them) its ranking values ([`Memo::listed`]) and how it was cast, if it was, with its values.
-/// About 20 bytes a source, and the values of those cast.
+/// 16 bytes a source, and the values of those cast.
 pub(super) struct KeptPoint {
     x: DVec3,
     n: DVec3,
