@@ -21,12 +21,17 @@
 //!   what a fresh gather computes, bit for bit.
 //!
 //! The ranking that decides how each source is taken ([`super::rank`]) reads the solution, so
-//! it runs every frame; a source is keyed by its node and by how it was taken ([`How`]), and a
-//! kept value is taken only for the same way. A foot ([`super::surface`]) is a point of its own:
-//! its gather keeps its sources alike, below the source it stands on.
+//! it runs every frame; its own per-source values (the unoccluded form factor, near, touched)
+//! read no occluder and are kept while neither end moved. A source is found by its place in the
+//! point's list of the frame before (the same order, unless links changed) and taken only for
+//! the same way ([`How`]). A foot ([`super::surface`]) is a point of its own: its gather keeps
+//! its sources alike, below the source it stands on. Values are kept in f32, and a fresh gather
+//! rounds to f32 alike. A node keeps its id and its patch for the tree's life (the quadtrees only
+//! grow, [`crate::hierarchy::update`]), so an id names the same source frame after frame.
 //!
-//! On the moving-light box (the demo scene) a fresh gather was about 70% of an updated frame,
-//! and the light's own sources, which always change, 12% of the gather's casting.
+//! On the moving-light box a fresh gather was about 80% of an updated frame; kept, the gather
+//! takes 2.4x less (docs/benchmarks.md, `box-gather`), and what it still computes is mostly the
+//! light's own sources, which change every frame.
 
 use glam::DVec3;
 
