@@ -263,7 +263,14 @@ impl<'k> Memo<'k> {
     /// with `keep`, it keeps this frame's.
     pub fn new(previous: Option<&'k KeptPoint>, changes: Option<Changes<'k>>, nb: usize, keep: bool) -> Self {
         let keeping = keep.then(|| KeptPoint::like(previous));
-        Self { previous, changes, nb, keeping, finder: Finder { cursor: 0, index: None }, reuse: Reuse::default() }
+        Self {
+            previous,
+            changes,
+            nb,
+            keeping,
+            finder: Finder { cursor: 0, index: None },
+            reuse: Reuse::default(),
+        }
     }
 
     /// The point's place: kept values of a point elsewhere are not taken.
