@@ -299,7 +299,7 @@ typedef struct GrLight {
    */
   double radius;
   /**
-   * Full cone angle of a spot (radians) and its blend in [0,1].
+   * Full cone angle of a spot (radians) and its blend in `[0,1]`.
    */
   double spot_size;
   double spot_blend;
@@ -319,7 +319,7 @@ typedef struct GrLight {
 } GrLight;
 
 /**
- * Progress callback: `fraction` done in [0,1], a short NUL-terminated `stage` name (valid only
+ * Progress callback: `fraction` done in `[0,1]`, a short NUL-terminated `stage` name (valid only
  * during the call), and the `user` pointer given to `gr_session_solve_frame`. Return 0 to
  * cancel, non-zero to go on.
  *
@@ -401,7 +401,7 @@ GrStatus gr_scene_builder_add_mesh(struct GrSceneBuilder *b,
                                    uint32_t *out_index);
 
 /**
- * Adds a light (copied; fill it with `gr_light_default`). Named "lights[N]" in messages;
+ * Adds a light (copied; fill it with `gr_light_default`). Named `lights[N]` in messages;
  * `GR_STATUS_INVALID_ARGUMENT` for an unknown kind or shape or a wrong `struct_size`. The
  * session's `gr_session_set_lights` replaces the list later.
  *
@@ -460,7 +460,7 @@ GrStatus gr_light_default(struct GrLight *out);
  * removes them). The array's stride is the first light's `struct_size` (a host built against
  * an older header passes an array of its smaller structs), which every light must carry. Each
  * is checked (`struct_size`, kind, shape, `soft_falloff` 0 or 1, finite non-negative power
- * and colour, spot size in (0, pi], blend in [0,1], area size > 0); on error nothing changes.
+ * and colour, spot size in (0, pi], blend in `[0,1]`, area size > 0); on error nothing changes.
  *
  * # Safety
  * `s` is NULL or a live session; `lights` is NULL (with `count` 0) or points to `count`
@@ -733,7 +733,7 @@ GrStatus gr_session_corner_irradiance(const struct GrSession *s,
 
 /**
  * Evaluates the radiosity (RGB, W/m^2) of the last solved frame at `count` points: point `i` is
- * face `faces[i]` of object `objects[i]` at face parameters `(st[2i], st[2i+1])` in [0,1]^2
+ * face `faces[i]` of object `objects[i]` at face parameters `(st[2i], st[2i+1])` in `[0,1]^2`
  * (corner order of the face: (0,0), (1,0), (1,1), (0,1); a triangle's third corner is the
  * collapsed edge t = 1). Writes 3 floats per point to `out`, which must not overlap the inputs.
  * Nothing is written unless every point is valid. These are the face polynomials' values (the

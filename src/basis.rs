@@ -57,7 +57,7 @@ impl Basis {
     }
 }
 
-/// Shifted orthonormal Legendre polynomials on [0,1], degrees 0..=3:
+/// Shifted orthonormal Legendre polynomials on `[0,1]`, degrees 0..=3:
 /// 1, sqrt3 (2u-1), sqrt5 (6u^2-6u+1), sqrt7 (20u^3-30u^2+12u-1).
 pub fn legendre_1d(u: f64) -> [f64; MAX_ORDER + 1] {
     let x = 2.0 * u - 1.0;

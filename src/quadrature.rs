@@ -1,9 +1,9 @@
-//! Gauss-Legendre quadrature on [0,1].
+//! Gauss-Legendre quadrature on `[0,1]`.
 //!
 //! Nodes by Newton iteration on `P_n` (Golub-Welsch is not needed at these sizes); `n` points
 //! integrate polynomials of degree `2n-1` exactly.
 
-/// `n` Gauss-Legendre nodes and weights mapped to [0,1] (weights sum to 1).
+/// `n` Gauss-Legendre nodes and weights mapped to `[0,1]` (weights sum to 1).
 #[derive(Clone, Debug)]
 pub struct GaussLegendre {
     nodes: Vec<f64>,

@@ -20,7 +20,7 @@ use crate::scene::placement::{self, front_order};
 use crate::solver::{self, Coefficients, ShootStats};
 use crate::visibility::Occluders;
 
-/// Progress callback: fraction done in [0,1] and a short stage name; returns false to cancel.
+/// Progress callback: fraction done in `[0,1]` and a short stage name; returns false to cancel.
 pub type Progress<'a> = &'a (dyn Fn(f64, &str) -> bool + Sync);
 
 /// A progress callback that never cancels.

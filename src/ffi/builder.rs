@@ -258,7 +258,7 @@ unsafe fn read_mesh(mesh: *const GrMesh, index: usize) -> Result<Object, Failure
     })
 }
 
-/// Adds a light (copied; fill it with `gr_light_default`). Named "lights[N]" in messages;
+/// Adds a light (copied; fill it with `gr_light_default`). Named `lights[N]` in messages;
 /// `GR_STATUS_INVALID_ARGUMENT` for an unknown kind or shape or a wrong `struct_size`. The
 /// session's `gr_session_set_lights` replaces the list later.
 ///

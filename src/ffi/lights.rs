@@ -50,7 +50,7 @@ pub struct GrLight {
     pub power: f64,
     /// Point and spot radius (m).
     pub radius: f64,
-    /// Full cone angle of a spot (radians) and its blend in [0,1].
+    /// Full cone angle of a spot (radians) and its blend in `[0,1]`.
     pub spot_size: f64,
     pub spot_blend: f64,
     /// Sun angular diameter (radians).
@@ -163,7 +163,7 @@ fn light_of(i: usize, g: &GrLight) -> Result<Light, Failure> {
 /// removes them). The array's stride is the first light's `struct_size` (a host built against
 /// an older header passes an array of its smaller structs), which every light must carry. Each
 /// is checked (`struct_size`, kind, shape, `soft_falloff` 0 or 1, finite non-negative power
-/// and colour, spot size in (0, pi], blend in [0,1], area size > 0); on error nothing changes.
+/// and colour, spot size in (0, pi], blend in `[0,1]`, area size > 0); on error nothing changes.
 ///
 /// # Safety
 /// `s` is NULL or a live session; `lights` is NULL (with `count` 0) or points to `count`

@@ -4,7 +4,7 @@
 //! these modules by cbindgen (`cbindgen.toml`; `GR_UPDATE_HEADER=1 cargo test --test header`).
 //!
 //! - [`error`]: `GrStatus` and the thread-local message behind `gr_last_error`.
-//! - [`panic`]: the boundary.
+//! - [`panic`](mod@panic): the boundary.
 //! - [`settings`]: `GrSettings`, `GrMethod`.
 //! - [`session`]: `GrSession` and its functions.
 //! - [`lights`]: `GrLight` and `gr_session_set_lights` (Blender Light objects).

@@ -37,7 +37,7 @@ pub(super) struct State {
     results: OnceLock<Vec<ObjectResult>>,
 }
 
-/// Progress callback: `fraction` done in [0,1], a short NUL-terminated `stage` name (valid only
+/// Progress callback: `fraction` done in `[0,1]`, a short NUL-terminated `stage` name (valid only
 /// during the call), and the `user` pointer given to `gr_session_solve_frame`. Return 0 to
 /// cancel, non-zero to go on.
 ///
@@ -784,7 +784,7 @@ unsafe fn write_corners(
 }
 
 /// Evaluates the radiosity (RGB, W/m^2) of the last solved frame at `count` points: point `i` is
-/// face `faces[i]` of object `objects[i]` at face parameters `(st[2i], st[2i+1])` in [0,1]^2
+/// face `faces[i]` of object `objects[i]` at face parameters `(st[2i], st[2i+1])` in `[0,1]^2`
 /// (corner order of the face: (0,0), (1,0), (1,1), (0,1); a triangle's third corner is the
 /// collapsed edge t = 1). Writes 3 floats per point to `out`, which must not overlap the inputs.
 /// Nothing is written unless every point is valid. These are the face polynomials' values (the

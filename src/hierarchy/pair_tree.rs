@@ -152,7 +152,7 @@ impl Splits {
     }
 
     /// Records that pair `(a, b)` was split at `s`. A table that cannot grow is
-    /// [`Error::OutOfMemory`].
+    /// [`Error::OutOfMemory`](crate::Error::OutOfMemory).
     pub fn record(&mut self, a: NodeId, b: NodeId, s: NodeId) -> Result<()> {
         if let Some(m) = self.map.as_mut() {
             if m.len() == m.capacity() {

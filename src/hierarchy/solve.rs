@@ -190,7 +190,7 @@ impl State {
         self.walk(tree).pull(tree.root, 0);
     }
 
-    /// A walk over the tree that writes this state's nodes ([`push_pull`]).
+    /// A walk over the tree that writes this state's nodes ([`push_pull`](super::push_pull)).
     fn walk<'a>(&'a mut self, tree: &'a Tree) -> Walk<'a> {
         Walk {
             tree,

@@ -125,7 +125,7 @@ pub struct LightState {
     pub power: f64,
     /// Full cone angle of a spot, radians.
     pub spot_size: f64,
-    /// Spot blend in [0,1].
+    /// Spot blend in `[0,1]`.
     pub spot_blend: f64,
     /// Point and Spot radius, metres (0: a point).
     pub radius: f64,

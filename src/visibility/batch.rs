@@ -5,10 +5,11 @@ use glam::DVec3;
 
 use super::BRUTE_FORCE_CANDIDATES;
 
-/// Per-thread buffers of [`Occluders::relink_visibility`] and [`Occluders::cast`] (no
-/// allocation, zeroing or copying per link).
+/// Per-thread buffers of [`Occluders::relink_visibility`](super::Occluders::relink_visibility)
+/// and [`Occluders::cast`](super::Occluders::cast) (no allocation, zeroing or copying per link).
 pub(super) struct Scratch {
-    /// Per moved vertex, the shaft tests it fails ([`Shaft::outside_masks`]).
+    /// Per moved vertex, the shaft tests it fails
+    /// ([`Shaft::outside_masks`](super::shaft::Shaft::outside_masks)).
     pub(super) masks: Vec<u32>,
     /// Triangles as `v0, v1 - v0, v2 - v0`: the moved ones in the shaft at their previous and new
     /// positions; the candidates being cast.
@@ -199,7 +200,8 @@ impl CandidateTriangles {
         f
     }
 
-    /// [`CandidateTriangles::from`] into `f` (its first `n` entries).
+    /// The terms from origin `o` ([`FromOrigin`]) into `f` (its first `n` entries); the tests'
+    /// `from` returns them in a new one.
     #[inline]
     pub(super) fn terms_from(&self, o: DVec3, f: &mut FromOrigin) {
         let [e1x, e1y, e1z] = &self.e1;

@@ -307,8 +307,9 @@ fn lane_bits<const N: usize>(hit: [bool; N]) -> u32 {
     bits
 }
 
-/// Bit `k` set where lane `k`'s segment meets the slabs of `b` within `span`: [`slab_hit`] lane
-/// by lane with the same operations (a free axis, NaN, sets no bound), so the same verdicts.
+/// Bit `k` set where lane `k`'s segment meets the slabs of `b` within `span`:
+/// [`slab_hit`](super::slab_hit) lane by lane with the same operations (a free axis, NaN, sets no
+/// bound), so the same verdicts.
 #[inline(always)]
 fn slab_mask<const N: usize>(b: &Aabb, lanes: &Lanes<N>, (t_min, t_max): (f64, f64)) -> u32 {
     let (mut near, mut far) = ([t_min; N], [t_max; N]);
