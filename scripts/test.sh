@@ -72,6 +72,12 @@ stage() {
 
 stage "cargo fmt" cargo fmt --all -- --check
 stage "cargo clippy (check build of every target)" cargo clippy --release --all-targets -- -D warnings
+# The API docs as they are read, with the private items: no broken or ambiguous intra-doc links.
+# Public docs link to private items on purpose (they are written for maintainers), and rustdoc
+# warns of those even with --document-private-items, so that one lint is allowed here.
+stage "cargo doc (private items, no warnings)" limited 600 \
+    env RUSTDOCFLAGS="-D warnings -A rustdoc::private_intra_doc_links" \
+    cargo doc --no-deps --release --document-private-items
 # The test binaries without the release profile's line tables: with them each of the 26 held
 # 26-31 MB (1.1 GB of target/), and a CI machine ran out of disk linking them. (The C test
 # links the lean library these stages build; the stage after them builds it as shipped.)
