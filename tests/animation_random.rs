@@ -985,34 +985,55 @@ const HIERARCHY_CASES: u64 = 32;
 ///    again, none lost or doubled), and they are the pair tree's leaves;
 /// 3. the face means are within 2% of the fresh frame's peak: the two hierarchies' links differ
 ///    where the brightness refined them (the update refines from the last frame's light), so
-///    this is the accuracy knob's agreement, not the solver tolerance's.
+///    this is the accuracy knob's agreement, not the solver tolerance's;
+/// 4. the corners, gathered with the last frame's kept values where the moves spared them
+///    (`hierarchy::gather::KeptGather`), are exactly a fresh gather's of the same solution.
 ///
-/// Coverage is asserted: updates that redid fewer pairs than they touched (coarsened), and
-/// updates that kept most links. Measured over the 32 fixed seeds: 99 updates (97 coarsened, 49
-/// kept most links), worst face 3.8e-3 of the peak; over seeds 1..=300
+/// Coverage is asserted: updates that redid fewer pairs than they touched (coarsened), updates
+/// that kept most links, and gathers that took kept values. Measured over the 32 fixed seeds: 99
+/// updates (97 coarsened, 48 kept most links, 99 gathers took kept values), worst face 4.4e-3 of
+/// the peak (2026-12-07); over seeds 1..=300
 /// (`ANIMATION_RANDOM_CASES=300`, 105 s): 1,028 updates, worst face 1.2e-2 of the peak. That run
 /// found seed 77 (a blocked pair that a recomputation found open: the BVH's blocker cache and
 /// its slab test, `visibility::bvh`, both fixed). `ANIMATION_RANDOM_SEED` / `ANIMATION_RANDOM_CASES` pick the
 /// seeds as for the flat tests.
 #[test]
 fn random_animations_on_the_hierarchy_match_fresh_builds() {
-    use galerkin_radiosity::hierarchy::update::update_frame;
-    use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
     let var = |name: &str| std::env::var(name).ok().map(|v| v.parse::<u64>().expect(name));
     let seeds: Vec<u64> = match (var("ANIMATION_RANDOM_SEED"), var("ANIMATION_RANDOM_CASES")) {
         (Some(seed), _) => vec![seed],
         (None, Some(n)) => (1..=n).collect(),
         (None, None) => (1..=HIERARCHY_CASES).collect(),
     };
+    check_hierarchy_cases(&seeds);
+}
+
+/// Seed 42 (a static box starts to glow in its last frame) found the kept gather taking a
+/// face's values from when it was dark: an emitter's rectangles are integrated with their
+/// penumbrae split, so its values are not a dark face's (`Changes::lit_or_dimmed`).
+#[test]
+fn seed_42_a_face_that_starts_to_glow_is_gathered_again() {
+    check_hierarchy_cases(&[42]);
+}
+
+/// [`random_animations_on_the_hierarchy_match_fresh_builds`]' checks on `seeds`.
+fn check_hierarchy_cases(seeds: &[u64]) {
+    use galerkin_radiosity::hierarchy::gather;
+    use galerkin_radiosity::hierarchy::update::update_frame;
+    use galerkin_radiosity::hierarchy::{HierarchySettings, solve_frame};
     let (mut updates, mut coarsened, mut mostly_kept, mut worst) = (0, 0, 0, 0.0f64);
-    for &seed in &seeds {
+    let mut gathers_kept = 0;
+    for &seed in seeds {
         let case = generate(seed);
         let scene = &case.scene;
         let (first, last) = scene.frames;
         // Shown when a check below fails (the harness prints a failed test's output).
         println!("{}", case.description.join("; "));
         let fresh_hs = HierarchySettings::of(&scene.settings);
-        let hs = HierarchySettings { keep_pair_tree: true, ..fresh_hs };
+        // The corners gathered too, keeping their values from frame to frame (as `Session` gathers
+        // an animation), each frame's against a fresh gather of its solution.
+        let hs =
+            HierarchySettings { keep_pair_tree: true, corner_gather: true, keep_gather: true, ..fresh_hs };
         let about = || {
             format!("seed {seed} ({}), rerun with ANIMATION_RANDOM_SEED={seed}", case.description.join("; "))
         };
@@ -1028,6 +1049,19 @@ fn random_animations_on_the_hierarchy_match_fresh_builds() {
                 coarsened += usize::from(s.refined_from < s.touched_pairs);
                 mostly_kept += usize::from(s.kept_links > s.links / 2);
             }
+            if s.updated && s.gather_kept > 0 {
+                gathers_kept += 1;
+            }
+            let lit = galerkin_radiosity::hierarchy::Lighting::new(scene, frame, &next.hierarchy.tree.faces);
+            let inputs = gather::Inputs::new(&next.hierarchy, &next.state, &lit);
+            let fresh_corners =
+                gather::corners_with(&inputs, scene, frame, &no_progress, gather::Mode::Fast).unwrap();
+            let (radiosity, _) = next.corners.as_ref().expect("gathered");
+            assert!(
+                radiosity == &fresh_corners.radiosity,
+                "frame {f}: the kept gather's corners are not a fresh gather's: {}",
+                about()
+            );
             hierarchy_checks::check_pairs(&next, scene, frame, &hs);
             hierarchy_checks::check_partition(&next);
             hierarchy_checks::check_pair_tree(&next);
@@ -1050,13 +1084,15 @@ fn random_animations_on_the_hierarchy_match_fresh_builds() {
         }
     }
     println!(
-        "{} cases, {updates} updates ({coarsened} coarsened, {mostly_kept} kept most links); worst face {worst:.3e} of the peak",
+        "{} cases, {updates} updates ({coarsened} coarsened, {mostly_kept} kept most links, {gathers_kept} gathers \
+         took kept values); worst face {worst:.3e} of the peak",
         seeds.len()
     );
     if seeds.len() as u64 == HIERARCHY_CASES {
         assert!(
-            updates > 60 && coarsened > 10 && mostly_kept > 10,
-            "coverage: {updates} updates, {coarsened} coarsened, {mostly_kept} kept most links"
+            updates > 60 && coarsened > 10 && mostly_kept > 10 && gathers_kept > 30,
+            "coverage: {updates} updates, {coarsened} coarsened, {mostly_kept} kept most links, {gathers_kept} \
+             gathers took kept values"
         );
     }
 }

@@ -160,8 +160,7 @@ pub fn update_frame(
         m
     });
     let since_touch = since.as_ref().filter(|m| !m.swept.is_empty()).map(|m| Touch::new(&hierarchy.tree, m));
-    let changes =
-        gather::Changes { touch: if since.is_some() { since_touch.as_ref() } else { touch.as_ref() } };
+    let changes = gather::Changes::of(if since.is_some() { since_touch.as_ref() } else { touch.as_ref() });
     let kept = last_gather.as_ref().map(|k| (k, changes));
     let mut next = super::finish(hierarchy, state, stats, &lit, scene, frame, hs, kept, progress)?;
     if !hs.corner_gather && last_gather.is_some() {

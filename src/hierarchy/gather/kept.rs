@@ -37,7 +37,7 @@ use glam::DVec3;
 
 use super::Mode;
 use crate::hierarchy::touch::{Reach, Touch};
-use crate::hierarchy::tree::NodeId;
+use crate::hierarchy::tree::{NodeId, Tree};
 
 /// At most this many bytes are kept, whatever the memory budget: points past it are gathered
 /// afresh next frame.
@@ -76,6 +76,8 @@ impl How {
 pub struct KeptGather {
     mode: Mode,
     nb: usize,
+    /// Per face: it emitted when these values were gathered.
+    emitting: Vec<bool>,
     /// Per corner point (in [`crate::gather::corner_points`]' order); `None` past the cap, or
     /// for a point with no sources (buried, an emitter's own).
     points: Vec<Option<KeptPoint>>,
@@ -83,9 +85,20 @@ pub struct KeptGather {
 }
 
 impl KeptGather {
-    pub(super) fn new(mode: Mode, nb: usize, points: Vec<Option<KeptPoint>>) -> Self {
+    pub(super) fn new(mode: Mode, nb: usize, emitting: Vec<bool>, points: Vec<Option<KeptPoint>>) -> Self {
         let bytes = points.iter().flatten().map(KeptPoint::bytes).sum();
-        Self { mode, nb, points, bytes }
+        Self { mode, nb, emitting, points, bytes }
+    }
+
+    /// Per node of `tree`: a surface whose face emits now (`emitting`, per face) and did not
+    /// when these values were gathered, or the reverse.
+    pub(super) fn lit_or_dimmed(&self, tree: &Tree, emitting: &[bool]) -> Vec<bool> {
+        let flipped: Vec<bool> =
+            emitting.iter().enumerate().map(|(f, &e)| self.emitting.get(f) != Some(&e)).collect();
+        if !flipped.contains(&true) {
+            return Vec::new();
+        }
+        tree.nodes.iter().map(|n| n.surface().is_some_and(|s| flipped[s.face as usize])).collect()
     }
 
     /// The kept point `k` for a gather in `mode` with `nb` basis functions.
@@ -197,20 +210,39 @@ impl Finder {
     }
 }
 
-/// What the frame's moves changed, for telling which kept values still hold: `None` when
-/// nothing moved (an emission change alone).
+/// What changed since the kept values were gathered, for telling which still hold: the moves
+/// (`touch`; `None` when nothing moved, an emission change alone), and the surface nodes whose
+/// face started or stopped emitting (an emitter's rectangles are integrated with their
+/// penumbrae split, [`super::surface`]'s `gauss`, so its values are not a dark face's).
 #[derive(Clone, Copy)]
 pub struct Changes<'a> {
-    pub touch: Option<&'a Touch<'a>>,
+    touch: Option<&'a Touch<'a>>,
+    /// Per node (empty: none).
+    lit_or_dimmed: &'a [bool],
 }
 
-impl Changes<'_> {
+impl<'a> Changes<'a> {
+    /// The changes of moves tested by `touch`, emission not yet compared.
+    pub fn of(touch: Option<&'a Touch<'a>>) -> Self {
+        Self { touch, lit_or_dimmed: &[] }
+    }
+
+    /// These changes with the nodes that started or stopped emitting
+    /// ([`KeptGather::lit_or_dimmed`]).
+    pub(super) fn with_lit_or_dimmed<'b>(self, lit_or_dimmed: &'b [bool]) -> Changes<'b>
+    where
+        'a: 'b,
+    {
+        Changes { touch: self.touch, lit_or_dimmed }
+    }
+
     fn spares(&self, x: DVec3, source: NodeId, how: How) -> bool {
         let reach = match how {
             How::Near | How::NearFoot => Reach::Box,
             How::Far | How::Coarse | How::CoarseNear | How::Cluster => Reach::Hull,
         };
-        self.touch.is_none_or(|t| t.spares(x, source, reach))
+        !self.lit_or_dimmed.get(source as usize).copied().unwrap_or(false)
+            && self.touch.is_none_or(|t| t.spares(x, source, reach))
     }
 
     fn unmoved(&self, source: NodeId) -> bool {

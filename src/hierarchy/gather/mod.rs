@@ -284,6 +284,10 @@ pub fn corners_keeping(
     // Points keep their values while the kept bytes stay under the cap (which points is a
     // matter of the threads' timing; the values are the same either way).
     let kept_bytes = AtomicU64::new(0);
+    // Which faces emit: an emitter's values are not a dark face's.
+    let emitting: Vec<bool> = inputs.emission.iter().map(|e| *e != [0.0; 3]).collect();
+    let lit_or_dimmed = keeping.from.map_or_else(Vec::new, |(kept, _)| kept.lit_or_dimmed(tree, &emitting));
+    let from = keeping.from.map(|(kept, changes)| (kept, changes.with_lit_or_dimmed(&lit_or_dimmed)));
     let gathered: Vec<([[f64; 3]; 2], Option<kept::KeptPoint>, Reuse)> = points
         .par_iter()
         .enumerate()
@@ -295,7 +299,7 @@ pub fn corners_keeping(
             let Some(at) = p.at else {
                 return ([p.exitance(scene, frame), [0.0; 3]], None, Reuse::default());
             };
-            let previous = keeping.from.and_then(|(kept, changes)| Some((kept.point(k, mode, nb)?, changes)));
+            let previous = from.and_then(|(kept, changes)| Some((kept.point(k, mode, nb)?, changes)));
             let mut memo = Memo::new(previous.map(|p| p.0), previous.map(|p| p.1), nb, keeping.cap > 0);
             let values = gather.point(at, p.normal, solids.as_ref(), true, &mut memo);
             let reuse = memo.reuse;
@@ -321,8 +325,8 @@ pub fn corners_keeping(
     };
     let counts = gather.counters.counts(points.len());
     let (radiosity, irradiance) = (per_object(0), per_object(1));
-    let kept =
-        (keeping.cap > 0).then(|| KeptGather::new(mode, nb, gathered.into_iter().map(|g| g.1).collect()));
+    let kept = (keeping.cap > 0)
+        .then(|| KeptGather::new(mode, nb, emitting, gathered.into_iter().map(|g| g.1).collect()));
     Ok(Gathered { radiosity, irradiance, counts, reuse, kept })
 }
 
