@@ -1,7 +1,7 @@
 """Times the add-on's live preview while scrubbing: what an artist waits for per frame change.
 
     .venv/bin/python -m tools.live_preview_bench [--subdiv 13] [--frames 24] [--lib A --lib B ...]
-        [--mode full --mode idle]
+        [--mode full --mode idle] [--method HIERARCHICAL]
 
 Builds the test suite's Cornell box (six walls of subdiv x subdiv faces, a 0.5 x 0.5 ceiling
 light keyframed across the room over 48 frames, no block: 1,015 faces at 13) under the bpy
@@ -36,7 +36,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def measure(subdiv: int, frames: int, mode: str = "full") -> dict:
+def measure(subdiv: int, frames: int, mode: str = "full", method: str = "INCREMENTAL") -> dict:
     """Runs in this process (bpy imported here): ``rows``, one dict per frame from 2 to
     ``frames``, and ``idle_refine_ms`` (``idle`` mode: the rest frame's refinement)."""
     sys.path[:0] = [str(REPO), str(REPO / "tests" / "python")]
@@ -63,6 +63,7 @@ def measure(subdiv: int, frames: int, mode: str = "full") -> dict:
     scenes.cornell_box(bpy, n=subdiv, light_frames=(1, 48), box=False)
     sc = bpy.context.scene
     sc.radiosity.basis_order = 2
+    sc.radiosity.method = method
     sc.radiosity.live_refine_when_idle = mode == "idle"
     if mode == "idle":
         live._timers_run = lambda: True
@@ -128,14 +129,15 @@ def main(argv=None):
     ap.add_argument("--mode", action="append", choices=("full", "idle"), default=[],
                     help="solve every frame change in full, or refine when idle (repeatable; default: full)")
     ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--method", default="INCREMENTAL", help="the panel's Method (INCREMENTAL, HIERARCHICAL)")
     ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # child mode
     args = ap.parse_args(argv)
     modes = args.mode or ["full"]
     if args.json:
-        print(json.dumps(measure(args.subdiv, args.frames, modes[0])))
+        print(json.dumps(measure(args.subdiv, args.frames, modes[0], args.method)))
         return
     if not args.lib and len(modes) == 1:
-        out = measure(args.subdiv, args.frames, modes[0])
+        out = measure(args.subdiv, args.frames, modes[0], args.method)
         rows = out["rows"]
         print(f"{rows[0]['faces']} faces, mode {modes[0]}")
         print("| frame | frame_set ms | kernel ms | solve ms | gather ms | moments recomputed |")
@@ -161,7 +163,7 @@ def main(argv=None):
                 if lib is not None:
                     env["GALERKIN_RADIOSITY_LIB"] = lib
                 cmd = [sys.executable, "-m", "tools.live_preview_bench", "--json", "--mode", mode,
-                       "--subdiv", str(args.subdiv), "--frames", str(args.frames)]
+                       "--subdiv", str(args.subdiv), "--frames", str(args.frames), "--method", args.method]
                 res = subprocess.run(cmd, cwd=REPO, env=env, check=True, capture_output=True, text=True)
                 out = json.loads(res.stdout.strip().splitlines()[-1])
                 m = medians(out["rows"])
