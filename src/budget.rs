@@ -249,9 +249,10 @@ const HIERARCHY_KEPT_GATHER_PER_CORNER: u64 = 48 << 10;
 /// coefficient vectors and its mixer's columns. An animation (a scene of more than one frame)
 /// also keeps the pair tree ([`HIERARCHY_PAIR_TREE_PER_LINK`]) and, with the corner gather, its
 /// sources' values ([`HIERARCHY_KEPT_GATHER_PER_CORNER`], within their cap of an eighth of the
-/// budget, twice: the last frame's and the next), and an update holds the last frame's nodes and solution beside the new ones. Elements and results as [`estimate`]. Against the measured peaks: the full monastery at
-/// order 1, 2.2 GB (4.3 GB estimated without the gather); a 9,912-face crop of it, 104 MB
-/// (0.33 GB).
+/// budget, twice: the last frame's and the next), and an update holds the last frame's nodes
+/// and solution beside the new ones. Elements and results as [`estimate`]. Against the measured
+/// peaks: the full monastery at order 1, 2.2 GB (4.3 GB estimated without the gather); a
+/// 9,912-face crop of it, 104 MB (0.33 GB).
 pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
     let s = &scene.settings;
     let nb = ((s.basis_order + 1) * (s.basis_order + 1)) as u64;

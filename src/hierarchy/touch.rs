@@ -120,7 +120,7 @@ impl<'a> Touch<'a> {
     /// `false` for a node made after this test.
     pub fn spares(&self, x: DVec3, id: NodeId, reach: Reach) -> bool {
         let Some(&below) = self.below.get(id as usize) else { return false };
-        if self.holds[id as usize] {
+        if !self.unmoved(id) {
             return false;
         }
         let point = Aabb { min: x, max: x };

@@ -260,8 +260,8 @@ pub struct Reuse {
 /// One point's gather: its kept values from the frame before (already checked to be at the
 /// same place), and the values it keeps for the next frame.
 pub(super) struct Memo<'k> {
-    previous: Option<&'k KeptPoint>,
-    changes: Option<Changes<'k>>,
+    /// The point's kept values and what changed since they were gathered.
+    previous: Option<(&'k KeptPoint, Changes<'k>)>,
     nb: usize,
     keeping: Option<KeptPoint>,
     finder: Finder,
@@ -291,23 +291,16 @@ impl Slot {
 }
 
 impl<'k> Memo<'k> {
-    /// A point's memo: `previous` is the point's kept values, taken where `changes` spares them;
-    /// with `keep`, it keeps this frame's.
-    pub fn new(previous: Option<&'k KeptPoint>, changes: Option<Changes<'k>>, nb: usize, keep: bool) -> Self {
-        let keeping = keep.then(|| KeptPoint::like(previous));
-        Self {
-            previous,
-            changes,
-            nb,
-            keeping,
-            finder: Finder { cursor: 0, index: None },
-            reuse: Reuse::default(),
-        }
+    /// A point's memo: `previous` is the point's kept values, taken where the changes with them
+    /// spare them; with `keep`, it keeps this frame's.
+    pub fn new(previous: Option<(&'k KeptPoint, Changes<'k>)>, nb: usize, keep: bool) -> Self {
+        let keeping = keep.then(|| KeptPoint::like(previous.map(|p| p.0)));
+        Self { previous, nb, keeping, finder: Finder { cursor: 0, index: None }, reuse: Reuse::default() }
     }
 
     /// The point's place: kept values of a point elsewhere are not taken.
     pub fn at(&mut self, x: DVec3, n: DVec3) {
-        if self.previous.is_some_and(|p| p.x != x || p.n != n) {
+        if self.previous.is_some_and(|(p, _)| p.x != x || p.n != n) {
             self.previous = None;
         }
         if let Some(k) = &mut self.keeping {
@@ -320,10 +313,11 @@ impl<'k> Memo<'k> {
     /// ones while neither the point nor the source moved, else `compute`d. Returns its slot,
     /// for [`Memo::values`].
     pub fn listed(&mut self, source: NodeId, compute: impl FnOnce() -> [f64; 2]) -> ([f64; 2], Slot) {
-        let previous = self.previous.and_then(|p| Some((p, self.finder.slot_of(p, source)?)));
-        let unmoved = self.changes.is_some_and(|c| c.unmoved(source));
+        let previous = self.previous.and_then(|(p, c)| Some((p, c, self.finder.slot_of(p, source)?)));
         let ranked = match previous {
-            Some((p, k)) if unmoved => [f64::from(p.form_factors[k]), f64::from(p.entries[k].what)],
+            Some((p, c, k)) if c.unmoved(source) => {
+                [f64::from(p.form_factors[k]), f64::from(p.entries[k].what)]
+            }
             _ => {
                 let [form_factor, what] = compute();
                 [to_f32(form_factor) as f64, what]
@@ -339,7 +333,7 @@ impl<'k> Memo<'k> {
             }
             None => u32::MAX,
         };
-        (ranked, Slot { previous: previous.map_or(u32::MAX, |(_, k)| k as u32), own })
+        (ranked, Slot { previous: previous.map_or(u32::MAX, |(_, _, k)| k as u32), own })
     }
 
     /// The values of the source at `slot` taken as `how` ([`How::len`] of them): the kept ones
@@ -353,8 +347,8 @@ impl<'k> Memo<'k> {
     ) -> Values {
         let mut v = [0.0; crate::basis::MAX_LEN + 1];
         let len = how.len(self.nb);
-        let kept = match (self.previous, self.changes) {
-            (Some(p), Some(c)) if slot.previous != u32::MAX => {
+        let kept = match self.previous {
+            Some((p, c)) if slot.previous != u32::MAX => {
                 let e = p.entries[slot.previous as usize];
                 let at = e.at as usize;
                 (e.how == how as u8 && c.spares(p.x, source, how)).then(|| &p.values[at..at + len])
@@ -386,9 +380,8 @@ impl<'k> Memo<'k> {
 
     /// The memo of the foot on `source`.
     pub fn foot(&self, source: NodeId) -> Memo<'k> {
-        let previous = self.previous.and_then(|p| p.foot(source));
-        let keeping = self.keeping.as_ref().map(|_| KeptPoint::like(previous));
-        Memo::new(previous, self.changes, self.nb, keeping.is_some())
+        let previous = self.previous.and_then(|(p, c)| Some((p.foot(source)?, c)));
+        Memo::new(previous, self.nb, self.keeping.is_some())
     }
 
     /// Keeps the foot on `source`'s gather, done with `foot`.

@@ -300,7 +300,7 @@ pub fn corners_keeping(
                 return ([p.exitance(scene, frame), [0.0; 3]], None, Reuse::default());
             };
             let previous = from.and_then(|(kept, changes)| Some((kept.point(k, mode, nb)?, changes)));
-            let mut memo = Memo::new(previous.map(|p| p.0), previous.map(|p| p.1), nb, keeping.cap > 0);
+            let mut memo = Memo::new(previous, nb, keeping.cap > 0);
             let values = gather.point(at, p.normal, solids.as_ref(), true, &mut memo);
             let reuse = memo.reuse;
             let kept = memo.into_kept().filter(|kp| {

@@ -88,7 +88,7 @@ impl Gather<'_> {
             // A source the point touches takes its part next to the point from the foot,
             // however dark its own polynomial (a sliver the solve barely lights).
             let touched = near && feet && self.touch(rx, node.radius, s).is_some();
-            let m = self.unoccluded(rx, linked.source, near);
+            let m = self.whole(rx, linked.source, near, Rays::Among(&[]));
             [m[0], f64::from(u8::from(near) + 2 * u8::from(touched))]
         });
         if what < 0.0 {
@@ -109,17 +109,18 @@ impl Gather<'_> {
         })
     }
 
-    /// The surface node `source`'s moments at the point without occluders: a Gauss sum, and
+    /// The surface node `source`'s moments at the point by one Gauss sum with `rays`, and
     /// `near` the point, scaled to the exact polygon form factor (next to the point the Gauss
-    /// nodes miss most of the kernel; they only share it out).
-    fn unoccluded(&self, rx: &Receiver, source: NodeId, near: bool) -> [f64; MAX_NB] {
+    /// nodes miss most of the kernel; they only share it out): unoccluded for the ranking, with
+    /// rays through the BVH for a coarse cast.
+    fn whole(&self, rx: &Receiver, source: NodeId, near: bool, rays: Rays) -> [f64; MAX_NB] {
         let tree = self.inputs.tree;
         let s = tree.node(source).surface().expect("a surface");
         let nb = tree.basis.len();
         let mut m = [0.0; MAX_NB];
         let src = Source { face: s.face, patch: &s.patch };
         let rule = if near { &self.rule } else { &self.far_rule };
-        let sum = self.gauss(rx, src, &Rect::UNIT, rule, Rays::Among(&[]), &mut m[..nb]);
+        let sum = self.gauss(rx, src, &Rect::UNIT, rule, rays, &mut m[..nb]);
         if near {
             let f = polygon::form_factor(rx.x, rx.n, &s.patch.corners, s.normal);
             scale_to(&mut m[..nb], sum, f);
@@ -137,20 +138,10 @@ impl Gather<'_> {
         got: &mut Received,
         memo: &mut Memo,
     ) {
-        let tree = self.inputs.tree;
-        let s = tree.node(source).surface().expect("a surface");
-        let nb = tree.basis.len();
+        let nb = self.inputs.tree.basis.len();
         let how = if near { How::CoarseNear } else { How::Coarse };
-        let m = memo.values(slot, source, how, |m| {
-            let m = &mut m[..nb];
-            let src = Source { face: s.face, patch: &s.patch };
-            let rule = if near { &self.rule } else { &self.far_rule };
-            let sum = self.gauss(rx, src, &Rect::UNIT, rule, Rays::Bvh, m);
-            if near {
-                let f = polygon::form_factor(rx.x, rx.n, &s.patch.corners, s.normal);
-                scale_to(m, sum, f);
-            }
-        });
+        let m = memo
+            .values(slot, source, how, |m| m.copy_from_slice(&self.whole(rx, source, near, Rays::Bvh)[..nb]));
         got.add(self.light(source, &m[..nb]), m[0]);
     }
 
@@ -204,7 +195,7 @@ impl Gather<'_> {
                     o.visible_from(rx.x, (rx.face, s.face), &[s.patch.point(0.5, 0.5)], &mut seen);
                 }
                 if seen[0] {
-                    let m = self.unoccluded(rx, source, r.near);
+                    let m = self.whole(rx, source, r.near, Rays::Among(&[]));
                     got.add(self.light(source, &m[..tree.basis.len()]), r.form_factor);
                 }
             } else {
