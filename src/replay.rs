@@ -55,6 +55,11 @@ impl Replay {
         &self.sigma
     }
 
+    /// `K sigma` under the kernel of the solve that made the shots.
+    pub fn k_sigma(&self) -> &[[f64; 3]] {
+        &self.k_sigma
+    }
+
     /// Whether the replay holds for a kernel with these reflectances.
     pub fn applies_to(&self, reflectance: &[[f64; 3]]) -> bool {
         self.reflectance == reflectance

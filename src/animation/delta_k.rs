@@ -35,6 +35,8 @@ pub(super) fn shot_part(solution: &Coefficients, mut sent: Vec<[f64; 3]>) -> Vec
 /// added to `out`, `Delta b` and `Delta K sigma`.
 pub(super) struct DeltaK<'a> {
     pub(super) x: [&'a [[f64; 3]]; 2],
+    /// The replay's `K sigma` (crate::replay), under the kernel before this frame's changes.
+    pub(super) k_sigma: Option<&'a [[f64; 3]]>,
     pub(super) out: [&'a mut [[f64; 3]]; 2],
 }
 
@@ -121,14 +123,14 @@ impl DeltaK<'_> {
     ///
     /// The hemisphere bound follows the changed rows (crate::hemisphere): a receiver whose
     /// bounded reflectance goes from rho' to rho'' changes the kernel by (rho'' - rho') G_new,
-    /// taken on (b - u) and on sigma like the block changes. Whole rows: the billiard changes
-    /// ~630 of its 1,189 bounds a frame, which two serial gather_row each took 0.57 s of a 0.65 s
-    /// apply (0.013 s before the bound). Both vectors in one pass; many rows (an eighth of the
-    /// elements or more) by streaming the store once (solver::gather_rows, equal up to rounding),
-    /// few rows each on its own in parallel (gather_row_pair). Which bounds changed is O(1) per
-    /// receiver: the store keeps each row's sum through its writes (LinkStore::row_sum); summing
-    /// every changed receiver's whole row here cost the moving-light box, whose light changes
-    /// every row, 7.6 ms of a 22.4 ms apply (medians).
+    /// taken on (b - u) and on sigma like the block changes. Which bounds changed is O(1) per
+    /// receiver: the store keeps each row's sum through its writes (LinkStore::row_sum).
+    ///
+    /// The rows' products `G_new (b - u)` and `G_new sigma` come from what the solution already
+    /// holds ([`row_products`]), not from the store: in a closed scene every row's sum is 1 up to
+    /// quadrature error, so a moving light moves about half the bounds every frame, and reading
+    /// their rows through the store took 22-31 ms of the moving-light box's 33-47 ms kernel update
+    /// (the add-on's live preview, 2026-12-07). Rows that cannot be taken that way are gathered.
     pub(super) fn add_bound_changes(
         &mut self,
         sys: &mut System,
@@ -138,8 +140,6 @@ impl DeltaK<'_> {
     ) {
         let n = first.len() - 1;
         let nb = sys.basis.len();
-        let [sent, sigma] = self.x;
-        let [delta_b, delta_k_sigma] = &mut self.out;
         let sys_ref = &*sys;
         let bounds: Vec<(usize, [f64; 3])> = (0..n)
             .into_par_iter()
@@ -150,16 +150,9 @@ impl DeltaK<'_> {
                 (bounded != sys_ref.reflectance[r]).then_some((r, bounded))
             })
             .collect();
-        let gathered: Vec<[Vec<[f64; 3]>; 2]> = if bounds.len() * 8 >= n {
-            let rows: Vec<u32> = bounds.iter().map(|&(r, _)| r as u32).collect();
-            solver::gather_rows(&sys_ref.links, &rows, [sent, sigma])
-        } else {
-            bounds
-                .par_iter()
-                .map(|&(r, _)| solver::gather_row_pair(&sys_ref.links, r as u32, [sent, sigma]))
-                .collect()
-        };
-        for (&(r, bounded), [on_sent, on_sigma]) in bounds.iter().zip(&gathered) {
+        let products = self.row_products(sys_ref, &bounds);
+        let [delta_b, delta_k_sigma] = &mut self.out;
+        for (&(r, bounded), [on_sent, on_sigma]) in bounds.iter().zip(&products) {
             let change: [f64; 3] = std::array::from_fn(|c| bounded[c] - sys_ref.reflectance[r][c]);
             for k in 0..nb {
                 for c in 0..3 {
@@ -171,6 +164,62 @@ impl DeltaK<'_> {
         for (r, bounded) in bounds {
             sys.reflectance[r] = bounded;
         }
+    }
+
+    /// Per receiver `r` of `bounds`, its row of the new kernel's `G` taken on `b - u` and on
+    /// `sigma`, both before reflection.
+    ///
+    /// Progressive shooting keeps `b = s + K (b - u)` (`s` the sources, emission and direct light;
+    /// `K = rho' G`, rho' the bounded reflectance it shot with; crate::replay), and the replay's
+    /// `K sigma` is the change of `b` its shots made under the same kernel. The pairs' changes
+    /// this frame added `rho' (G_new - G_old)` on both vectors to `out` already. So per channel
+    /// with `rho' > 0`:
+    ///
+    /// ```text
+    /// G_new (b - u) = (b - s + Delta b) / rho',    G_new sigma = (K sigma + Delta K sigma) / rho',
+    /// ```
+    ///
+    /// O(1) per row, equal to a gather through the store up to the solver's rounding (its batch
+    /// sums are `f32`; the test `bound_rows_from_the_solution_equal_the_stores_rows`). A row with
+    /// a channel whose bound changes from `rho' = 0` (a material keyed up from black) is gathered
+    /// through the store: many rows (an eighth of the elements or more) by streaming it once
+    /// (solver::gather_rows, equal up to rounding), few each on its own (gather_row_pair).
+    fn row_products(&self, sys: &System, bounds: &[(usize, [f64; 3])]) -> Vec<[Vec<[f64; 3]>; 2]> {
+        let nb = sys.basis.len();
+        let n = sys.solution.b.len() / nb;
+        let [delta_b, delta_k_sigma] = &self.out;
+        let from_solution = |&(r, bounded): &(usize, [f64; 3])| -> Option<[Vec<[f64; 3]>; 2]> {
+            let rho = sys.reflectance[r];
+            if (0..3).any(|c| rho[c] <= 0.0 && bounded[c] != rho[c]) {
+                return None;
+            }
+            let per = |f: &dyn Fn(usize, usize) -> f64| -> Vec<[f64; 3]> {
+                (r * nb..(r + 1) * nb)
+                    .map(|k| std::array::from_fn(|c| if rho[c] > 0.0 { f(k, c) / rho[c] } else { 0.0 }))
+                    .collect()
+            };
+            let source = |k: usize, c: usize| sys.emission[k][c] + sys.direct.get(k).map_or(0.0, |d| d[c]);
+            let on_sent = per(&|k, c| sys.solution.b[k][c] - source(k, c) + delta_b[k][c]);
+            let on_sigma = per(&|k, c| self.k_sigma.map_or(0.0, |ks| ks[k][c]) + delta_k_sigma[k][c]);
+            Some([on_sent, on_sigma])
+        };
+        let mut products: Vec<Option<[Vec<[f64; 3]>; 2]>> = bounds.par_iter().map(from_solution).collect();
+        let rest: Vec<usize> = (0..bounds.len()).filter(|&q| products[q].is_none()).collect();
+        let gathered: Vec<[Vec<[f64; 3]>; 2]> = if rest.len() * 8 >= n {
+            let rows: Vec<u32> = rest.iter().map(|&q| bounds[q].0 as u32).collect();
+            solver::gather_rows(&sys.links, &rows, self.x)
+        } else {
+            rest.par_iter()
+                .map(|&q| solver::gather_row_pair(&sys.links, bounds[q].0 as u32, self.x))
+                .collect()
+        };
+        for (q, g) in rest.into_iter().zip(gathered) {
+            products[q] = Some(g);
+        }
+        let products: Vec<_> = products.into_iter().map(|p| p.expect("every row taken")).collect();
+        #[cfg(test)]
+        tests::check_against_the_store(sys, self.x, bounds, &products);
+        products
     }
 }
 
@@ -217,5 +266,69 @@ fn delta_kb_nb<const NB: usize>(
             ob[c] += rho[c] * acc[c];
             os[c] += rho[c] * acc[3 + c];
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::cell::Cell;
+
+    use super::*;
+    use crate::animation::{AnimationState, Outcome, advance};
+    use crate::scene::Settings;
+    use crate::system::no_progress;
+
+    thread_local! {
+        /// Set by a test: the worst departure of the bound rows taken from the solution from the
+        /// same rows gathered through the store, of the frame's largest gathered entry, and how
+        /// many rows were compared (`None`: not checked).
+        static CHECKED: Cell<Option<(f64, usize)>> = const { Cell::new(None) };
+    }
+
+    /// With [`CHECKED`] set, gathers every row of `bounds` through the store and records how far
+    /// `products` are from them.
+    pub(super) fn check_against_the_store(
+        sys: &System,
+        x: [&[[f64; 3]]; 2],
+        bounds: &[(usize, [f64; 3])],
+        products: &[[Vec<[f64; 3]>; 2]],
+    ) {
+        let Some((worst, rows)) = CHECKED.get() else { return };
+        let gathered: Vec<_> =
+            bounds.iter().map(|&(r, _)| solver::gather_row_pair(&sys.links, r as u32, x)).collect();
+        let entries = |rows: &[[Vec<[f64; 3]>; 2]], v: usize| -> Vec<f64> {
+            rows.iter().flat_map(|row| row[v].iter().flatten().copied().collect::<Vec<_>>()).collect()
+        };
+        let mut frame_worst: f64 = 0.0;
+        for v in 0..2 {
+            let (ours, theirs) = (entries(products, v), entries(&gathered, v));
+            let peak = theirs.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+            if peak > 0.0 {
+                let apart = ours.iter().zip(&theirs).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+                frame_worst = frame_worst.max(apart / peak);
+            }
+        }
+        CHECKED.set(Some((worst.max(frame_worst), rows + bounds.len())));
+    }
+
+    /// The moving light changes every row's form-factor sum in a closed box, and about half the
+    /// rows are bounded (their sum over 1 by quadrature error): the rows' products taken from the
+    /// solution's invariant are the store's, on `b - u` and on the replay's `sigma`, frame after
+    /// frame.
+    #[test]
+    fn bound_rows_from_the_solution_equal_the_stores_rows() {
+        let settings = Settings { basis_order: 2, corner_gather: false, ..Settings::default() };
+        let scene = crate::scenes::cornell_box_moving_light(8, 8, settings);
+        let mut sys = System::build(&scene, 1.0, &no_progress).unwrap();
+        sys.solve(scene.settings.tolerance, &|| false).unwrap();
+        let mut state = AnimationState::new(sys.elements.len(), true);
+        CHECKED.set(Some((0.0, 0)));
+        for f in 2..=8 {
+            let outcome = advance(&mut sys, &mut state, &scene, f as f64, &no_progress).unwrap();
+            assert!(matches!(outcome, Outcome::Updated(_)), "frame {f} needed a rebuild");
+        }
+        let (worst, rows) = CHECKED.take().unwrap();
+        assert!(rows >= 50, "only {rows} bound rows moved over 7 frames");
+        assert!(worst < 1e-5, "the rows taken from the solution are {worst:e} of the peak from the store's");
     }
 }

@@ -334,7 +334,8 @@ fn update_kernel(
     let no_replay = vec![[0.0f64; 3]; m.new.elements.len() * sys.basis.len()];
     let sigma = replay.map_or(&no_replay[..], Replay::sigma);
     let sent = delta_k::shot_part(&sys.solution, std::mem::take(&mut state.sent));
-    let mut delta_k = DeltaK { x: [&sent, sigma], out: delta };
+    let k_sigma = replay.map(Replay::k_sigma);
+    let mut delta_k = DeltaK { x: [&sent, sigma], k_sigma, out: delta };
     let first = delta_k.add_pair_changes(sys, &written, &replaced);
     delta_k.add_bound_changes(sys, &first, &m.new.elements, m.next);
     drop(written);
