@@ -127,7 +127,7 @@ impl DeltaK<'_> {
     /// receiver: the store keeps each row's sum through its writes (LinkStore::row_sum).
     ///
     /// The rows' products `G_new (b - u)` and `G_new sigma` come from what the solution already
-    /// holds ([`row_products`]), not from the store: in a closed scene every row's sum is 1 up to
+    /// holds ([`Self::row_products`]), not from the store: in a closed scene every row's sum is 1 up to
     /// quadrature error, so a moving light moves about half the bounds every frame, and reading
     /// their rows through the store took 22-31 ms of the moving-light box's 33-47 ms kernel update
     /// (the add-on's live preview, 2026-12-07). Rows that cannot be taken that way are gathered.
