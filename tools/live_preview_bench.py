@@ -1,7 +1,7 @@
 """Times the add-on's live preview while scrubbing: what an artist waits for per frame change.
 
     .venv/bin/python -m tools.live_preview_bench [--subdiv 13] [--frames 24] [--lib A --lib B ...]
-        [--mode full --mode idle] [--method HIERARCHICAL]
+        [--mode full --mode idle] [--method HIERARCHICAL] [--light point]
 
 Builds the test suite's Cornell box (six walls of subdiv x subdiv faces, a 0.5 x 0.5 ceiling
 light keyframed across the room over 48 frames, no block: 1,015 faces at 13) under the bpy
@@ -37,7 +37,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def measure(subdiv: int, frames: int, mode: str = "full", method: str = "INCREMENTAL") -> dict:
+def measure(subdiv: int, frames: int, mode: str = "full", method: str = "INCREMENTAL",
+            light: str = "quad") -> dict:
     """Runs in this process (bpy imported here): ``rows``, one dict per frame from 2 to
     ``frames``, and ``idle_refine_ms`` (``idle`` mode: the rest frame's refinement)."""
     sys.path[:0] = [str(REPO), str(REPO / "tests" / "python")]
@@ -62,7 +63,19 @@ def measure(subdiv: int, frames: int, mode: str = "full", method: str = "INCREME
         return stats
 
     binding.Session.solve_frame = recording
-    scenes.cornell_box(bpy, n=subdiv, light_frames=(1, 48), box=False)
+    objs = scenes.cornell_box(bpy, n=subdiv, light_frames=(1, 48), box=False)
+    if light == "point":
+        # A Blender Point light on the same path in place of the emissive quad: no face moves,
+        # only the lights' direct light changes.
+        bpy.data.objects.remove(objs["Light"])
+        lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", type="POINT"))
+        lamp.data.energy = 100.0
+        bpy.context.scene.collection.objects.link(lamp)
+        for frame, x in ((1, -0.5), (48, 0.5)):
+            lamp.location = (x, 0.0, 1.8)
+            lamp.keyframe_insert("location", index=0, frame=frame)
+        scenes._linear(lamp)
+        bpy.context.scene.frame_set(1)
     sc = bpy.context.scene
     sc.radiosity.basis_order = 2
     sc.radiosity.method = method
@@ -134,14 +147,16 @@ def main(argv=None):
                     help="solve every frame change in full, or refine when idle (repeatable; default: full)")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--method", default="INCREMENTAL", help="the panel's Method (INCREMENTAL, HIERARCHICAL)")
+    ap.add_argument("--light", choices=("quad", "point"), default="quad",
+                    help="the moving light: the emissive ceiling quad, or a Blender Point light")
     ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # child mode
     args = ap.parse_args(argv)
     modes = args.mode or ["full"]
     if args.json:
-        print(json.dumps(measure(args.subdiv, args.frames, modes[0], args.method)))
+        print(json.dumps(measure(args.subdiv, args.frames, modes[0], args.method, args.light)))
         return
     if not args.lib and len(modes) == 1:
-        out = measure(args.subdiv, args.frames, modes[0], args.method)
+        out = measure(args.subdiv, args.frames, modes[0], args.method, args.light)
         rows = out["rows"]
         print(f"{rows[0]['faces']} faces, mode {modes[0]}")
         print("| frame | frame_set ms | of it Python ms | kernel ms | solve ms | gather ms "
@@ -168,7 +183,8 @@ def main(argv=None):
                 if lib is not None:
                     env["GALERKIN_RADIOSITY_LIB"] = lib
                 cmd = [sys.executable, "-m", "tools.live_preview_bench", "--json", "--mode", mode,
-                       "--subdiv", str(args.subdiv), "--frames", str(args.frames), "--method", args.method]
+                       "--subdiv", str(args.subdiv), "--frames", str(args.frames), "--method", args.method,
+                       "--light", args.light]
                 res = subprocess.run(cmd, cwd=REPO, env=env, check=True, capture_output=True, text=True)
                 out = json.loads(res.stdout.strip().splitlines()[-1])
                 m = medians(out["rows"])
