@@ -73,6 +73,11 @@ pub struct FrameStats {
     /// were kept from the last frame).
     pub gather_moments: usize,
     pub gather_recomputed: usize,
+    /// The lights' shadow rays for the frame's direct light: traced, and taken from the last
+    /// frame's where no move could have changed them (updated frames of the flat path;
+    /// [`crate::lights::direct::DirectLight::project_keeping`]).
+    pub direct_rays_traced: u64,
+    pub direct_rays_taken: u64,
     /// The frame was built from scratch (first frame, `--full`, or after a topology change).
     pub full_rebuild: bool,
     /// The frame is a preview ([`Session::set_preview`]): solved to [`preview_tolerance`],
@@ -501,6 +506,8 @@ impl Session {
                         gather_seconds,
                         gather_moments: g.moments,
                         gather_recomputed: g.recomputed,
+                        direct_rays_traced: u.direct_rays_traced,
+                        direct_rays_taken: u.direct_rays_taken,
                         preview: self.preview,
                         ..Default::default()
                     };

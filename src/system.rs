@@ -251,7 +251,7 @@ impl System {
         let nb = basis.len();
         let surface_reflectance: Vec<[f64; 3]> = elements.iter().map(|e| e.reflectance(scene)).collect();
         let reflectance = bounded_reflectances(&links, &surface_reflectance);
-        let (emission, direct, lights) = frame_sources(scene, frame, &elements, basis);
+        let (emission, direct, lights) = frame_sources(scene, frame, &elements, basis, None);
         let stats = SystemStats {
             elements: elements.len(),
             pairs: links.len(),
@@ -517,19 +517,29 @@ impl System {
 pub type FrameSources = (Vec<[f64; 3]>, Vec<[f64; 3]>, Option<std::sync::Arc<DirectLight>>);
 
 /// A frame's sources for `elements` of `scene` at `frame`: the materials' emission (`k = 0`),
-/// the lights' `rho E_d` (every `k`; empty without lights) and the lights as placed.
-pub fn frame_sources(scene: &Scene, frame: f64, elements: &[Element], basis: Basis) -> FrameSources {
+/// the lights' `rho E_d` (every `k`; empty without lights) and the lights as placed, with their
+/// shadow rays' outcomes kept for the next frame; `last`, the frame before and what moved since,
+/// lends its outcomes where they hold.
+pub fn frame_sources(
+    scene: &Scene,
+    frame: f64,
+    elements: &[Element],
+    basis: Basis,
+    last: Option<crate::lights::direct::LastFrame>,
+) -> FrameSources {
     let nb = basis.len();
     let mut emission = vec![[0.0; 3]; elements.len() * nb];
     for (i, e) in elements.iter().enumerate() {
         emission[i * nb] = e.emission(scene, frame);
     }
     let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
-    let Some(lights) = DirectLight::new(scene, frame, elements) else {
+    let Some(mut lights) = DirectLight::new(scene, frame, elements) else {
         return (emission, Vec::new(), None);
     };
     let rho: Vec<[f64; 3]> = elements.iter().map(|e| e.reflectance(scene)).collect();
-    let direct = lights.project(&patches, &rho, basis);
+    // Each element's shadow rays are kept for the next frame, which takes those no move can
+    // have changed (crate::lights::direct::DirectLight::project_keeping).
+    let (direct, _) = lights.project_keeping(&patches, &rho, basis, last);
     (emission, direct, Some(std::sync::Arc::new(lights)))
 }
 

@@ -93,6 +93,10 @@ pub struct UpdateStats {
     pub visibility_relinked: usize,
     /// Sample segments tested against occluders (`m^4` per link that needed rays).
     pub segments_tested: u64,
+    /// The lights' shadow rays for this frame's direct light traced, and taken from the last
+    /// frame's where no move could have changed them ([`crate::lights::direct::DirectLight::project_keeping`]).
+    pub direct_rays_traced: u64,
+    pub direct_rays_taken: u64,
     pub kernel_seconds: f64,
     /// Parts of `kernel_seconds`: placing the elements and finding the candidates; deciding
     /// each candidate's visibility and kernel (series, quadrature, expansion); writing the
@@ -268,7 +272,7 @@ pub fn advance(
     }
     stats.segments_tested = crate::visibility::segments_tested() - segments_before;
     stats.kernel_seconds = start.elapsed().as_secs_f64();
-    solve::enter_frame(sys, next, frame, new.elements, &mut delta_b);
+    solve::enter_frame(sys, next, frame, new.elements, (&new.moved, &motion.swept), &mut delta_b, &mut stats);
     let tolerance = next.settings.tolerance;
     state.replay = Some(solve::solve(sys, replay, &delta_k_sigma, tolerance, progress, &mut stats)?);
     Ok(Outcome::Updated(stats))

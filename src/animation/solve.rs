@@ -3,6 +3,8 @@
 //! shooting solve it.
 
 use crate::error::Result;
+use crate::geometry::Aabb;
+use crate::lights::direct::{DirectLight, LastFrame};
 use crate::replay::Replay;
 use crate::scene::Scene;
 use crate::solver;
@@ -11,16 +13,24 @@ use crate::system::{Element, Progress, System};
 use super::UpdateStats;
 
 /// Adds the emission changes to `delta_b` and `delta_b` to the solution, then moves the system to
-/// the new frame's `elements` at `frame`.
+/// the new frame's `elements` at `frame`; `moved` says which elements moved since the system's,
+/// inside the boxes `swept`.
 pub(super) fn enter_frame(
     sys: &mut System,
     next: &Scene,
     frame: f64,
     elements: Vec<Element>,
+    (moved, swept): (&[bool], &[Aabb]),
     delta_b: &mut [[f64; 3]],
+    stats: &mut UpdateStats,
 ) {
-    // Emission changes, the lights' direct light among them, enter as Delta e (eq. 9).
-    let (emission, direct, lights) = crate::system::frame_sources(next, frame, &elements, sys.basis);
+    // Emission changes, the lights' direct light among them, enter as Delta e (eq. 9). The last
+    // frame's shadow rays are taken again where no move can have changed them.
+    let last = sys.lights.as_deref().map(|lights| LastFrame { lights, moved, swept });
+    let (emission, direct, lights) = crate::system::frame_sources(next, frame, &elements, sys.basis, last);
+    if let Some(rays) = lights.as_deref().map(DirectLight::kept_rays) {
+        (stats.direct_rays_traced, stats.direct_rays_taken) = (rays.traced, rays.taken);
+    }
     let old_sources = sys.sources();
     (sys.direct, sys.lights) = (direct, lights);
     for (k, d) in delta_b.iter_mut().enumerate() {

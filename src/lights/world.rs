@@ -156,6 +156,16 @@ impl PlacedWorld {
         (scale.iter().any(|&c| c > 0.0)).then(|| PlacedWorld { scale, image: world.image.clone() })
     }
 
+    /// Whether `other` is the same sky: the same scale and the same image.
+    pub(super) fn same_as(&self, other: &PlacedWorld) -> bool {
+        let same_image = match (&self.image, &other.image) {
+            (None, None) => true,
+            (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+            _ => false,
+        };
+        same_image && self.scale == other.scale
+    }
+
     /// Radiance arriving from direction `d` (unit, pointing away from the receiver).
     pub(super) fn radiance(&self, d: DVec3) -> [f64; 3] {
         match &self.image {
@@ -176,19 +186,19 @@ impl PlacedWorld {
     /// `(SPLIT m)^2` pattern would sample them, for about `(m + 1)^2` rays plus `SPLIT^2` per
     /// stratum on an edge. An occluder smaller than a stratum that no corner sees is missed. With
     /// an image, an open stratum whose corners' radiances differ is averaged over its sub-strata.
-    pub(super) fn irradiance(&self, n: DVec3, m: usize, open: impl Fn(DVec3) -> bool) -> [f64; 3] {
+    pub(super) fn irradiance(&self, n: DVec3, m: usize, mut open: impl FnMut(DVec3) -> bool) -> [f64; 3] {
         let (t, b) = n.any_orthonormal_pair();
-        let direction = |u: f64, v: f64| {
-            let (dx, dy) = concentric(u, v);
-            let dz = (1.0 - dx * dx - dy * dy).max(0.0).sqrt();
-            (t * dx + b * dy + n * dz).normalize()
+        let computed;
+        let strata = match STRATA.get(m) {
+            Some(table) => table.get_or_init(|| Strata::new(m)),
+            None => {
+                computed = Strata::new(m);
+                &computed
+            }
         };
+        let direction = |[dx, dy, dz]: [f64; 3]| (t * dx + b * dy + n * dz).normalize();
         let mf = m as f64;
-        // Corners on the square's edge are horizon directions, which graze the receiver's plane
-        // and slip past what stands on it: they are raised to about 1 degree.
-        let edge = |k: usize| (k as f64 / mf).clamp(HORIZON, 1.0 - HORIZON);
-        let corner_dirs: Vec<DVec3> =
-            (0..(m + 1) * (m + 1)).map(|k| direction(edge(k % (m + 1)), edge(k / (m + 1)))).collect();
+        let corner_dirs: Vec<DVec3> = strata.corners.iter().map(|&l| direction(l)).collect();
         let corners: Vec<bool> = corner_dirs.iter().map(|&w| open(w)).collect();
         // With an image, the radiance at the corners too: a stratum the sky's colour changes
         // across is averaged over its sub-strata (lookups only, no rays).
@@ -204,11 +214,7 @@ impl PlacedWorld {
             }
         };
         let sf = SPLIT as f64;
-        let sub = |i: usize, j: usize, k: usize| {
-            let u = (i as f64 + ((k % SPLIT) as f64 + 0.5) / sf) / mf;
-            let v = (j as f64 + ((k / SPLIT) as f64 + 0.5) / sf) / mf;
-            direction(u, v)
-        };
+        let sub = |i: usize, j: usize, k: usize| direction(strata.subs[(j * m + i) * SPLIT * SPLIT + k]);
         for j in 0..m {
             for i in 0..m {
                 let index = |di: usize, dj: usize| (j + dj) * (m + 1) + i + di;
@@ -220,7 +226,7 @@ impl PlacedWorld {
                             add(sub(i, j, k), 1.0 / (sf * sf));
                         }
                     } else {
-                        add(direction((i as f64 + 0.5) / mf, (j as f64 + 0.5) / mf), 1.0);
+                        add(direction(strata.centres[j * m + i]), 1.0);
                     }
                 } else if seen.iter().any(|&o| o) {
                     for k in 0..SPLIT * SPLIT {
@@ -238,6 +244,44 @@ impl PlacedWorld {
 
 /// Sub-strata per axis of a stratum on an edge of the sky (or of its colours).
 const SPLIT: usize = 4;
+
+/// The directions of [`PlacedWorld::irradiance`]'s `m x m` strata in the receiver's tangent frame
+/// (x, y along the frame's tangents, z along the normal) before the frame turns them: its corners'
+/// (`(m + 1)^2`), centres' (`m^2`) and sub-strata's (`SPLIT^2` a stratum, stratum by stratum).
+/// The same for every point; each took a sine and a cosine per ray when made at the point.
+struct Strata {
+    corners: Vec<[f64; 3]>,
+    centres: Vec<[f64; 3]>,
+    subs: Vec<[f64; 3]>,
+}
+
+impl Strata {
+    fn new(m: usize) -> Self {
+        let local = |u: f64, v: f64| {
+            let (dx, dy) = concentric(u, v);
+            [dx, dy, (1.0 - dx * dx - dy * dy).max(0.0).sqrt()]
+        };
+        let (mf, sf) = (m as f64, SPLIT as f64);
+        // Corners on the square's edge are horizon directions, which graze the receiver's plane
+        // and slip past what stands on it: they are raised to about 1 degree.
+        let edge = |k: usize| (k as f64 / mf).clamp(HORIZON, 1.0 - HORIZON);
+        let corners = (0..(m + 1) * (m + 1)).map(|k| local(edge(k % (m + 1)), edge(k / (m + 1)))).collect();
+        let centres =
+            (0..m * m).map(|k| local(((k % m) as f64 + 0.5) / mf, ((k / m) as f64 + 0.5) / mf)).collect();
+        let subs = (0..m * m)
+            .flat_map(|cell| (0..SPLIT * SPLIT).map(move |k| (cell % m, cell / m, k)))
+            .map(|(i, j, k)| {
+                let u = (i as f64 + ((k % SPLIT) as f64 + 0.5) / sf) / mf;
+                let v = (j as f64 + ((k / SPLIT) as f64 + 0.5) / sf) / mf;
+                local(u, v)
+            })
+            .collect();
+        Self { corners, centres, subs }
+    }
+}
+
+/// [`Strata`] made once per `m` (up to 32: 8 x 8 strata per visibility sample per axis, four).
+static STRATA: [std::sync::OnceLock<Strata>; 33] = [const { std::sync::OnceLock::new() }; 33];
 
 /// Whether radiances at a stratum's corners differ by more than 2% of the largest (per channel).
 fn varies(l: [[f64; 3]; 4]) -> bool {
