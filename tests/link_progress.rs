@@ -1,7 +1,7 @@
-//! The link phase's progress follows its work (`PairSpace` in src/hierarchy/refine.rs): on the
-//! decimated monastery's first link round, the share reported when half the chunks of links are
-//! computed is near a half, a quarter's below a half. Not timed: the reports come one before each
-//! chunk of links computed, in an order that is the same for every thread count.
+//! The link phase's progress follows its work (`PairSpace` in src/hierarchy/refine/descent.rs):
+//! on the decimated monastery's first link round, the share reported when half the chunks of
+//! links are computed is near a half, a quarter's below a half. Not timed: the reports come one
+//! before each chunk of links computed, in an order that is the same for every thread count.
 
 use std::sync::Mutex;
 

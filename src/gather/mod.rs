@@ -40,6 +40,13 @@
 //! places ([`crate::visibility::MovedOccluders`]). On the moving-light box (1,079 patches, 1,767
 //! corner points, 1.33M moments) these took the gather of a frame from 75 to 53-56 ms on one
 //! thread, bit-identical.
+//!
+//! By job: `points.rs` the corner points (merged, inset, their shading points, the buried ones),
+//! `row.rs` a point's sources and which kept moments still hold, `moments.rs` a source's moments
+//! at a point, `nodes.rs` a source rectangle's Gauss nodes, `penumbra.rs` an emitter's penumbra
+//! check, `value.rs` a point's value from its moments, `stop.rs` the cancel and progress; here the
+//! frame's driver ([`CornerGather::run`]: what changed since the kept gather, the rows, the
+//! values) and what the parts share ([`Gather`]).
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -47,110 +54,23 @@ use rayon::prelude::*;
 mod moments;
 mod nodes;
 pub(crate) mod penumbra;
+mod points;
 mod row;
+mod stop;
+mod value;
 use nodes::{GAUSS_POINTS, GaussNodes};
+use points::buried_points;
+pub(crate) use points::{CornerPoint, corner_points};
+pub use points::{INSET, SMOOTH_LIFT, shading_point};
+pub(crate) use stop::Stop;
+use value::{received, source_irradiance};
 
 use crate::error::{Error, Result};
 use crate::geometry::{Aabb, FrontPlane, Patch, Rect};
 use crate::quadrature::GaussLegendre;
 use crate::scene::Scene;
-use crate::scene::surface::world_normal;
-use crate::solids::Solids;
-use crate::system::{Progress, System, corner_params};
+use crate::system::{Progress, System};
 use crate::visibility::{MovedOccluders, Occluders, Visibility};
-
-/// How often the gather asks the host whether to go on (and reports progress): every corner and
-/// every step of a moment's subdivision looks at the flag, one of them calls the host when this
-/// much time has passed, so a cancel is seen within about this long (the solve's is one batch).
-const POLL_INTERVAL: std::time::Duration = std::time::Duration::from_millis(10);
-
-/// The gather's cancel and progress: the host's callback, called at most every
-/// [`POLL_INTERVAL`] from whichever thread looks first, and what it said.
-pub(crate) struct Stop<'a> {
-    progress: Progress<'a>,
-    start: std::time::Instant,
-    /// Microseconds after `start` of the last call of `progress`.
-    last_poll: std::sync::atomic::AtomicU64,
-    cancelled: std::sync::atomic::AtomicBool,
-    /// Points gathered so far, of `total`.
-    pub done: std::sync::atomic::AtomicUsize,
-    total: usize,
-    /// A row's allocation the allocator refused ([`crate::budget::try_vec`]): the gather stops
-    /// (as cancelled) and returns it.
-    failed: std::sync::Mutex<Option<Error>>,
-}
-
-impl<'a> Stop<'a> {
-    /// The stop of a gather of `total` points.
-    pub fn new(progress: Progress<'a>, total: usize) -> Self {
-        Stop {
-            progress,
-            start: std::time::Instant::now(),
-            last_poll: 0.into(),
-            cancelled: false.into(),
-            done: 0.into(),
-            total,
-            failed: None.into(),
-        }
-    }
-
-    /// The gather's outcome once its rows are done: the allocation error that stopped it, else
-    /// `Cancelled` when the host asked to stop (a cancel seen inside a row cut it short without
-    /// an error), else `Ok`.
-    pub fn outcome(&self) -> Result<()> {
-        if let Some(e) = self.failed.lock().unwrap_or_else(|p| p.into_inner()).take() {
-            return Err(e);
-        }
-        if self.cancelled.load(std::sync::atomic::Ordering::Relaxed) {
-            return Err(Error::Cancelled);
-        }
-        Ok(())
-    }
-
-    /// Room for `len` values, or `None` after stopping the gather with the allocation's error.
-    pub fn vec<T>(&self, len: usize) -> Option<Vec<T>> {
-        crate::budget::try_vec(len, "the corner gather's rows")
-            .map_err(|e| {
-                self.failed.lock().unwrap_or_else(|p| p.into_inner()).get_or_insert(e);
-                self.cancelled.store(true, std::sync::atomic::Ordering::Relaxed);
-            })
-            .ok()
-    }
-
-    /// Whether the host asked to stop; asks it again when [`POLL_INTERVAL`] has passed.
-    pub fn stopped(&self) -> bool {
-        use std::sync::atomic::Ordering::Relaxed;
-        if self.cancelled.load(Relaxed) {
-            return true;
-        }
-        // The clock is read on one call in 32 per thread: a step of `moments` costs more than
-        // a flag load but can be cheaper than a clock read.
-        thread_local!(static CALLS: std::cell::Cell<u32> = const { std::cell::Cell::new(0) });
-        if CALLS.with(|c| {
-            c.set(c.get().wrapping_add(1));
-            c.get() % 32 != 0
-        }) {
-            return false;
-        }
-        let now = self.start.elapsed().as_micros() as u64;
-        let last = self.last_poll.load(Relaxed);
-        if now.saturating_sub(last) < POLL_INTERVAL.as_micros() as u64
-            || self.last_poll.compare_exchange(last, now, Relaxed, Relaxed).is_err()
-        {
-            return false;
-        }
-        let fraction = self.done.load(Relaxed) as f64 / self.total.max(1) as f64;
-        if !(self.progress)(fraction.min(1.0), "corner gather") {
-            self.cancelled.store(true, Relaxed);
-        }
-        self.cancelled.load(Relaxed)
-    }
-}
-
-/// Corners are gathered this far inside their face (in its parameter domain): exactly on an edge,
-/// a perpendicular neighbour is seen edge-on and drops out, while a vertex bake and the eye see
-/// the limit from inside.
-pub const INSET: f64 = 1e-3;
 
 /// A source (sub-)rectangle is integrated by the Gauss rule once the distance from the corner to
 /// its centre is this many times its bounding radius; closer, it is split in four.
@@ -239,29 +159,6 @@ pub struct GatherStats {
     pub moments: usize,
     /// Moments computed this frame (all of them on a first frame).
     pub recomputed: usize,
-}
-
-/// A corner point: faces of one object meeting at a vertex with the same normal and material see
-/// the same light there (4 faces per vertex of a grid), gathered once. A smooth-shaded corner
-/// has the mesh's interpolated normal ([`crate::scene::Surface::corner_normals`]), so the faces
-/// of a smooth vertex share one point and one value: no facets, as Cycles bakes them.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct CornerPoint {
-    /// The element covering it and the local point (inset), or `None` for a skipped face.
-    pub at: Option<(usize, f64, f64)>,
-    pub material: u32,
-    /// The object and face it was made for: a skipped face's point shows that face's exitance
-    /// ([`Scene::emission_of`]).
-    pub face: (u32, u32),
-    /// The world-space shading normal, where it is not the face's own.
-    pub normal: Option<DVec3>,
-}
-
-impl CornerPoint {
-    /// The exitance of the face the point was made for at `frame`.
-    pub fn exitance(&self, scene: &Scene, frame: f64) -> [f64; 3] {
-        scene.emission_of(self.face.0 as usize, self.face.1 as usize, self.material, frame)
-    }
 }
 
 /// One point's sources, sorted by element, with how their visibility was decided and their
@@ -596,116 +493,6 @@ impl CornerGather {
     }
 }
 
-/// The distinct corner points of the scene's faces, the point of each face corner, and the
-/// number of face corners per object. `locate(o, f, s, t)` gives the element covering face `f`
-/// of object `o` at its parameters `(s,t)` and the local point there (`None`: a skipped face),
-/// `patch(e)` that element's patch: the flat system's elements, or the hierarchy's faces.
-pub(crate) fn corner_points(
-    scene: &Scene,
-    frame: f64,
-    locate: impl Fn(usize, usize, f64, f64) -> Option<(usize, f64, f64)>,
-    patch: impl Fn(usize) -> Patch,
-) -> (Vec<CornerPoint>, Vec<usize>, Vec<usize>) {
-    let mut points = Vec::new();
-    let mut point_of_corner = Vec::new();
-    let mut per_object = Vec::with_capacity(scene.objects.len());
-    let mut shared = std::collections::HashMap::new();
-    for (o, obj) in scene.objects.iter().enumerate() {
-        let before = point_of_corner.len();
-        let shading = scene.corner_normals(o);
-        let world_from_object = obj.world_from_object(frame);
-        for (f, face) in obj.faces.iter().enumerate() {
-            let first = point_of_corner.len() - before;
-            for (k, (&v, (s, t))) in face.iter().zip(corner_params(face.len())).enumerate() {
-                // A triangle's apex is the collapsed edge t = 1: the inset corner (1, 1) would lie
-                // on the edge P1 P2 (INSET^2 inside), seeing the neighbour across it edge-on;
-                // halfway along the collapsed edge it lies INSET inside along the median.
-                let s = if face.len() == 3 && t == 1.0 { 0.5 } else { s };
-                let (si, ti) = (s.clamp(INSET, 1.0 - INSET), t.clamp(INSET, 1.0 - INSET));
-                let at = locate(o, f, si, ti);
-                let material = obj.face_materials[f];
-                let normal = shading.get(first + k).and_then(|&n| world_normal(&world_from_object, n));
-                // Faces with their own reflectance or emission scale (a texture's means) share a
-                // point only with faces of the same ones, as faces of one material do.
-                let own = |pick: fn(&crate::scene::Surface) -> &Vec<[f64; 3]>| {
-                    scene.surfaces.get(o).and_then(|s| pick(s).get(f)).map(|r| r.map(f64::to_bits))
-                };
-                let (rho, scale) = (own(|s| &s.face_reflectance), own(|s| &s.face_emission));
-                let key = at.map(|(e, s, t)| {
-                    let n = normal.unwrap_or_else(|| patch(e).area_vector(s, t).normalize_or_zero());
-                    (o, v, material, rho, scale, (n * 1e6).round().as_i64vec3().to_array())
-                });
-                let k = match key.and_then(|k| shared.get(&k)) {
-                    Some(&k) => k,
-                    None => {
-                        points.push(CornerPoint { at, material, face: (o as u32, f as u32), normal });
-                        if let Some(key) = key {
-                            shared.insert(key, points.len() - 1);
-                        }
-                        points.len() - 1
-                    }
-                };
-                point_of_corner.push(k);
-            }
-        }
-        per_object.push(point_of_corner.len() - before);
-    }
-    (points, point_of_corner, per_object)
-}
-
-/// A smooth-shaded point is lifted this far (times its element's bounding radius) along its
-/// shading normal: the inset point lies below the planes of the other faces at a convex vertex
-/// by about `INSET` of their size, and a shadow ray towards a light the shading normal faces but
-/// the face does not would leave under them (measured on Suzanne under a Point light: dark
-/// corners on the lit side, 0.33 relative RMSE against Cycles' smooth bake without the lift).
-pub const SMOOTH_LIFT: f64 = 4.0 * INSET;
-
-/// The point at `(s,t)` of `patch` and the normal it is gathered with: the face's own, or the
-/// shading normal `normal` with the point lifted by [`SMOOTH_LIFT`] along it.
-pub fn shading_point(patch: &Patch, s: f64, t: f64, normal: Option<DVec3>) -> (DVec3, DVec3) {
-    let x = patch.point(s, t);
-    match normal {
-        Some(n) => (x + SMOOTH_LIFT * patch.bounding_sphere().1 * n, n),
-        None => (x, patch.area_vector(s, t).normalize_or_zero()),
-    }
-}
-
-/// The touch of a source at `foot` (on its plane) when the foot falls on the source.
-fn foot_on(source: &Patch, foot: DVec3, radius: f64) -> Option<Touch> {
-    let (s, t) = source.locate(foot);
-    ((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&t)).then_some(Touch { s, t, radius })
-}
-
-/// Per point, whether it lies inside another closed surface of the scene
-/// ([`Solids::buries_surface_point`]). The solids are made of the faces, not of the elements: a
-/// face split into parts ([`crate::contact_split`]) leaves edges that only its own parts share.
-/// (Without parts the elements are the faces: nothing more is allocated, which a bake near its
-/// memory limit needs.)
-fn buried_points(
-    sys: &System,
-    scene: &Scene,
-    frame: f64,
-    patches: &[Patch],
-    points: &[CornerPoint],
-) -> Vec<bool> {
-    let split = sys.elements.iter().any(|e| e.domain != Rect::UNIT);
-    let faces = split.then(|| crate::system::build_elements(scene, frame, crate::basis::Basis::new(0)));
-    let solids = Solids::new(faces.as_deref().unwrap_or(&sys.elements), scene.objects.len());
-    if solids.is_empty() {
-        return Vec::new();
-    }
-    points
-        .par_iter()
-        .map(|p| {
-            p.at.is_some_and(|(e, s, t)| {
-                let (centre, radius) = patches[e].bounding_sphere();
-                let (x, n) = (patches[e].point(s, t), patches[e].area_vector(s, t).normalize_or_zero());
-                solids.buries_surface_point(x, n, centre, radius)
-            })
-        })
-        .collect()
-}
-
 /// `eps` plus a margin for testing the union of the swept boxes against a corner-source shaft:
 /// `n.c - |n|.h > d + eps` evaluated in f64 errs by a few ulps of the largest coordinate, so a
 /// union box outside by `union_eps` has every box inside it outside by `eps` as computed too.
@@ -716,106 +503,6 @@ fn union_eps(patches: &[Patch], swept: &[Aabb], eps: f64) -> f64 {
         .chain(swept.iter().copied())
         .fold(0.0f64, |m, b| m.max(b.min.abs().max_element()).max(b.max.abs().max_element()));
     eps + 1e-10 * extent
-}
-
-/// `B = E_i + rho_i sum_j sum_l m_j^l b_j^l` at a point of element `i`.
-fn radiosity(sys: &System, i: usize, row: &Row) -> [f64; 3] {
-    let [irradiance] = source_irradiance(sys, [row]);
-    finish(sys, i, row, irradiance)
-}
-
-/// `sum_j sum_l m_j^l b_j^l` of each of `K` rows, each summed in its own order (sources, then
-/// basis functions), the rows interleaved so that their chains of additions overlap.
-fn source_irradiance<const K: usize>(sys: &System, rows: [&Row; K]) -> [[f64; 3]; K] {
-    let nb = sys.basis.len();
-    let b = &sys.solution.b;
-    let mut irradiance = [[0.0; 3]; K];
-    let add = |irradiance: &mut [f64; 3], row: &Row, k: usize| {
-        let m = &row.moments[k * nb..(k + 1) * nb];
-        let j = row.sources[k] as usize;
-        let (b, w) = (&b[j * nb..(j + 1) * nb], sys.source_weights[j]);
-        for l in 0..nb {
-            for c in 0..3 {
-                irradiance[c] += w * m[l] as f64 * b[l][c];
-            }
-        }
-    };
-    let common = rows.iter().map(|r| r.sources.len()).min().unwrap_or(0);
-    for k in 0..common {
-        for (irradiance, row) in irradiance.iter_mut().zip(rows) {
-            add(irradiance, row, k);
-        }
-    }
-    for (irradiance, row) in irradiance.iter_mut().zip(rows) {
-        for k in common..row.sources.len() {
-            add(irradiance, row, k);
-        }
-    }
-    irradiance
-}
-
-/// [`radiosity`] from the sources' part of the irradiance: the feet's added, bounded by the
-/// point's hemisphere, then `E + rho` times it.
-fn finish(sys: &System, i: usize, row: &Row, irradiance: [f64; 3]) -> [f64; 3] {
-    let nb = sys.basis.len();
-    let irradiance = received(sys, row, irradiance);
-    let (rho, e) = (sys.surface_reflectance[i], sys.emission[i * nb]);
-    std::array::from_fn(|c| e[c] + rho[c] * irradiance[c])
-}
-
-/// The irradiance `H` a point receives from the surfaces (the lights' direct light is added
-/// apart), from the sources' part: the feet's added, bounded by the point's hemisphere.
-/// [`finish`] makes `B = E + rho H` of it.
-fn received(sys: &System, row: &Row, mut irradiance: [f64; 3]) -> [f64; 3] {
-    for foot in &row.feet {
-        let mut b = [radiosity(sys, foot.element as usize, &foot.row)];
-        sys.add_direct_light(
-            std::iter::once(Some(((foot.element as usize, foot.at.0, foot.at.1), None))),
-            &mut b,
-        );
-        let [b] = b;
-        let w = foot.weight as f64 * sys.source_weights[foot.element as usize];
-        for c in 0..3 {
-            irradiance[c] += w * b[c];
-        }
-    }
-    let bound = if sys.corner_bound { crate::hemisphere::bound(form_factor_sum(sys, row)) } else { 1.0 };
-    irradiance.map(|x| bound * x)
-}
-
-/// The point's form factors summed over its sources (`m_j^0`, `Gamma_0 = 1`) and feet, each
-/// with its source weight: at most 1 for a point that sees its hemisphere ([`crate::hemisphere`]).
-fn form_factor_sum(sys: &System, row: &Row) -> f64 {
-    let nb = sys.basis.len();
-    let w = &sys.source_weights;
-    let sources: f64 =
-        row.moments.iter().step_by(nb).zip(&row.sources).map(|(&m, &j)| m as f64 * w[j as usize]).sum();
-    sources + row.feet.iter().map(|f| f.weight as f64 * w[f.element as usize]).sum::<f64>()
-}
-
-/// The link's visibility bits from the corner's cell to each of the source's `cells` cells: bit `s`
-/// is `vis.at(corner, s)` (`vis.at(s, corner)` when the corner's element is `b`) is not zero.
-fn mask_row(vis: &Visibility, cells: usize, corner: usize, corner_is_a: bool) -> u16 {
-    if let Visibility::Partial(words) = vis
-        && cells <= 16
-    {
-        // The bits `Visibility::at` reads, without going through f64: the corner's row is
-        // `cells` consecutive bits (one shift while they sit in one word), its column every
-        // `cells`-th bit.
-        let bit = |i: usize| (words[i / 64] >> (i % 64)) & 1;
-        if corner_is_a {
-            let first = corner * cells;
-            if first % 64 + cells <= 64 {
-                return ((words[first / 64] >> (first % 64)) & ((1u64 << cells) - 1)) as u16;
-            }
-            return (0..cells).fold(0u16, |m, s| m | (bit(first + s) as u16) << s);
-        }
-        return (0..cells).fold(0u16, |m, s| m | (bit(s * cells + corner) as u16) << s);
-    }
-    (0..cells).fold(0u16, |bits, s| {
-        let seen = if corner_is_a { vis.at(corner, s, cells) } else { vis.at(s, corner, cells) };
-        bits | (u16::from(seen > 0.0) << s)
-    })
 }
 
 /// What every corner needs: the solved system, its elements' geometry, the occluders, and what
@@ -911,41 +598,4 @@ enum Among<'a> {
 pub(crate) fn behind_plane(x: DVec3, n: DVec3, sub: &Patch, radius: f64) -> bool {
     let margin = 1e-9 * radius;
     sub.corners.iter().all(|p| n.dot(*p - x) < -margin)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The bits read straight from the words are those `Visibility::at` gives, both ways round,
-    /// also for a row that straddles two words.
-    #[test]
-    fn mask_row_is_visibility_at() {
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
-        for m in 1..=4 {
-            let cells = m * m;
-            for _ in 0..50 {
-                let vis = Visibility::Partial(Box::new([next(), next(), next(), next()]));
-                for corner in 0..cells {
-                    for corner_is_a in [true, false] {
-                        let want = (0..cells).fold(0u16, |bits, s| {
-                            let seen =
-                                if corner_is_a { vis.at(corner, s, cells) } else { vis.at(s, corner, cells) };
-                            bits | (u16::from(seen > 0.0) << s)
-                        });
-                        assert_eq!(mask_row(&vis, cells, corner, corner_is_a), want, "m {m} corner {corner}");
-                    }
-                }
-            }
-        }
-        for vis in [Visibility::Full, Visibility::Blocked] {
-            assert_eq!(mask_row(&vis, 16, 3, true), if vis == Visibility::Full { 0xffff } else { 0 });
-        }
-    }
 }

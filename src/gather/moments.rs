@@ -10,7 +10,7 @@ use super::nodes::{GaussNodes, N};
 use super::penumbra::Corners;
 use super::{
     Among, BALL_EDGE, FACING, FOOT_BALL, GAUSS_RATIO, Gather, MAX_DEPTH, Mode, NEAR_FACING, PENUMBRA_DEPTH,
-    Receiver, Touch, behind_plane, foot_on,
+    Receiver, Touch, behind_plane,
 };
 use crate::geometry::{Patch, Rect};
 use crate::kernel::point::{point_kernel, point_to_polygon};
@@ -269,4 +269,10 @@ impl Gather<'_> {
             (Mode::Mask(bits), _) => bits >> cell & 1 == 1,
         }
     }
+}
+
+/// The touch of a source at `foot` (on its plane) when the foot falls on the source.
+fn foot_on(source: &Patch, foot: DVec3, radius: f64) -> Option<Touch> {
+    let (s, t) = source.locate(foot);
+    ((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&t)).then_some(Touch { s, t, radius })
 }

@@ -4,9 +4,7 @@
 
 use glam::DVec3;
 
-use super::{
-    Foot, GAUSS_RATIO, Gather, Linked, Mode, Receiver, Row, Touch, VisKind, mask_row, shading_point,
-};
+use super::{Foot, GAUSS_RATIO, Gather, Linked, Mode, Receiver, Row, Touch, VisKind, shading_point};
 use crate::geometry::{Aabb, Rect};
 use crate::links::ElementId;
 use crate::visibility::shaft::Shaft;
@@ -424,5 +422,67 @@ impl Gather<'_> {
     /// The link's visibility bits from the corner's cell to each of the source's cells.
     pub(super) fn mask_row(&self, vis: &Visibility, corner: usize, corner_is_a: bool) -> u16 {
         mask_row(vis, self.cells_per_axis * self.cells_per_axis, corner, corner_is_a)
+    }
+}
+
+/// The link's visibility bits from the corner's cell to each of the source's `cells` cells: bit `s`
+/// is `vis.at(corner, s)` (`vis.at(s, corner)` when the corner's element is `b`) is not zero.
+fn mask_row(vis: &Visibility, cells: usize, corner: usize, corner_is_a: bool) -> u16 {
+    if let Visibility::Partial(words) = vis
+        && cells <= 16
+    {
+        // The bits `Visibility::at` reads, without going through f64: the corner's row is
+        // `cells` consecutive bits (one shift while they sit in one word), its column every
+        // `cells`-th bit.
+        let bit = |i: usize| (words[i / 64] >> (i % 64)) & 1;
+        if corner_is_a {
+            let first = corner * cells;
+            if first % 64 + cells <= 64 {
+                return ((words[first / 64] >> (first % 64)) & ((1u64 << cells) - 1)) as u16;
+            }
+            return (0..cells).fold(0u16, |m, s| m | (bit(first + s) as u16) << s);
+        }
+        return (0..cells).fold(0u16, |m, s| m | (bit(s * cells + corner) as u16) << s);
+    }
+    (0..cells).fold(0u16, |bits, s| {
+        let seen = if corner_is_a { vis.at(corner, s, cells) } else { vis.at(s, corner, cells) };
+        bits | (u16::from(seen > 0.0) << s)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The bits read straight from the words are those `Visibility::at` gives, both ways round,
+    /// also for a row that straddles two words.
+    #[test]
+    fn mask_row_is_visibility_at() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        for m in 1..=4 {
+            let cells = m * m;
+            for _ in 0..50 {
+                let vis = Visibility::Partial(Box::new([next(), next(), next(), next()]));
+                for corner in 0..cells {
+                    for corner_is_a in [true, false] {
+                        let want = (0..cells).fold(0u16, |bits, s| {
+                            let seen =
+                                if corner_is_a { vis.at(corner, s, cells) } else { vis.at(s, corner, cells) };
+                            bits | (u16::from(seen > 0.0) << s)
+                        });
+                        assert_eq!(mask_row(&vis, cells, corner, corner_is_a), want, "m {m} corner {corner}");
+                    }
+                }
+            }
+        }
+        for vis in [Visibility::Full, Visibility::Blocked] {
+            assert_eq!(mask_row(&vis, 16, 3, true), if vis == Visibility::Full { 0xffff } else { 0 });
+        }
     }
 }
