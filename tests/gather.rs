@@ -234,6 +234,71 @@ fn kept_gather_equals_fresh_gather() {
     }
 }
 
+/// The lights' direct light at the corners is kept too: a block sliding over a floor under a
+/// World and a soft Point light (frames 1-3, then still), each frame's kept gather equals a fresh
+/// gather of the same frame, and once nothing moved every corner's shadow ray is taken from the
+/// last gather's.
+#[test]
+fn kept_direct_light_at_corners_equals_a_fresh_gathers() {
+    use galerkin_radiosity::animation::{AnimationState, Outcome, advance};
+    use galerkin_radiosity::gather::CornerGather;
+    use galerkin_radiosity::lights::{Light, LightKind, World};
+    use galerkin_radiosity::visibility::Occluders;
+    let p = DVec3::new;
+    let floor = scenes::subdivided_quad(
+        "Floor",
+        [p(-2., -2., 0.), p(2., -2., 0.), p(2., 2., 0.), p(-2., 2., 0.)],
+        6,
+        0,
+    );
+    let mut block = scenes::box_mesh("Block", p(-0.3, -0.3, 0.0), p(0.3, 0.3, 0.6), 2, false, 0);
+    block.animation = scenes::translation_keys(&[(1.0, p(-0.8, 0.0, 0.0)), (3.0, p(0.8, 0.0, 0.0))]);
+    let mut lamp =
+        Light::new("Lamp", LightKind::Point, glam::DMat4::from_translation(p(0.4, -0.6, 1.5)), 60.0);
+    lamp.base.radius = 0.1;
+    let settings = Settings { basis_order: 1, tolerance: 1e-6, ..Settings::default() };
+    let scene = Scene::new(settings, (1, 4), materials(0.6, 0.0), vec![vec![]; 2], vec![floor, block])
+        .unwrap()
+        .with_lights(vec![lamp])
+        .unwrap()
+        .with_world(Some(World::uniform([0.4, 0.5, 0.6], 1.0)))
+        .unwrap();
+    let mut sys = solved(&scene);
+    sys.gather_corners(&scene, 1.0, &no_progress).unwrap();
+    let mut state = AnimationState::new(sys.elements.len(), true);
+    for frame in 2..=4 {
+        let f = frame as f64;
+        assert!(matches!(
+            advance(&mut sys, &mut state, &scene, f, &no_progress).unwrap(),
+            Outcome::Updated(_)
+        ));
+        let kept = sys.gather_corners(&scene, f, &no_progress).unwrap();
+        let patches: Vec<_> = sys.elements.iter().map(|e| e.patch).collect();
+        let occluders = Occluders::new(&patches, scene.settings.visibility_samples);
+        let (fresh, _, all) =
+            CornerGather::run(&sys, &scene, f, Some(&occluders), None, None, &no_progress).unwrap();
+        let mut worst: f64 = 0.0;
+        for (r, want) in sys.face_results(&scene, f).iter().zip(&fresh) {
+            for (a, b) in r.corner_radiosity.iter().zip(want) {
+                // Relative: the kept gather's corners are read back as f32.
+                let d = (0..3).map(|c| (a[c] as f64 - b[c]).abs() / b[c].abs().max(1e-3)).fold(0.0, f64::max);
+                worst = worst.max(d);
+            }
+        }
+        eprintln!(
+            "frame {frame}: corners' shadow rays {} traced, {} taken; worst relative difference {worst:.1e}",
+            kept.direct_rays_traced, kept.direct_rays_taken
+        );
+        assert!(worst <= 1e-6, "frame {frame}: {worst}");
+        assert_eq!(kept.direct_rays_traced + kept.direct_rays_taken, all.direct_rays_traced);
+        if frame == 4 {
+            assert!(kept.direct_rays_traced == 0 && kept.direct_rays_taken > 0, "nothing moved: {kept:?}");
+        } else {
+            assert!(kept.direct_rays_taken > 0, "frame {frame}: no corner ray taken");
+        }
+    }
+}
+
 /// A bake cancelled while its corners are being gathered leaves the last frame readable, and the
 /// next frame solves as if nothing had happened.
 #[test]

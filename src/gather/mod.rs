@@ -149,6 +149,10 @@ pub struct CornerGather {
     /// The irradiance `H` at every face corner, as the corners of [`CornerGather::run`]'s
     /// values: `B = E + rho H` (the lights' direct light included; 0 at a buried point).
     irradiance: CornerValues,
+    /// The lights this gather's direct light was taken from, and per point its shadow rays'
+    /// outcomes, for the next gather to take where no move changed them ([`crate::lights::kept`]).
+    lights: Option<std::sync::Arc<crate::lights::direct::DirectLight>>,
+    direct_outcomes: Vec<crate::lights::kept::Outcomes>,
 }
 
 /// What this frame's gather did.
@@ -159,6 +163,10 @@ pub struct GatherStats {
     pub moments: usize,
     /// Moments computed this frame (all of them on a first frame).
     pub recomputed: usize,
+    /// The lights' shadow rays at the points traced, and taken from the last gather's
+    /// ([`crate::lights::kept`]).
+    pub direct_rays_traced: u64,
+    pub direct_rays_taken: u64,
 }
 
 /// One point's sources, sorted by element, with how their visibility was decided and their
@@ -371,6 +379,10 @@ impl CornerGather {
                 kinds
             },
         };
+        // The lights' direct light at every point, its shadow rays taken from the last gather's
+        // where no move can have changed them.
+        let (direct, direct_outcomes, direct_rays) =
+            direct_at_points(sys, &points, previous.as_ref(), &moved, &swept);
         let kept_rows: Vec<Option<Row>> = match previous {
             Some(p) => p.rows.into_iter().map(Some).collect(),
             None => vec![None; points.len()],
@@ -383,57 +395,55 @@ impl CornerGather {
         type Gathered = (Row, usize, [[f64; 3]; 2]);
         let mut gathered: Vec<Gathered> =
             crate::budget::try_vec(points.len(), "the corner gather's results")?;
-        gathered.par_extend(points.par_chunks(4).zip(kept_rows.into_par_iter().chunks(4)).flat_map_iter(
-            |(points, kept)| {
-                stop.done.fetch_add(points.len(), std::sync::atomic::Ordering::Relaxed);
-                if stop.stopped() {
-                    return Vec::new();
+        let chunks = points.par_chunks(4).zip(direct.par_chunks(4)).zip(kept_rows.into_par_iter().chunks(4));
+        gathered.par_extend(chunks.flat_map_iter(|((points, direct), kept)| {
+            stop.done.fetch_add(points.len(), std::sync::atomic::Ordering::Relaxed);
+            if stop.stopped() {
+                return Vec::new();
+            }
+            let rows: Vec<(Row, usize)> = points
+                .iter()
+                .zip(kept)
+                .map(|(point, kept)| match point.at {
+                    Some((e, s, t)) => gather.row(e, s, t, point.normal, kept, true),
+                    None => (Row::default(), 0),
+                })
+                .collect();
+            let mut values: Vec<[f64; 3]> = points
+                .iter()
+                .map(|p| match p.at {
+                    Some(_) => [0.0; 3],
+                    None => p.exitance(scene, frame),
+                })
+                .collect();
+            let at: Vec<(usize, usize)> =
+                points.iter().enumerate().filter_map(|(k, p)| Some((k, p.at?.0))).collect();
+            // `H`, the light the point receives (without its own emission and reflectance),
+            // beside `B = E + rho H`.
+            let mut light = vec![[0.0; 3]; points.len()];
+            let sums: Vec<[f64; 3]> = if let [a, b, c, d] = at[..] {
+                source_irradiance(sys, [&rows[a.0].0, &rows[b.0].0, &rows[c.0].0, &rows[d.0].0]).to_vec()
+            } else {
+                at.iter().map(|&(k, _)| source_irradiance(sys, [&rows[k].0])[0]).collect()
+            };
+            for (&(k, e), sum) in at.iter().zip(sums) {
+                light[k] = received(sys, &rows[k].0, sum);
+                let (rho, emission) = (sys.surface_reflectance[e], sys.emission[e * nb]);
+                values[k] = std::array::from_fn(|c| emission[c] + rho[c] * light[k][c]);
+            }
+            for (k, (p, direct)) in points.iter().zip(direct).enumerate() {
+                let (Some(at), Some(direct)) = (p.at, direct) else { continue };
+                for c in 0..3 {
+                    light[k][c] += direct[c];
+                    values[k][c] += sys.surface_reflectance[at.0][c] * direct[c];
                 }
-                let rows: Vec<(Row, usize)> = points
-                    .iter()
-                    .zip(kept)
-                    .map(|(point, kept)| match point.at {
-                        Some((e, s, t)) => gather.row(e, s, t, point.normal, kept, true),
-                        None => (Row::default(), 0),
-                    })
-                    .collect();
-                let mut values: Vec<[f64; 3]> = points
-                    .iter()
-                    .map(|p| match p.at {
-                        Some(_) => [0.0; 3],
-                        None => p.exitance(scene, frame),
-                    })
-                    .collect();
-                let at: Vec<(usize, usize)> =
-                    points.iter().enumerate().filter_map(|(k, p)| Some((k, p.at?.0))).collect();
-                // `H`, the light the point receives (without its own emission and reflectance),
-                // beside `B = E + rho H`.
-                let mut light = vec![[0.0; 3]; points.len()];
-                let sums: Vec<[f64; 3]> = if let [a, b, c, d] = at[..] {
-                    source_irradiance(sys, [&rows[a.0].0, &rows[b.0].0, &rows[c.0].0, &rows[d.0].0]).to_vec()
-                } else {
-                    at.iter().map(|&(k, _)| source_irradiance(sys, [&rows[k].0])[0]).collect()
-                };
-                for (&(k, e), sum) in at.iter().zip(sums) {
-                    light[k] = received(sys, &rows[k].0, sum);
-                    let (rho, emission) = (sys.surface_reflectance[e], sys.emission[e * nb]);
-                    values[k] = std::array::from_fn(|c| emission[c] + rho[c] * light[k][c]);
-                }
-                for (k, p) in points.iter().enumerate() {
-                    let Some(at) = p.at else { continue };
-                    let Some(direct) = sys.direct_irradiance(at, p.normal) else { break };
-                    for c in 0..3 {
-                        light[k][c] += direct[c];
-                        values[k][c] += sys.surface_reflectance[at.0][c] * direct[c];
-                    }
-                }
-                rows.into_iter()
-                    .zip(values)
-                    .zip(light)
-                    .map(|(((row, n), v), h)| (row, n, [v, h]))
-                    .collect::<Vec<_>>()
-            },
-        ));
+            }
+            rows.into_iter()
+                .zip(values)
+                .zip(light)
+                .map(|(((row, n), v), h)| (row, n, [v, h]))
+                .collect::<Vec<_>>()
+        }));
         stop.outcome()?;
         let mut values: Vec<[f64; 3]> = crate::budget::try_vec(points.len(), "the corner gather's results")?;
         values.extend(gathered.iter().map(|g| g.2[0]));
@@ -456,6 +466,8 @@ impl CornerGather {
             points: points.len(),
             moments: rows.iter().map(|(r, _)| r.moment_count()).sum(),
             recomputed: rows.iter().map(|(_, n)| n).sum(),
+            direct_rays_traced: direct_rays.traced,
+            direct_rays_taken: direct_rays.taken,
         };
         let per_object = |values: &[[f64; 3]]| {
             let mut out: CornerValues = Vec::with_capacity(corners_per_object.len());
@@ -480,9 +492,52 @@ impl CornerGather {
             hull,
             buried,
             irradiance,
+            lights: sys.lights.clone(),
+            direct_outcomes,
         };
         Ok((out, kept, stats))
     }
+}
+
+/// The lights' direct irradiance at every point (`None` off the elements or without lights),
+/// and its shadow rays' outcomes per point: taken from `previous`'s where its lights were placed
+/// as these, the point's element did not move (`moved`) and no box in `swept` meets a ray
+/// ([`crate::lights::kept`]), bit for bit what tracing them gives.
+fn direct_at_points(
+    sys: &System,
+    points: &[CornerPoint],
+    previous: Option<&CornerGather>,
+    moved: &[bool],
+    swept: &[Aabb],
+) -> (Vec<Option<[f64; 3]>>, Vec<crate::lights::kept::Outcomes>, crate::lights::direct::KeptRays) {
+    let Some(lights) = sys.lights.as_deref() else {
+        return (vec![None; points.len()], Vec::new(), Default::default());
+    };
+    // (`previous` holds the same points: the caller kept it only then.)
+    let last = previous.filter(|p| {
+        p.direct_outcomes.len() == points.len() && p.lights.as_deref().is_some_and(|l| l.same_sources(lights))
+    });
+    let swept = lights.swept_for_rays(swept);
+    let each: Vec<_> = points
+        .par_iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let Some((e, s, t)) = p.at else { return (None, Default::default(), Default::default()) };
+            let kept = last.filter(|_| !moved[e]).map(|l| &l.direct_outcomes[k]);
+            let (x, n) = shading_point(&sys.elements[e].patch, s, t, p.normal);
+            let (irradiance, outcomes, rays) = lights.irradiance_keeping(x, n, e as u32, kept, &swept);
+            (Some(irradiance), outcomes, rays)
+        })
+        .collect();
+    let mut rays = crate::lights::direct::KeptRays::default();
+    let mut direct = Vec::with_capacity(each.len());
+    let mut outcomes = Vec::with_capacity(each.len());
+    for (d, o, r) in each {
+        (rays.traced, rays.taken) = (rays.traced + r.traced, rays.taken + r.taken);
+        direct.push(d);
+        outcomes.push(o);
+    }
+    (direct, outcomes, rays)
 }
 
 impl CornerGather {

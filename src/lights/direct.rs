@@ -560,11 +560,7 @@ impl DirectLight {
         let nb = basis.len();
         let rule = GaussLegendre::new(PROJECTION_POINTS);
         let last = last.filter(|l| l.lights.same_sources(self) && l.lights.outcomes.len() == patches.len());
-        // Grown by a hair: a ray that grazes a moved triangle's old or new place is traced.
-        // (An empty box meets no segment, though the slab test would say it meets all.)
-        let swept: Vec<Aabb> = last.map_or_else(Vec::new, |l| {
-            l.swept.iter().filter(|b| b.min.cmple(b.max).all()).map(|b| b.inflated(1e-9 * self.far)).collect()
-        });
+        let swept = last.map_or_else(Vec::new, |l| self.swept_for_rays(l.swept));
         let this = &*self;
         // One element's coefficients, its rays' outcomes, and how many were traced and taken.
         struct Projected {
@@ -612,9 +608,34 @@ impl DirectLight {
         self.rays
     }
 
+    /// [`DirectLight::irradiance`] at a gathered point, recording its shadow rays' outcomes and
+    /// taking those of `last` (the same point's at the last gather, with lights placed as these:
+    /// [`DirectLight::same_sources`]) whose segments meet none of `swept` ([`super::kept`]): the
+    /// same irradiance as [`DirectLight::irradiance`], bit for bit.
+    pub(crate) fn irradiance_keeping(
+        &self,
+        x: DVec3,
+        n: DVec3,
+        e: u32,
+        last: Option<&Outcomes>,
+        swept: &[Aabb],
+    ) -> ([f64; 3], Outcomes, KeptRays) {
+        let mut probe = Probe::new(last, swept, true);
+        let irradiance = self.irradiance_with(&mut probe, x, n, e, self.world_axis.0, self.soft_corner);
+        let rays = KeptRays { traced: probe.traced, taken: probe.taken, bytes: 0 };
+        (irradiance, probe.into_record().unwrap_or_default(), rays)
+    }
+
+    /// `boxes` as the keeping of shadow rays tests them: grown by a hair of the rays' reach (a
+    /// ray grazing a moved triangle's old or new place is traced), empty ones left out (the slab
+    /// test would say an empty box meets every segment).
+    pub(crate) fn swept_for_rays(&self, boxes: &[Aabb]) -> Vec<Aabb> {
+        boxes.iter().filter(|b| b.min.cmple(b.max).all()).map(|b| b.inflated(1e-9 * self.far)).collect()
+    }
+
     /// Whether `other` places the same lights, World and emitters' backs as `self` and casts their
     /// rays alike: its shadow rays from an unmoved element are `self`'s.
-    fn same_sources(&self, other: &DirectLight) -> bool {
+    pub(crate) fn same_sources(&self, other: &DirectLight) -> bool {
         let same_world = match (&self.world, &other.world) {
             (None, None) => true,
             (Some(a), Some(b)) => a.same_as(b),

@@ -43,7 +43,7 @@
 
 mod backs;
 pub mod direct;
-mod kept;
+pub(crate) mod kept;
 pub mod world;
 
 pub use world::{Environment, World, WorldKey};
