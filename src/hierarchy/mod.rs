@@ -139,6 +139,10 @@ fn splits_for(hs: &HierarchySettings) -> pair_tree::Splits {
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct HierarchyStats {
     pub faces: usize,
+    /// The lights' shadow rays of the leaves' projections: traced, and taken from the frame
+    /// before where no move changed them ([`solve::LeafRays`]).
+    pub direct_rays_traced: u64,
+    pub direct_rays_taken: u64,
     pub nodes: usize,
     pub leaves: usize,
     pub links: usize,
@@ -218,6 +222,10 @@ pub struct HierarchicalFrame {
     /// When this frame passed on an earlier frame's kept gather without gathering (a preview):
     /// what moved since that frame, which the next gather's kept values must have been spared.
     pub moved_since_gather: Option<touch::Moves>,
+    /// The lights as placed for this frame, and its leaves' shadow rays toward them, for the next
+    /// frame to take where no move changed them ([`solve::LeafRays`]).
+    pub direct: Option<DirectLight>,
+    pub leaf_rays: solve::LeafRays,
 }
 
 /// Solves `scene` at `frame` on the hierarchy, from scratch. Runs on the current rayon pool;
@@ -251,15 +259,28 @@ pub fn solve_frame(
         tree.split_for_contacts(&parts);
     }
     let mut state = State::new(&tree);
-    state.add_sources(&tree, &lit.emission, lit.lights.as_ref());
+    let mut rays = solve::LeafRays::default();
+    state.add_sources_keeping(&tree, &lit.emission, lit.lights.as_ref(), &mut rays);
     state.start_from_sources(&tree);
     let oracle = Oracle::of(hs, state.source_power(&tree), total_area);
     let mut hierarchy = Hierarchy::new(tree, oracle, splits_for(hs), hs.moves);
     let mut stats = HierarchyStats { faces: hierarchy.tree.faces.len(), ..Default::default() };
     let rule = GaussLegendre::new(scene.settings.quadrature_order);
     let ctx = link_context(scene, hs, &rule, lit.occluders.as_ref());
-    link_and_solve(&mut hierarchy, &mut state, &ctx, &lit, hs, Start::Root, &mut stats, progress)?;
-    finish(hierarchy, state, stats, &lit, scene, frame, hs, None, progress)
+    link_and_solve(
+        &mut hierarchy,
+        &mut state,
+        &ctx,
+        (&lit, &mut rays),
+        hs,
+        Start::Root,
+        &mut stats,
+        progress,
+    )?;
+    let mut next = finish(hierarchy, state, stats, &lit, scene, frame, hs, None, progress)?;
+    (next.stats.direct_rays_traced, next.stats.direct_rays_taken) = (rays.traced, rays.taken);
+    (next.direct, next.leaf_rays) = (lit.lights, rays.into_kept());
+    Ok(next)
 }
 
 /// Each face's reflectance, in `faces`' order.
@@ -344,7 +365,7 @@ fn link_and_solve(
     hierarchy: &mut Hierarchy,
     state: &mut State,
     ctx: &LinkContext,
-    lit: &Lighting,
+    (lit, rays): (&Lighting, &mut solve::LeafRays),
     hs: &HierarchySettings,
     start: Start,
     stats: &mut HierarchyStats,
@@ -395,7 +416,7 @@ fn link_and_solve(
             }
         }
         state.grow(&hierarchy.tree)?;
-        state.add_sources(&hierarchy.tree, &lit.emission, lit.lights.as_ref());
+        state.add_sources_keeping(&hierarchy.tree, &lit.emission, lit.lights.as_ref(), rays);
         let linking = t.elapsed().as_secs_f64();
         stats.link_seconds += linking;
         *(if round == 0 { &mut stats.first_link_seconds } else { &mut stats.relink_seconds }) += linking;
@@ -482,7 +503,16 @@ fn finish(
         stats.kept_gather_bytes = g.kept.as_ref().map_or(0, |k| k.bytes());
         kept_gather = g.kept;
     }
-    Ok(HierarchicalFrame { hierarchy, state, stats, corners, kept_gather, moved_since_gather: None })
+    Ok(HierarchicalFrame {
+        hierarchy,
+        state,
+        stats,
+        corners,
+        kept_gather,
+        moved_since_gather: None,
+        direct: None,
+        leaf_rays: Default::default(),
+    })
 }
 
 impl HierarchicalFrame {

@@ -21,7 +21,9 @@ use super::tree::{Kind, NodeId, Tree};
 use super::two_scale::TwoScale;
 use crate::budget;
 use crate::error::{Error, Result};
-use crate::lights::direct::DirectLight;
+use crate::geometry::Aabb;
+use crate::lights::direct::{DirectLight, KeptRays};
+use crate::lights::kept::Outcomes;
 
 /// The radiosity state of every node.
 #[derive(Clone)]
@@ -41,6 +43,52 @@ pub struct State {
     /// ([`State::bound_leaves`]); empty: 1 everywhere.
     bound: Vec<f64>,
     two_scale: TwoScale,
+}
+
+/// The lights' shadow rays of the leaves' projections ([`crate::lights::kept`]): this frame's
+/// outcomes per node, and the last frame's with what moved since, taken where no move can have
+/// changed them.
+#[derive(Default)]
+pub struct LeafRays {
+    /// Per node, its projection's outcomes this frame (empty for inner nodes and clusters).
+    now: Vec<Outcomes>,
+    last: Option<LastRays>,
+    /// Rays traced and taken from the last frame's, over this frame's projections.
+    pub traced: u64,
+    pub taken: u64,
+}
+
+struct LastRays {
+    outcomes: Vec<Outcomes>,
+    /// Per face, whether it moved since.
+    moved_faces: Vec<bool>,
+    /// Boxes holding the moved faces' old and new places.
+    swept: Vec<Aabb>,
+}
+
+impl LeafRays {
+    /// The rays to keep after `last`, this frame's of a tree cloned from that frame's (node ids
+    /// hold), `lights` placed as `last_lights` were ([`DirectLight::same_sources`]); otherwise
+    /// none are taken.
+    pub fn after(
+        last: LeafRays,
+        (lights, last_lights): (Option<&DirectLight>, Option<&DirectLight>),
+        moved_faces: &[bool],
+        swept: &[Aabb],
+    ) -> Self {
+        let same = matches!((lights, last_lights), (Some(a), Some(b)) if a.same_sources(b));
+        let last = same.then(|| LastRays {
+            outcomes: last.now,
+            moved_faces: moved_faces.to_vec(),
+            swept: swept.to_vec(),
+        });
+        LeafRays { now: Vec::new(), last, traced: 0, taken: 0 }
+    }
+
+    /// This frame's outcomes alone (the last frame's dropped), for the frame to keep.
+    pub fn into_kept(self) -> LeafRays {
+        LeafRays { now: self.now, ..Default::default() }
+    }
 }
 
 /// Counts of one solve.
@@ -127,6 +175,18 @@ impl State {
     /// Computes the sources of every leaf that has none yet: the face material's exitance on
     /// `k = 0` and the lights' `rho E_d` projected on the leaf's basis (eq. 4).
     pub fn add_sources(&mut self, tree: &Tree, emission: &[[f64; 3]], lights: Option<&DirectLight>) {
+        self.add_sources_keeping(tree, emission, lights, &mut LeafRays::default());
+    }
+
+    /// [`State::add_sources`], keeping the leaves' shadow rays in `rays` for the next frame and
+    /// taking its last frame's where they hold ([`LeafRays`]): the same sources, bit for bit.
+    pub fn add_sources_keeping(
+        &mut self,
+        tree: &Tree,
+        emission: &[[f64; 3]],
+        lights: Option<&DirectLight>,
+        rays: &mut LeafRays,
+    ) {
         let nb = self.nb;
         let todo: Vec<usize> = (0..tree.nodes.len())
             .filter(|&id| {
@@ -136,22 +196,43 @@ impl State {
             })
             .collect();
         let rule = DirectLight::projection_rule();
-        let computed: Vec<Vec<[f64; 3]>> = todo
+        let (last, swept) = match (&rays.last, lights) {
+            (Some(last), Some(lights)) => (Some(last), lights.swept_for_rays(&last.swept)),
+            _ => (None, Vec::new()),
+        };
+        let computed: Vec<(Vec<[f64; 3]>, Outcomes, KeptRays)> = todo
             .par_iter()
             .map(|&id| {
                 let s = tree.nodes[id].surface().expect("leaves are surfaces");
                 let f = s.face as usize;
                 let mut out = vec![[0.0; 3]; nb];
                 out[0] = emission[f];
-                if let Some(lights) = lights {
-                    lights.project_onto(&s.patch, s.face, tree.reflectance[f], tree.basis, &rule, &mut out);
-                }
-                out
+                let Some(lights) = lights else { return (out, Outcomes::default(), KeptRays::default()) };
+                // A node's id and patch hold from frame to frame where its face did not move.
+                let kept = last.filter(|l| !l.moved_faces[f]).and_then(|l| l.outcomes.get(id));
+                let rho = tree.reflectance[f];
+                let (outcomes, counts) = lights.project_onto_keeping(
+                    &s.patch,
+                    s.face,
+                    rho,
+                    tree.basis,
+                    &rule,
+                    &mut out,
+                    (kept, &swept),
+                );
+                (out, outcomes, counts)
             })
             .collect();
-        for (&id, src) in todo.iter().zip(computed) {
+        if lights.is_some() && rays.now.len() < tree.nodes.len() {
+            rays.now.resize_with(tree.nodes.len(), Outcomes::default);
+        }
+        for (&id, (src, outcomes, counts)) in todo.iter().zip(computed) {
             self.sources[id * nb..(id + 1) * nb].copy_from_slice(&src);
             self.has_sources[id] = true;
+            if lights.is_some() {
+                rays.now[id] = outcomes;
+            }
+            (rays.traced, rays.taken) = (rays.traced + counts.traced, rays.taken + counts.taken);
         }
     }
 

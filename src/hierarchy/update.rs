@@ -88,7 +88,11 @@ pub fn update_frame(
 
     let mut state = previous.state.clone();
     state.clear_sources();
-    state.add_sources(&tree, &lit.emission, lit.lights.as_ref());
+    // The leaves' shadow rays toward the lights: the last frame's taken where no move changed them.
+    let last_rays = std::mem::take(&mut previous.leaf_rays);
+    let lights = (lit.lights.as_ref(), previous.direct.as_ref());
+    let mut rays = super::solve::LeafRays::after(last_rays, lights, &moves.faces, &moves.swept);
+    state.add_sources_keeping(&tree, &lit.emission, lit.lights.as_ref(), &mut rays);
     state.refresh(&tree);
     let oracle = Oracle::of(hs, state.source_power(&tree), total_area);
     // What the last frame's verdicts were decided at holds for this oracle only if it decides
@@ -146,7 +150,7 @@ pub fn update_frame(
         &mut hierarchy,
         &mut state,
         &ctx,
-        &lit,
+        (&lit, &mut rays),
         hs,
         Start::Pairs(work),
         &mut stats,
@@ -163,6 +167,8 @@ pub fn update_frame(
     let changes = gather::Changes::of(if since.is_some() { since_touch.as_ref() } else { touch.as_ref() });
     let kept = last_gather.as_ref().map(|k| (k, changes));
     let mut next = super::finish(hierarchy, state, stats, &lit, scene, frame, hs, kept, progress)?;
+    (next.stats.direct_rays_traced, next.stats.direct_rays_taken) = (rays.traced, rays.taken);
+    (next.direct, next.leaf_rays) = (lit.lights, rays.into_kept());
     if !hs.corner_gather && last_gather.is_some() {
         next.kept_gather = last_gather;
         next.moved_since_gather = Some(since.unwrap_or(moves));

@@ -664,6 +664,27 @@ impl DirectLight {
         self.project_onto_with(&mut Probe::tracing(), p, owner, rho, basis, rule, coeffs);
     }
 
+    /// [`DirectLight::project_onto`], recording its shadow rays' outcomes and taking those of
+    /// `last` (the same patch's at the last frame, with lights placed as these:
+    /// [`DirectLight::same_sources`]) whose segments meet none of `swept` (made by
+    /// [`DirectLight::swept_for_rays`]): the same coefficients, bit for bit ([`super::kept`]).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn project_onto_keeping(
+        &self,
+        p: &Patch,
+        owner: u32,
+        rho: [f64; 3],
+        basis: Basis,
+        rule: &GaussLegendre,
+        coeffs: &mut [[f64; 3]],
+        (last, swept): (Option<&Outcomes>, &[Aabb]),
+    ) -> (Outcomes, KeptRays) {
+        let mut probe = Probe::new(last, swept, true);
+        self.project_onto_with(&mut probe, p, owner, rho, basis, rule, coeffs);
+        let rays = KeptRays { traced: probe.traced, taken: probe.taken, bytes: 0 };
+        (probe.into_record().unwrap_or_default(), rays)
+    }
+
     /// [`DirectLight::project_onto`] with its shadow rays answered by `probe`.
     #[allow(clippy::too_many_arguments)]
     fn project_onto_with(
