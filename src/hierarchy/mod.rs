@@ -224,7 +224,7 @@ pub struct HierarchicalFrame {
     pub moved_since_gather: Option<touch::Moves>,
     /// The lights as placed for this frame, and its leaves' shadow rays toward them, for the next
     /// frame to take where no move changed them ([`solve::LeafRays`]).
-    pub direct: Option<DirectLight>,
+    pub direct: Option<std::sync::Arc<DirectLight>>,
     pub leaf_rays: solve::LeafRays,
 }
 
@@ -279,7 +279,10 @@ pub fn solve_frame(
     )?;
     let mut next = finish(hierarchy, state, stats, &lit, scene, frame, hs, None, progress)?;
     (next.stats.direct_rays_traced, next.stats.direct_rays_taken) = (rays.traced, rays.taken);
-    (next.direct, next.leaf_rays) = (lit.lights, rays.into_kept());
+    (next.direct, next.leaf_rays) = (lit.lights.map(std::sync::Arc::new), rays.into_kept());
+    if let Some(k) = &mut next.kept_gather {
+        k.lights = next.direct.clone();
+    }
     Ok(next)
 }
 

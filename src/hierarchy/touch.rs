@@ -109,6 +109,11 @@ impl<'a> Touch<'a> {
         Self { moves, holds, boxes, below, eps }
     }
 
+    /// The boxes the moves swept (their faces' old and new places).
+    pub fn swept(&self) -> &[Aabb] {
+        &self.moves.swept
+    }
+
     /// Per node: it holds a moved face.
     pub fn holds(&self) -> &[bool] {
         &self.holds

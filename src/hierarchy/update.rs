@@ -90,7 +90,7 @@ pub fn update_frame(
     state.clear_sources();
     // The leaves' shadow rays toward the lights: the last frame's taken where no move changed them.
     let last_rays = std::mem::take(&mut previous.leaf_rays);
-    let lights = (lit.lights.as_ref(), previous.direct.as_ref());
+    let lights = (lit.lights.as_ref(), previous.direct.as_deref());
     let mut rays = super::solve::LeafRays::after(last_rays, lights, &moves.faces, &moves.swept);
     state.add_sources_keeping(&tree, &lit.emission, lit.lights.as_ref(), &mut rays);
     state.refresh(&tree);
@@ -168,7 +168,11 @@ pub fn update_frame(
     let kept = last_gather.as_ref().map(|k| (k, changes));
     let mut next = super::finish(hierarchy, state, stats, &lit, scene, frame, hs, kept, progress)?;
     (next.stats.direct_rays_traced, next.stats.direct_rays_taken) = (rays.traced, rays.taken);
-    (next.direct, next.leaf_rays) = (lit.lights, rays.into_kept());
+    (next.direct, next.leaf_rays) = (lit.lights.map(std::sync::Arc::new), rays.into_kept());
+    if let Some(k) = &mut next.kept_gather {
+        // (Gathered this frame; a kept gather passed on below keeps its own frame's lights.)
+        k.lights = next.direct.clone();
+    }
     if !hs.corner_gather && last_gather.is_some() {
         next.kept_gather = last_gather;
         next.moved_since_gather = Some(since.unwrap_or(moves));

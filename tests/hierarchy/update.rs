@@ -584,10 +584,10 @@ fn the_furnace_gathers_again_only_what_changed() {
     }
 }
 
-/// The leaves' direct light is kept between frames: a block sliding over a floor under a World,
-/// a soft Point light and a Sun (frames 1-3, then still), each updated frame's leaf sources equal
-/// a fresh projection of the same leaves bit for bit, and once nothing moves every leaf takes its
-/// shadow rays from the frame before.
+/// The leaves' and the corners' direct light is kept between frames: a block sliding over a floor
+/// under a World, a soft Point light and a Sun (frames 1-3, then still), each updated frame's leaf
+/// sources equal a fresh projection of the same leaves and its corners a fresh gather's, bit for
+/// bit, and once nothing moves every leaf takes its shadow rays from the frame before.
 #[test]
 fn kept_leaf_rays_give_the_sources_a_fresh_projection_gives() {
     use galerkin_radiosity::lights::direct::DirectLight;
@@ -610,7 +610,12 @@ fn kept_leaf_rays_give_the_sources_a_fresh_projection_gives() {
         .unwrap()
         .with_world(Some(World::uniform([0.4, 0.5, 0.6], 1.0)))
         .unwrap();
-    let hs = HierarchySettings { keep_pair_tree: true, ..Default::default() };
+    let hs = HierarchySettings {
+        keep_pair_tree: true,
+        keep_gather: true,
+        corner_gather: true,
+        ..Default::default()
+    };
     let mut h = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
     for frame in 2..=4 {
         let f = frame as f64;
@@ -636,6 +641,14 @@ fn kept_leaf_rays_give_the_sources_a_fresh_projection_gives() {
             );
             compared += 1;
         }
+        let inputs = galerkin_radiosity::hierarchy::gather::Inputs::new(&next.hierarchy, &next.state, &lit);
+        let mode = galerkin_radiosity::hierarchy::gather::Mode::Fast;
+        let fresh =
+            galerkin_radiosity::hierarchy::gather::corners_with(&inputs, &scene, f, &no_progress, mode)
+                .unwrap();
+        let (radiosity, irradiance) = next.corners.as_ref().expect("gathered");
+        assert_eq!(radiosity, &fresh.radiosity, "frame {frame}: B");
+        assert_eq!(irradiance, &fresh.irradiance, "frame {frame}: H");
         let s = &next.stats;
         eprintln!(
             "frame {frame}: {compared} leaves, direct rays {} traced, {} taken",

@@ -33,11 +33,16 @@
 //! takes 2.4x less (docs/benchmarks.md, `box-gather`), and what it still computes is mostly the
 //! light's own sources, which change every frame.
 
+use std::sync::Arc;
+
 use glam::DVec3;
 
 use super::Mode;
+use crate::geometry::Aabb;
 use crate::hierarchy::touch::{Reach, Touch};
 use crate::hierarchy::tree::{NodeId, Tree};
+use crate::lights::direct::DirectLight;
+use crate::lights::kept::Outcomes;
 
 /// At most this many bytes are kept, whatever the memory budget: points past it are gathered
 /// afresh next frame.
@@ -82,12 +87,14 @@ pub struct KeptGather {
     /// for a point with no sources (buried, an emitter's own).
     points: Vec<Option<KeptPoint>>,
     bytes: usize,
+    /// The lights the points' direct light was taken from (set by the frame that keeps this).
+    pub lights: Option<Arc<DirectLight>>,
 }
 
 impl KeptGather {
     pub(super) fn new(mode: Mode, nb: usize, emitting: Vec<bool>, points: Vec<Option<KeptPoint>>) -> Self {
         let bytes = points.iter().flatten().map(KeptPoint::bytes).sum();
-        Self { mode, nb, emitting, points, bytes }
+        Self { mode, nb, emitting, points, bytes, lights: None }
     }
 
     /// Per node of `tree`: a surface whose face emits now (`emitting`, per face) and did not
@@ -135,6 +142,8 @@ pub(super) struct KeptPoint {
     values: Vec<f32>,
     /// The feet's own points, by the source they stand on.
     feet: Vec<(NodeId, KeptPoint)>,
+    /// The outcomes of the point's shadow rays toward the lights ([`crate::lights::kept`]).
+    direct: Outcomes,
 }
 
 /// A listed source's record beside its form factor.
@@ -165,6 +174,7 @@ impl KeptPoint {
             entries: Vec::with_capacity(room(|p| p.sources.len())),
             values: Vec::with_capacity(room(|p| p.values.len())),
             feet: Vec::with_capacity(room(|p| p.feet.len())),
+            direct: Outcomes::default(),
         }
     }
 
@@ -178,7 +188,8 @@ impl KeptPoint {
             + self.sources.capacity() * 4
             + self.form_factors.capacity() * 4
             + self.entries.capacity() * std::mem::size_of::<Entry>()
-            + self.values.capacity() * 4;
+            + self.values.capacity() * 4
+            + self.direct.bytes();
         own + self.feet.iter().map(|(_, f)| 4 + f.bytes()).sum::<usize>()
     }
 }
@@ -243,6 +254,11 @@ impl<'a> Changes<'a> {
         };
         !self.lit_or_dimmed.get(source as usize).copied().unwrap_or(false)
             && self.touch.is_none_or(|t| t.spares(x, source, reach))
+    }
+
+    /// The boxes the moves since the kept values swept (none: nothing moved).
+    pub(super) fn swept(&self) -> &'a [Aabb] {
+        self.touch.map_or(&[], |t| t.swept())
     }
 
     fn unmoved(&self, source: NodeId) -> bool {
@@ -382,6 +398,24 @@ impl<'k> Memo<'k> {
     pub fn foot(&self, source: NodeId) -> Memo<'k> {
         let previous = self.previous.and_then(|(p, c)| Some((p.foot(source)?, c)));
         Memo::new(previous, self.nb, self.keeping.is_some())
+    }
+
+    /// The lights' direct irradiance at the point `(x, n)` on face `f`, its shadow rays taken from
+    /// the point's kept outcomes where `swept` is given (the kept values' lights are these, and
+    /// `swept` holds what moved since) and no box of it meets a ray; the outcomes kept for the
+    /// next frame. The same irradiance as [`DirectLight::irradiance`], bit for bit.
+    pub fn direct(
+        &mut self,
+        lights: &DirectLight,
+        (x, n, f): (DVec3, DVec3, u32),
+        swept: Option<&[Aabb]>,
+    ) -> [f64; 3] {
+        let last = swept.and(self.previous.map(|(p, _)| &p.direct));
+        let (irradiance, outcomes, _) = lights.irradiance_keeping(x, n, f, last, swept.unwrap_or(&[]));
+        if let Some(k) = &mut self.keeping {
+            k.direct = outcomes;
+        }
+        irradiance
     }
 
     /// Keeps the foot on `source`'s gather, done with `foot`.

@@ -275,7 +275,13 @@ pub fn corners_keeping(
     if !progress(0.0, "corner gather") {
         return Err(crate::error::Error::Cancelled);
     }
-    let gather = Gather::new(inputs, &stop, mode)?;
+    let mut gather = Gather::new(inputs, &stop, mode)?;
+    // The points' direct light takes its kept shadow rays when the kept values' lights are
+    // placed as this frame's (crate::lights::kept).
+    gather.direct_swept = keeping.from.and_then(|(kept, changes)| {
+        let (now, then) = (inputs.lights?, kept.lights.as_deref()?);
+        now.same_sources(then).then(|| now.swept_for_rays(changes.swept()))
+    });
     let solids = inputs
         .occluders
         .is_some()
@@ -365,6 +371,9 @@ struct Gather<'a> {
     /// The rule past [`FAR_RATIO`].
     far_rule: GaussLegendre,
     counters: Counters,
+    /// With the kept values' lights placed as this frame's, the boxes the moves since swept,
+    /// for the points' direct light ([`Memo::direct`]).
+    direct_swept: Option<Vec<crate::geometry::Aabb>>,
 }
 
 impl<'a> Gather<'a> {
@@ -383,6 +392,7 @@ impl<'a> Gather<'a> {
             rule: GaussLegendre::new(GAUSS_POINTS),
             far_rule: GaussLegendre::new(FAR_POINTS),
             counters: Counters::default(),
+            direct_swept: None,
         })
     }
 
@@ -412,7 +422,8 @@ impl<'a> Gather<'a> {
         let rx = Receiver { x, n, face: f as u32, radius: face.patch.bounding_sphere().1 };
         let feet = feet.then_some(solids);
         let (leaf, _, _) = tree.leaf_at(f, s, t);
-        let direct = self.inputs.lights.map_or([0.0; 3], |l| l.irradiance(x, n, f as u32));
+        let swept = self.direct_swept.as_deref();
+        let direct = self.inputs.lights.map_or([0.0; 3], |l| memo.direct(l, (x, n, f as u32), swept));
         let mut got = Received::default();
         let mut ranked = Vec::new();
         let mut tails = [0.0; 3];
