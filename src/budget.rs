@@ -154,11 +154,30 @@ fn estimate_for(scene: &Scene, frames: u64, n: u64, pairs: u64) -> Estimate {
         0
     };
     // Elements (patch, moments, geometry samples), and the solution, unshot and emission
-    // coefficients (three copies of RGB f64 per coefficient, and the saved copies of an update).
-    let elements = n.saturating_mul(1024 + nb * 8 * 4 + 6 * nb * 3 * 8);
+    // coefficients (three copies of RGB f64 per coefficient, and the saved copies of an update);
+    // the lights' shadow rays kept for the next frame, per element and per corner point.
+    let rays = kept_ray_bytes(scene);
+    let elements = n
+        .saturating_mul(1024 + nb * 8 * 4 + 6 * nb * 3 * 8 + rays)
+        .saturating_add(corners.saturating_mul(rays / 8));
     let values = (scene.face_count() as u64).saturating_add(corners.saturating_mul(2));
     let results = frames.saturating_mul(values).saturating_mul(12 + JSON_BYTES_PER_VALUE);
     Estimate { links, gather, elements, results }
+}
+
+/// Bytes the lights' shadow rays kept between frames take per element or leaf
+/// ([`crate::lights::kept`]): at each of its 36 projection points a section of 4 bytes per source
+/// and a bit per ray, about 250 rays under a World at Medium (the 851-face room's 8.9k a face;
+/// as the square of the quality's visibility samples), 16 per soft light; a gathered point, with
+/// twice the World's strata per axis, about an eighth of this.
+fn kept_ray_bytes(scene: &Scene) -> u64 {
+    let world = u64::from(scene.world.is_some());
+    let lights = scene.lights.len() as u64;
+    if world + lights == 0 {
+        return 0;
+    }
+    let v = scene.settings.visibility_samples.max(1) as u64;
+    36 * (4 * (world + lights) + (250 * v * v / 4 * world + 16 * v * v / 4 * lights) / 8) + 64
 }
 
 /// The budget in bytes: `memory_budget_mb` when set (non-zero), else [`DEFAULT_SHARE`] of the
@@ -280,6 +299,8 @@ pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
     let per_node =
         size_of::<crate::hierarchy::tree::Node>() as u64 + 16 + nb * 8 + 3 * nb * 3 * 8 + mixer + 64;
     let copies = if animated { 2 } else { 1 };
+    // Each leaf's shadow rays toward the lights, the last frame's and the next's.
+    let per_node = per_node + kept_ray_bytes(scene);
     let elements = flat.elements.saturating_add(nodes.saturating_mul(per_node).saturating_mul(copies));
     // The corner gather keeps nothing between points but its values, which the results count;
     // an animation's keeps its sources' values for the next frame, within their cap, and holds
