@@ -56,8 +56,9 @@ impl Outcomes {
 pub(super) struct Probe<'a> {
     last: Option<&'a Outcomes>,
     swept: &'a [Aabb],
-    /// The next ray's place in the sequence.
+    /// The next ray's place in the sequence, and the end of its section's rays there.
     at: usize,
+    end: usize,
     /// A traced ray's outcome differed from the record: the rest of the section may differ.
     diverged: bool,
     /// The next section's number.
@@ -80,6 +81,7 @@ impl<'a> Probe<'a> {
             last,
             swept,
             at: 0,
+            end: usize::MAX,
             diverged: false,
             section: 0,
             record: record.then(Outcomes::default),
@@ -94,8 +96,11 @@ impl<'a> Probe<'a> {
         if let Some(record) = &mut self.record {
             record.starts.push(record.len as u32);
         }
-        match self.last.and_then(|o| o.starts.get(self.section)) {
-            Some(&start) => (self.at, self.diverged) = (start as usize, false),
+        match self.last.and_then(|o| Some((o, *o.starts.get(self.section)?))) {
+            Some((o, start)) => {
+                let end = o.starts.get(self.section + 1).map_or(o.len, |&e| e as usize);
+                (self.at, self.end, self.diverged) = (start as usize, end, false);
+            }
             None => self.diverged = true,
         }
         self.section += 1;
@@ -103,7 +108,9 @@ impl<'a> Probe<'a> {
 
     /// Whether the segment from `x` to `y` passes: `trace()` it, or take the recorded outcome.
     pub(super) fn passes(&mut self, x: DVec3, y: DVec3, trace: impl FnOnce() -> bool) -> bool {
-        let recorded = if self.diverged { None } else { self.last.and_then(|o| o.get(self.at)) };
+        // (A section cast as recorded never reads past its end; the bound makes that local.)
+        let recorded =
+            if self.diverged || self.at >= self.end { None } else { self.last.and_then(|o| o.get(self.at)) };
         self.at += 1;
         let passes = match recorded {
             Some(r) if !self.swept.iter().any(|b| b.meets_segment(x, y)) => {
