@@ -184,7 +184,10 @@ impl Patch {
 
     /// Area by 4x4 Gauss (exact for planar patches, whose `A(s,t)` is bilinear).
     pub fn area(&self) -> f64 {
-        let q = GaussLegendre::new(4);
+        // The rule made once: making it (Newton's iterations for the nodes, two vectors) was 1%
+        // of a flat updated frame, every element and part asking for its area.
+        static RULE: std::sync::LazyLock<GaussLegendre> = std::sync::LazyLock::new(|| GaussLegendre::new(4));
+        let q = &*RULE;
         let mut a = 0.0;
         for (s, ws) in q.iter() {
             for (t, wt) in q.iter() {
