@@ -183,6 +183,34 @@ fn gathered_corners_of_incremental_frames_match_full() {
     }
 }
 
+/// Advances `sys` (`state` its animation) to frame `f`, gathers its corners keeping the last
+/// gather's values, and gathers them afresh: the kept gather's counts, the fresh one's, and the
+/// worst difference of a kept corner from the fresh one, relative (the kept gather's corners are
+/// read back as f32).
+fn kept_and_fresh_gather(
+    sys: &mut System,
+    state: &mut galerkin_radiosity::animation::AnimationState,
+    scene: &Scene,
+    f: f64,
+) -> (gather::GatherStats, gather::GatherStats, f64) {
+    use galerkin_radiosity::animation::{Outcome, advance};
+    use galerkin_radiosity::visibility::Occluders;
+    assert!(matches!(advance(sys, state, scene, f, &no_progress).unwrap(), Outcome::Updated(_)));
+    let kept = sys.gather_corners(scene, f, &no_progress).unwrap();
+    let patches: Vec<_> = sys.elements.iter().map(|e| e.patch).collect();
+    let occluders = Occluders::new(&patches, scene.settings.visibility_samples);
+    let (fresh, _, all) =
+        gather::CornerGather::run(sys, scene, f, Some(&occluders), None, None, &no_progress).unwrap();
+    let mut worst: f64 = 0.0;
+    for (r, want) in sys.face_results(scene, f).iter().zip(&fresh) {
+        for (a, b) in r.corner_radiosity.iter().zip(want) {
+            let d = (0..3).map(|c| (a[c] as f64 - b[c]).abs() / b[c].abs().max(1e-3)).fold(0.0, f64::max);
+            worst = worst.max(d);
+        }
+    }
+    (kept, all, worst)
+}
+
 /// The gather kept from frame to frame (moments reused where neither the corner, the source nor
 /// anything in the shaft between them moved, rows whose sources cannot have changed not
 /// re-derived) gives what a fresh gather of the same frame gives: on the demo animation (a light
@@ -190,9 +218,7 @@ fn gathered_corners_of_incremental_frames_match_full() {
 /// passes the blocks, over 6 frames each.
 #[test]
 fn kept_gather_equals_fresh_gather() {
-    use galerkin_radiosity::animation::{AnimationState, Outcome, advance};
-    use galerkin_radiosity::gather::CornerGather;
-    use galerkin_radiosity::visibility::Occluders;
+    use galerkin_radiosity::animation::AnimationState;
     let settings = |order| Settings { basis_order: order, tolerance: 1e-6, ..Settings::default() };
     for scene in
         [scenes::cornell_box_animated(4, 6, settings(1)), scenes::cornell_box_moving_light(4, 6, settings(2))]
@@ -203,26 +229,7 @@ fn kept_gather_equals_fresh_gather() {
         assert_eq!(first.recomputed, first.moments);
         let mut state = AnimationState::new(sys.elements.len(), true);
         for frame in 2..=6 {
-            let f = frame as f64;
-            assert!(matches!(
-                advance(&mut sys, &mut state, &scene, f, &no_progress).unwrap(),
-                Outcome::Updated(_)
-            ));
-            let kept = sys.gather_corners(&scene, f, &no_progress).unwrap();
-            let patches: Vec<_> = sys.elements.iter().map(|e| e.patch).collect();
-            let occluders = Occluders::new(&patches, scene.settings.visibility_samples);
-            let (fresh, _, all) =
-                CornerGather::run(&sys, &scene, f, Some(&occluders), None, None, &no_progress).unwrap();
-            let got = sys.face_results(&scene, f);
-            let mut worst: f64 = 0.0;
-            for (r, want) in got.iter().zip(&fresh) {
-                for (a, b) in r.corner_radiosity.iter().zip(want) {
-                    // Relative: the kept gather's corners are read back as f32.
-                    let d =
-                        (0..3).map(|c| (a[c] as f64 - b[c]).abs() / b[c].abs().max(1e-3)).fold(0.0, f64::max);
-                    worst = worst.max(d);
-                }
-            }
+            let (kept, all, worst) = kept_and_fresh_gather(&mut sys, &mut state, &scene, frame as f64);
             eprintln!(
                 "frame {frame}: {} of {} moments recomputed, worst relative difference from a fresh gather {worst:.1e}",
                 kept.recomputed, kept.moments
@@ -240,10 +247,8 @@ fn kept_gather_equals_fresh_gather() {
 /// last gather's.
 #[test]
 fn kept_direct_light_at_corners_equals_a_fresh_gathers() {
-    use galerkin_radiosity::animation::{AnimationState, Outcome, advance};
-    use galerkin_radiosity::gather::CornerGather;
+    use galerkin_radiosity::animation::AnimationState;
     use galerkin_radiosity::lights::{Light, LightKind, World};
-    use galerkin_radiosity::visibility::Occluders;
     let p = DVec3::new;
     let floor = scenes::subdivided_quad(
         "Floor",
@@ -267,24 +272,7 @@ fn kept_direct_light_at_corners_equals_a_fresh_gathers() {
     sys.gather_corners(&scene, 1.0, &no_progress).unwrap();
     let mut state = AnimationState::new(sys.elements.len(), true);
     for frame in 2..=4 {
-        let f = frame as f64;
-        assert!(matches!(
-            advance(&mut sys, &mut state, &scene, f, &no_progress).unwrap(),
-            Outcome::Updated(_)
-        ));
-        let kept = sys.gather_corners(&scene, f, &no_progress).unwrap();
-        let patches: Vec<_> = sys.elements.iter().map(|e| e.patch).collect();
-        let occluders = Occluders::new(&patches, scene.settings.visibility_samples);
-        let (fresh, _, all) =
-            CornerGather::run(&sys, &scene, f, Some(&occluders), None, None, &no_progress).unwrap();
-        let mut worst: f64 = 0.0;
-        for (r, want) in sys.face_results(&scene, f).iter().zip(&fresh) {
-            for (a, b) in r.corner_radiosity.iter().zip(want) {
-                // Relative: the kept gather's corners are read back as f32.
-                let d = (0..3).map(|c| (a[c] as f64 - b[c]).abs() / b[c].abs().max(1e-3)).fold(0.0, f64::max);
-                worst = worst.max(d);
-            }
-        }
+        let (kept, all, worst) = kept_and_fresh_gather(&mut sys, &mut state, &scene, frame as f64);
         eprintln!(
             "frame {frame}: corners' shadow rays {} traced, {} taken; worst relative difference {worst:.1e}",
             kept.direct_rays_traced, kept.direct_rays_taken

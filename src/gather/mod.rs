@@ -533,7 +533,7 @@ fn direct_at_points(
     let mut direct = Vec::with_capacity(each.len());
     let mut outcomes = Vec::with_capacity(each.len());
     for (d, o, r) in each {
-        (rays.traced, rays.taken) = (rays.traced + r.traced, rays.taken + r.taken);
+        rays.add(r);
         direct.push(d);
         outcomes.push(o);
     }

@@ -277,13 +277,7 @@ pub fn solve_frame(
         &mut stats,
         progress,
     )?;
-    let mut next = finish(hierarchy, state, stats, &lit, scene, frame, hs, None, progress)?;
-    (next.stats.direct_rays_traced, next.stats.direct_rays_taken) = (rays.traced, rays.taken);
-    (next.direct, next.leaf_rays) = (lit.lights.map(std::sync::Arc::new), rays.into_kept());
-    if let Some(k) = &mut next.kept_gather {
-        k.lights = next.direct.clone();
-    }
-    Ok(next)
+    finish(hierarchy, state, stats, (lit, rays), scene, frame, hs, None, progress)
 }
 
 /// Each face's reflectance, in `faces`' order.
@@ -451,13 +445,14 @@ fn link_and_solve(
 }
 
 /// The frame's counts and, with `hs.corner_gather`, its gathered corners (taking what `kept`,
-/// the last frame's gather, holds where the frame's changes spare it).
+/// the last frame's gather, holds where the frame's changes spare it); the frame keeps its lights
+/// and its leaves' shadow rays (`lit`, `rays`) for the next.
 #[allow(clippy::too_many_arguments)]
 fn finish(
     hierarchy: Hierarchy,
     state: State,
     mut stats: HierarchyStats,
-    lit: &Lighting,
+    (lit, rays): (Lighting, solve::LeafRays),
     scene: &Scene,
     frame: f64,
     hs: &HierarchySettings,
@@ -490,7 +485,7 @@ fn finish(
     let (mut corners, mut kept_gather) = (None, None);
     if hs.corner_gather {
         let t = Instant::now();
-        let inputs = gather::Inputs::new(&hierarchy, &state, lit);
+        let inputs = gather::Inputs::new(&hierarchy, &state, &lit);
         let cap = if hs.keep_gather {
             gather::KeptGather::cap(crate::budget::budget_bytes(scene.settings.memory_budget_mb))
         } else {
@@ -506,6 +501,11 @@ fn finish(
         stats.kept_gather_bytes = g.kept.as_ref().map_or(0, |k| k.bytes());
         kept_gather = g.kept;
     }
+    (stats.direct_rays_traced, stats.direct_rays_taken) = (rays.counts.traced, rays.counts.taken);
+    let direct = lit.lights.map(std::sync::Arc::new);
+    if let Some(k) = &mut kept_gather {
+        k.lights = direct.clone();
+    }
     Ok(HierarchicalFrame {
         hierarchy,
         state,
@@ -513,8 +513,8 @@ fn finish(
         corners,
         kept_gather,
         moved_since_gather: None,
-        direct: None,
-        leaf_rays: Default::default(),
+        direct,
+        leaf_rays: rays.into_kept(),
     })
 }
 

@@ -54,8 +54,7 @@ pub struct LeafRays {
     now: Vec<Outcomes>,
     last: Option<LastRays>,
     /// Rays traced and taken from the last frame's, over this frame's projections.
-    pub traced: u64,
-    pub taken: u64,
+    pub counts: KeptRays,
 }
 
 struct LastRays {
@@ -82,7 +81,7 @@ impl LeafRays {
             moved_faces: moved_faces.to_vec(),
             swept: swept.to_vec(),
         });
-        LeafRays { now: Vec::new(), last, traced: 0, taken: 0 }
+        LeafRays { now: Vec::new(), last, counts: KeptRays::default() }
     }
 
     /// This frame's outcomes alone (the last frame's dropped), for the frame to keep.
@@ -232,7 +231,7 @@ impl State {
             if lights.is_some() {
                 rays.now[id] = outcomes;
             }
-            (rays.traced, rays.taken) = (rays.traced + counts.traced, rays.taken + counts.taken);
+            rays.counts.add(counts);
         }
     }
 

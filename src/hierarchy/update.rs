@@ -166,13 +166,8 @@ pub fn update_frame(
     let since_touch = since.as_ref().filter(|m| !m.swept.is_empty()).map(|m| Touch::new(&hierarchy.tree, m));
     let changes = gather::Changes::of(if since.is_some() { since_touch.as_ref() } else { touch.as_ref() });
     let kept = last_gather.as_ref().map(|k| (k, changes));
-    let mut next = super::finish(hierarchy, state, stats, &lit, scene, frame, hs, kept, progress)?;
-    (next.stats.direct_rays_traced, next.stats.direct_rays_taken) = (rays.traced, rays.taken);
-    (next.direct, next.leaf_rays) = (lit.lights.map(std::sync::Arc::new), rays.into_kept());
-    if let Some(k) = &mut next.kept_gather {
-        // (Gathered this frame; a kept gather passed on below keeps its own frame's lights.)
-        k.lights = next.direct.clone();
-    }
+    // (A kept gather passed on below keeps its own frame's lights.)
+    let mut next = super::finish(hierarchy, state, stats, (lit, rays), scene, frame, hs, kept, progress)?;
     if !hs.corner_gather && last_gather.is_some() {
         next.kept_gather = last_gather;
         next.moved_since_gather = Some(since.unwrap_or(moves));

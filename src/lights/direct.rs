@@ -7,6 +7,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::backs::{Back, emitter_backs};
+pub use super::kept::KeptRays;
 use super::kept::{Outcomes, Probe};
 use super::world::PlacedWorld;
 use super::{AreaShape, Light, LightKind, LightState, direction};
@@ -231,16 +232,6 @@ pub struct LastFrame<'a> {
     pub moved: &'a [bool],
     /// Boxes holding every moved element's old and new place.
     pub swept: &'a [Aabb],
-}
-
-/// What [`DirectLight::project_keeping`] did with its shadow rays.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct KeptRays {
-    pub traced: u64,
-    /// Taken from the last frame's outcomes.
-    pub taken: u64,
-    /// Bytes the outcomes kept for the next frame hold.
-    pub bytes: usize,
 }
 
 /// The scene's lights, World and two-sided emitters' backs placed at one frame with the
@@ -562,40 +553,27 @@ impl DirectLight {
         let last = last.filter(|l| l.lights.same_sources(self) && l.lights.outcomes.len() == patches.len());
         let swept = last.map_or_else(Vec::new, |l| self.swept_for_rays(l.swept));
         let this = &*self;
-        // One element's coefficients, its rays' outcomes, and how many were traced and taken.
-        struct Projected {
-            coeffs: Vec<[f64; 3]>,
-            outcomes: Outcomes,
-            rays: KeptRays,
-        }
+        // Per element: its coefficients, its rays' outcomes, and how many were traced and taken.
+        type Projected = (Vec<[f64; 3]>, (Outcomes, KeptRays));
         let projected: Vec<Projected> = (0..patches.len())
             .into_par_iter()
             .map(|e| {
                 let kept = last.filter(|l| !l.moved[e]).map(|l| &l.lights.outcomes[e]);
-                let mut probe = Probe::new(kept, &swept, true);
                 let mut coeffs = vec![[0.0; 3]; nb];
-                this.project_onto_with(
-                    &mut probe,
-                    &patches[e],
-                    e as u32,
-                    reflectance[e],
-                    basis,
-                    &rule,
-                    &mut coeffs,
-                );
-                let rays = KeptRays { traced: probe.traced, taken: probe.taken, bytes: 0 };
-                Projected { coeffs, outcomes: probe.into_record().unwrap_or_default(), rays }
+                let (p, rho) = (&patches[e], reflectance[e]);
+                let kept =
+                    this.project_onto_keeping(p, e as u32, rho, basis, &rule, &mut coeffs, (kept, &swept));
+                (coeffs, kept)
             })
             .collect();
         let mut out = Vec::with_capacity(patches.len() * nb);
         let mut rays = KeptRays::default();
         self.outcomes = projected
             .into_iter()
-            .map(|p| {
-                out.extend(p.coeffs);
-                rays.traced += p.rays.traced;
-                rays.taken += p.rays.taken;
-                p.outcomes
+            .map(|(coeffs, (outcomes, counts))| {
+                out.extend(coeffs);
+                rays.add(counts);
+                outcomes
             })
             .collect();
         rays.bytes = self.outcomes.iter().map(Outcomes::bytes).sum();
@@ -622,8 +600,8 @@ impl DirectLight {
     ) -> ([f64; 3], Outcomes, KeptRays) {
         let mut probe = Probe::new(last, swept, true);
         let irradiance = self.irradiance_with(&mut probe, x, n, e, self.world_axis.0, self.soft_corner);
-        let rays = KeptRays { traced: probe.traced, taken: probe.taken, bytes: 0 };
-        (irradiance, probe.into_record().unwrap_or_default(), rays)
+        let (outcomes, rays) = probe.finish();
+        (irradiance, outcomes, rays)
     }
 
     /// `boxes` as the keeping of shadow rays tests them: grown by a hair of the rays' reach (a
@@ -681,8 +659,7 @@ impl DirectLight {
     ) -> (Outcomes, KeptRays) {
         let mut probe = Probe::new(last, swept, true);
         self.project_onto_with(&mut probe, p, owner, rho, basis, rule, coeffs);
-        let rays = KeptRays { traced: probe.traced, taken: probe.taken, bytes: 0 };
-        (probe.into_record().unwrap_or_default(), rays)
+        probe.finish()
     }
 
     /// [`DirectLight::project_onto`] with its shadow rays answered by `probe`.

@@ -51,6 +51,25 @@ impl Outcomes {
     }
 }
 
+/// What a keeping of shadow rays did: rays traced, and taken from the last frame's outcomes.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct KeptRays {
+    pub traced: u64,
+    /// Taken from the last frame's outcomes.
+    pub taken: u64,
+    /// Bytes the outcomes kept for the next frame hold (where counted).
+    pub bytes: usize,
+}
+
+impl KeptRays {
+    /// Adds `other`'s counts to these.
+    pub fn add(&mut self, other: KeptRays) {
+        self.traced += other.traced;
+        self.taken += other.taken;
+        self.bytes += other.bytes;
+    }
+}
+
 /// Answers one element's shadow rays: from the last frame's outcomes where it may, by tracing
 /// otherwise, recording every outcome for the next frame.
 pub(super) struct Probe<'a> {
@@ -65,8 +84,7 @@ pub(super) struct Probe<'a> {
     section: usize,
     record: Option<Outcomes>,
     /// Rays traced, and taken from the record.
-    pub(super) traced: u64,
-    pub(super) taken: u64,
+    rays: KeptRays,
 }
 
 impl<'a> Probe<'a> {
@@ -85,8 +103,7 @@ impl<'a> Probe<'a> {
             diverged: false,
             section: 0,
             record: record.then(Outcomes::default),
-            traced: 0,
-            taken: 0,
+            rays: KeptRays::default(),
         }
     }
 
@@ -114,11 +131,11 @@ impl<'a> Probe<'a> {
         self.at += 1;
         let passes = match recorded {
             Some(r) if !self.swept.iter().any(|b| b.meets_segment(x, y)) => {
-                self.taken += 1;
+                self.rays.taken += 1;
                 r
             }
             _ => {
-                self.traced += 1;
+                self.rays.traced += 1;
                 let p = trace();
                 if recorded.is_some_and(|r| r != p) {
                     self.diverged = true;
@@ -132,9 +149,9 @@ impl<'a> Probe<'a> {
         passes
     }
 
-    /// The outcomes recorded.
-    pub(super) fn into_record(self) -> Option<Outcomes> {
-        self.record
+    /// The outcomes recorded (none if not recording), and the rays traced and taken.
+    pub(super) fn finish(self) -> (Outcomes, KeptRays) {
+        (self.record.unwrap_or_default(), self.rays)
     }
 }
 
@@ -174,8 +191,8 @@ mod tests {
         // Through it, another outcome: from here on every ray is traced.
         assert!(!probe.passes(x, across, || false));
         assert!(probe.passes(x, beside, || true));
-        assert_eq!((probe.taken, probe.traced), (2, 3));
-        let record = probe.into_record().unwrap();
+        assert_eq!((probe.rays.taken, probe.rays.traced), (2, 3));
+        let (record, _) = probe.finish();
         assert_eq!(
             (0..5).map(|k| record.get(k).unwrap()).collect::<Vec<_>>(),
             [true, true, false, false, true]
@@ -205,8 +222,8 @@ mod tests {
         probe.section();
         assert!(!probe.passes(x, beside, || true));
         assert!(probe.passes(x, beside, || false));
-        assert_eq!((probe.traced, probe.taken), (3, 2));
-        let record = probe.into_record().unwrap();
+        assert_eq!((probe.rays.traced, probe.rays.taken), (3, 2));
+        let (record, _) = probe.finish();
         assert_eq!(record.starts, [0, 3]);
     }
 }

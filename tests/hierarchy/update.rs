@@ -22,6 +22,24 @@ fn animated() -> Scene {
     cornell_box_animated(2, 8, settings())
 }
 
+/// Settings that gather the corners and keep their values (and the pair tree) between frames,
+/// as a session's animation does.
+fn keeping_gather() -> HierarchySettings {
+    HierarchySettings { keep_pair_tree: true, keep_gather: true, corner_gather: true, ..Default::default() }
+}
+
+/// The fast corner gather of `h`'s solution at `frame`, afresh (nothing kept).
+fn fresh_gather(
+    h: &HierarchicalFrame,
+    scene: &Scene,
+    frame: f64,
+) -> galerkin_radiosity::hierarchy::gather::Gathered {
+    use galerkin_radiosity::hierarchy::gather::{self, Mode};
+    let lit = Lighting::new(scene, frame, &h.hierarchy.tree.faces);
+    let inputs = gather::Inputs::new(&h.hierarchy, &h.state, &lit);
+    gather::corners_with(&inputs, scene, frame, &no_progress, Mode::Fast).unwrap()
+}
+
 fn face_means(h: &HierarchicalFrame) -> Vec<f64> {
     (0..h.hierarchy.tree.faces.len()).map(|f| h.face_mean(f)[0]).collect()
 }
@@ -218,7 +236,7 @@ fn casts_a_move_cannot_change_are_taken_from_the_frame_before() {
 /// points keep nothing (they are gathered afresh).
 #[test]
 fn a_kept_gather_equals_a_fresh_gather() {
-    use galerkin_radiosity::hierarchy::gather::{self, Mode};
+    use galerkin_radiosity::hierarchy::gather;
     let order2 = Settings { basis_order: 2, ..settings() };
     // A memory budget of 1 MB caps the kept values at 128 KiB: most points keep nothing.
     let capped = Settings { memory_budget_mb: 1, ..order2.clone() };
@@ -228,12 +246,7 @@ fn a_kept_gather_equals_a_fresh_gather() {
         ("demo", animated(), false),
         ("moving light, capped", cornell_box_moving_light(4, 6, capped), false),
     ] {
-        let hs = HierarchySettings {
-            keep_pair_tree: true,
-            keep_gather: true,
-            corner_gather: true,
-            ..Default::default()
-        };
+        let hs = keeping_gather();
         let mut h = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
         assert_eq!(h.stats.gather_kept, 0, "{name}: a first frame has no frame before");
         for frame in 2..=5 {
@@ -254,9 +267,7 @@ fn a_kept_gather_equals_a_fresh_gather() {
                 "{name}: {} bytes",
                 s.kept_gather_bytes
             );
-            let lit = Lighting::new(&scene, f, &next.hierarchy.tree.faces);
-            let inputs = gather::Inputs::new(&next.hierarchy, &next.state, &lit);
-            let fresh = gather::corners_with(&inputs, &scene, f, &no_progress, Mode::Fast).unwrap();
+            let fresh = fresh_gather(&next, &scene, f);
             let (radiosity, irradiance) = next.corners.as_ref().expect("gathered");
             assert_eq!(radiosity, &fresh.radiosity, "{name} frame {frame}: B");
             assert_eq!(irradiance, &fresh.irradiance, "{name} frame {frame}: H");
@@ -272,14 +283,8 @@ fn a_kept_gather_equals_a_fresh_gather() {
 /// frames).
 #[test]
 fn a_kept_gather_outlasts_frames_without_a_gather() {
-    use galerkin_radiosity::hierarchy::gather::{self, Mode};
     let scene = cornell_box_moving_light(4, 8, Settings { basis_order: 2, ..settings() });
-    let gathering = HierarchySettings {
-        keep_pair_tree: true,
-        keep_gather: true,
-        corner_gather: true,
-        ..Default::default()
-    };
+    let gathering = keeping_gather();
     let preview = HierarchySettings { corner_gather: false, ..gathering };
     let mut h = solve_frame(&scene, 1.0, &gathering, &no_progress).unwrap();
     for frame in [2, 3] {
@@ -292,9 +297,7 @@ fn a_kept_gather_outlasts_frames_without_a_gather() {
         let next = update_frame(&mut h, &scene, f, &gathering, &no_progress).unwrap();
         let s = &next.stats;
         assert!(s.gather_kept > 0 && s.gather_computed > 0 || s.moved_faces == 0, "{} kept", s.gather_kept);
-        let lit = Lighting::new(&scene, f, &next.hierarchy.tree.faces);
-        let inputs = gather::Inputs::new(&next.hierarchy, &next.state, &lit);
-        let fresh = gather::corners_with(&inputs, &scene, f, &no_progress, Mode::Fast).unwrap();
+        let fresh = fresh_gather(&next, &scene, f);
         let (radiosity, _) = next.corners.as_ref().expect("gathered");
         assert_eq!(radiosity, &fresh.radiosity, "frame {frame}");
         assert!(next.moved_since_gather.is_none());
@@ -610,12 +613,7 @@ fn kept_leaf_rays_give_the_sources_a_fresh_projection_gives() {
         .unwrap()
         .with_world(Some(World::uniform([0.4, 0.5, 0.6], 1.0)))
         .unwrap();
-    let hs = HierarchySettings {
-        keep_pair_tree: true,
-        keep_gather: true,
-        corner_gather: true,
-        ..Default::default()
-    };
+    let hs = keeping_gather();
     let mut h = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
     for frame in 2..=4 {
         let f = frame as f64;
@@ -641,11 +639,7 @@ fn kept_leaf_rays_give_the_sources_a_fresh_projection_gives() {
             );
             compared += 1;
         }
-        let inputs = galerkin_radiosity::hierarchy::gather::Inputs::new(&next.hierarchy, &next.state, &lit);
-        let mode = galerkin_radiosity::hierarchy::gather::Mode::Fast;
-        let fresh =
-            galerkin_radiosity::hierarchy::gather::corners_with(&inputs, &scene, f, &no_progress, mode)
-                .unwrap();
+        let fresh = fresh_gather(&next, &scene, f);
         let (radiosity, irradiance) = next.corners.as_ref().expect("gathered");
         assert_eq!(radiosity, &fresh.radiosity, "frame {frame}: B");
         assert_eq!(irradiance, &fresh.irradiance, "frame {frame}: H");
