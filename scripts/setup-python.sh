@@ -18,7 +18,9 @@ venv() {
         "$PY" -m venv "$dir"
     fi
     if ! "$dir/bin/python" -c "import $imports" >/dev/null 2>&1; then
-        "$dir/bin/pip" install -q "$@"
+        # No wheel cache: the bpy wheels are 300-374 MB each and are unpacked once per venv; a
+        # cached copy would only take disk (a CI machine once ran out of it making .venv45).
+        "$dir/bin/pip" install -q --no-cache-dir "$@"
     fi
 }
 
