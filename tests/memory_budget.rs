@@ -6,7 +6,7 @@ use std::process::Command;
 
 use galerkin_radiosity::budget;
 use galerkin_radiosity::ffi::*;
-use galerkin_radiosity::scene::Settings;
+use galerkin_radiosity::scene::{Material, Scene, Settings};
 use galerkin_radiosity::scenes;
 
 mod c_session;
@@ -38,12 +38,17 @@ fn the_cli_refuses_a_scene_over_the_default_budget() {
     assert!(err.contains("over the memory budget: this bake needs up to"), "{err}");
     assert!(err.contains("% of the memory available"), "{err}");
     assert!(err.contains("raise memory_budget_mb"), "{err}");
+    // The hierarchy's own estimate fits where the flat one does not: the line names it.
+    let planned = budget::hierarchical_estimate(&scene, 1).total().div_ceil(1 << 20);
+    assert!(budget::check_hierarchical(&scene, 1).is_ok());
+    assert!(err.contains(&format!("; or bake with --hierarchy, which plans for {planned} MB here")), "{err}");
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(!out.exists());
-    // An explicit budget is named as such.
+    // An explicit budget is named as such; the hierarchy does not fit 64 MB, and is not named.
     let (code, err) = run(&["--memory-budget", "64"]);
     assert_eq!(code, 1, "{err}");
     assert!(err.contains("but the budget is 64 MB (settings.memory_budget_mb)"), "{err}");
+    assert!(!err.contains("--hierarchy"), "{err}");
     let (code, err) = run(&["--memory-budget", "lots"]);
     assert_eq!(code, 2, "{err}");
 }
@@ -77,6 +82,56 @@ fn the_cli_refuses_a_hierarchical_bake_over_its_budget() {
     scene.settings.accuracy = 1e-4;
     let tight = budget::hierarchical_estimate(&scene, 1);
     assert!(tight.links > 5 * loose.links, "{loose:?} {tight:?}");
+}
+
+/// A flat bake that fits its budget but has many faces is told of `--hierarchy` once, on stderr,
+/// and bakes; `--quiet` and the hierarchy itself say nothing.
+#[test]
+fn the_cli_warns_a_large_flat_bake_of_the_hierarchy() {
+    let dir = std::env::temp_dir().join(format!("gr-budget-warn-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = dir.join("large.json");
+    // A floor of 45 x 45 faces under a light: over 2,000 faces, but only the light's pairs (the
+    // floor's faces do not see each other), so each bake takes well under a second.
+    let p = glam::DVec3::new;
+    let floor =
+        scenes::subdivided_quad("floor", [p(0., 0., 0.), p(1., 0., 0.), p(1., 1., 0.), p(0., 1., 0.)], 45, 0);
+    let light = scenes::subdivided_quad(
+        "light",
+        [p(0.4, 0.4, 1.), p(0.4, 0.6, 1.), p(0.6, 0.6, 1.), p(0.6, 0.4, 1.)],
+        1,
+        1,
+    );
+    let materials = vec![
+        Material { name: "grey".into(), reflectance: [0.5; 3], emission: [0.0; 3] },
+        Material { name: "light".into(), reflectance: [0.0; 3], emission: [5.0; 3] },
+    ];
+    let settings = Settings { corner_gather: false, ..Settings::default() };
+    let scene = Scene::new(settings, (1, 1), materials, vec![vec![]; 2], vec![floor, light]).unwrap();
+    assert!(scene.face_count() >= 2000, "{}", scene.face_count());
+    std::fs::write(&input, galerkin_radiosity::scene::json::scene_to_json(&scene)).unwrap();
+    let out = dir.join("out.json");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["bake", input.to_str().unwrap(), "-o", out.to_str().unwrap()];
+        args.extend(extra);
+        let o = Command::new(env!("CARGO_BIN_EXE_galerkin-radiosity")).args(&args).output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    let warning = format!(
+        "warning: {} faces: the flat methods link every pair of faces, so their memory and time grow with the \
+         square of the face count; --hierarchy grows about linearly",
+        scene.face_count()
+    );
+    let err = run(&[]);
+    assert_eq!(
+        err.lines().filter(|l| l.starts_with("warning: ")).collect::<Vec<_>>(),
+        [warning.as_str()],
+        "{err}"
+    );
+    assert!(out.exists());
+    assert!(!run(&["--quiet"]).contains("warning"));
+    assert!(!run(&["--hierarchy"]).contains("--hierarchy grows"));
 }
 
 #[test]
