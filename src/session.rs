@@ -44,6 +44,12 @@ pub struct FrameStats {
     pub frame: f64,
     pub seconds: f64,
     pub kernel_seconds: f64,
+    /// Of `kernel_seconds` on an updated frame, the kernel update's phases
+    /// ([`crate::animation::UpdateStats`]): finding the candidate pairs (with the frame's
+    /// occluders), computing them, and writing them into the store with their `Delta K` products.
+    pub kernel_scan_seconds: f64,
+    pub kernel_pairs_seconds: f64,
+    pub kernel_apply_seconds: f64,
     pub solve_seconds: f64,
     pub elements: usize,
     pub pairs: usize,
@@ -487,6 +493,9 @@ impl Session {
                         frame,
                         seconds: start.elapsed().as_secs_f64(),
                         kernel_seconds: u.kernel_seconds,
+                        kernel_scan_seconds: u.scan_seconds,
+                        kernel_pairs_seconds: u.pairs_seconds,
+                        kernel_apply_seconds: u.apply_seconds,
                         solve_seconds: u.solve_seconds,
                         elements: sys.elements.len(),
                         pairs: sys.links.len(),

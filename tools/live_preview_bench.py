@@ -107,6 +107,10 @@ def measure(subdiv: int, frames: int, mode: str = "full", method: str = "INCREME
             # The handler's own work around the native solve (sampling, writing the attributes).
             "python_ms": 1e3 * (wall - st["native_seconds"]),
             "kernel_ms": 1e3 * st["kernel_seconds"],
+            # Its phases: the candidate pairs found, computed, written with their Delta K products.
+            "scan_ms": 1e3 * st.get("kernel_scan_seconds", 0.0),
+            "pairs_ms": 1e3 * st.get("kernel_pairs_seconds", 0.0),
+            "apply_ms": 1e3 * st.get("kernel_apply_seconds", 0.0),
             "solve_ms": 1e3 * st["solve_seconds"],
             "gather_ms": 1e3 * st["gather_seconds"],
             "moments_recomputed": st["gather_recomputed"],
@@ -141,7 +145,8 @@ def measure(subdiv: int, frames: int, mode: str = "full", method: str = "INCREME
 
 def medians(rows: list[dict]) -> dict:
     keep = [r for r in rows if r["frame"] >= 3]
-    keys = ("frame_set_ms", "python_ms", "kernel_ms", "solve_ms", "gather_ms", "moments_recomputed")
+    keys = ("frame_set_ms", "python_ms", "kernel_ms", "scan_ms", "pairs_ms", "apply_ms", "solve_ms",
+            "gather_ms", "moments_recomputed")
     return {k: statistics.median(r[k] for r in keep) for k in keys}
 
 
@@ -151,6 +156,11 @@ def _idle(ms) -> str:
 
 def _error(e) -> str:
     return "" if e is None else f"{100 * e['rms']:.1f}% / {100 * e['worst']:.0f}%"
+
+
+def _kernel(r: dict) -> str:
+    """The kernel update's time with its phases (an updated frame's; zero on the first)."""
+    return f"{r['kernel_ms']:.1f} ({r['scan_ms']:.1f}, {r['pairs_ms']:.1f}, {r['apply_ms']:.1f})"
 
 
 def main(argv=None):
@@ -178,14 +188,14 @@ def main(argv=None):
         print(f"{rows[0]['faces']} faces ({last['elements']} elements), mode {modes[0]}; the last frame "
               f"recomputed {last['moved_pairs']} moving pairs and {last['visibility_pairs']} static pairs' "
               "visibility")
-        print("| frame | frame_set ms | of it Python ms | kernel ms | solve ms | gather ms "
-              "| moments recomputed |")
+        print("| frame | frame_set ms | of it Python ms | kernel ms (scan, pairs, apply) | solve ms "
+              "| gather ms | moments recomputed |")
         print("|---|---|---|---|---|---|---|")
         for r in rows:
-            print(f"| {r['frame']} | {r['frame_set_ms']:.1f} | {r['python_ms']:.1f} | {r['kernel_ms']:.1f} | "
+            print(f"| {r['frame']} | {r['frame_set_ms']:.1f} | {r['python_ms']:.1f} | {_kernel(r)} | "
                   f"{r['solve_ms']:.1f} | {r['gather_ms']:.1f} | {r['moments_recomputed']} |")
         m = medians(rows)
-        print(f"| median 3.. | {m['frame_set_ms']:.1f} | {m['python_ms']:.1f} | {m['kernel_ms']:.1f} | "
+        print(f"| median 3.. | {m['frame_set_ms']:.1f} | {m['python_ms']:.1f} | {_kernel(m)} | "
               f"{m['solve_ms']:.1f} | {m['gather_ms']:.1f} | {m['moments_recomputed']:.0f} |")
         if out["idle_refine_ms"] is not None:
             e = out["preview_error"]
