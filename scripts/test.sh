@@ -25,6 +25,9 @@ limited() {
 }
 
 START=$SECONDS
+# The free disk, for a stage that fails writing (the bpy venvs and target/ take about 3.5 GB; a
+# CI machine once ran out making .venv45).
+echo "# disk: $(df -Ph . | awk 'NR == 2 {print $4}') free where the tests run"
 
 # The Python venvs (bpy wheels of 374 and 300 MB) are made in the background from the start: the
 # download and unpacking wait on the network and the disk, not on the cores the Rust stages use
