@@ -294,7 +294,7 @@ pub fn hierarchical_estimate(scene: &Scene, frames: u64) -> Estimate {
         .saturating_add(full_count.saturating_mul(per_full_link));
     let nodes = faces.saturating_mul(2).saturating_add(full_count);
     // The solve's Anderson mixer holds `2 depth + 4` copies of the leaves' coefficients
-    // (`hierarchy::solve::Accelerated`); most nodes are leaves.
+    // (`hierarchy::solve::sweep::Accelerated`); most nodes are leaves.
     let mixer = (2 * crate::hierarchy::solve::ANDERSON_DEPTH as u64 + 4) * nb * 3 * 8;
     let per_node =
         size_of::<crate::hierarchy::tree::Node>() as u64 + 16 + nb * 8 + 3 * nb * 3 * 8 + mixer + 64;

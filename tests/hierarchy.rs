@@ -173,7 +173,7 @@ fn coarse_face(scene: &galerkin_radiosity::scene::Scene, object: usize, face: us
 /// link is light, the per-face means against a fine reference (every link in full, accuracy
 /// 2e-5) are hardly further off than with every link in full at the same accuracy (measured:
 /// 10.46% against 9.22% since the solve keeps the hemisphere bound, which takes both closer to
-/// the reference and the full links more, `hierarchy::solve::bound_of`; 11.27% against 10.41%
+/// the reference and the full links more, `hierarchy::solve::bound::bound_of`; 11.27% against 10.41%
 /// before it; 12.23% against 11.47% before hidden pairs were split,
 /// `hidden_pairs_are_refined_not_dropped`; 12.27% against 12.06% before full near links kept
 /// their sources' first moments, `kernel::pair::integrate_near_coarse`, which a light link's

@@ -4,7 +4,7 @@
 //! `tree.rs` holds the nodes (clusters over faces, quadtrees of `Rect`s below them),
 //! `two_scale.rs` the push and pull between a surface and its quadrants, `lobes.rs` how clusters
 //! shoot and receive, `coupling.rs` what a link holds and how it is computed, `refine/` the
-//! oracle and the link hierarchy, `solve.rs` the Jacobi sweeps with push-pull. [`solve_frame`]
+//! oracle and the link hierarchy, `solve/` the Jacobi sweeps with push-pull. [`solve_frame`]
 //! runs it on one frame of a scene from scratch: link from the sources' brightness, solve,
 //! link again where the solution's brightness asks for it, solve again.
 
