@@ -13,6 +13,7 @@ use crate::animation::{self, AnimationState, Outcome};
 use crate::error::{Error, Result};
 use crate::finite::{check_results, clamp_rounding};
 use crate::gather::GatherStats;
+use crate::lights::direct::DirectLight;
 use crate::scene::json::ObjectResult;
 use crate::scene::{MAX_EMISSION, Scene, check_placed};
 use crate::solver;
@@ -344,6 +345,17 @@ impl Session {
         let cancel = || !progress(1.0, "solve");
         let refinement = self.pool.install(|| -> Result<Refinement> {
             let start = Instant::now();
+            // A preview's lights were projected coarsely: projected again in full, the change
+            // entering as Delta e (eq. 9) before the shooting goes on.
+            if sys.lights.as_deref().is_some_and(DirectLight::is_preview) {
+                sys.replace_sources(crate::system::frame_sources(
+                    &placed,
+                    frame,
+                    &sys.elements,
+                    sys.basis,
+                    None,
+                ));
+            }
             let stop = placed.settings.tolerance * sys.emitted_power();
             let shot = solver::shoot(&sys.links, &sys.reflectance, &mut sys.solution, stop, &cancel)?;
             let solve_seconds = start.elapsed().as_secs_f64();
@@ -457,6 +469,9 @@ impl Session {
         check_placed(&placed, frame)?;
         if self.preview {
             placed.settings.tolerance = preview_tolerance(placed.settings.tolerance);
+            // (The hierarchy's refinement projects every leaf's light again whatever moved: its
+            // previews keep the full rule, and their kept rays.)
+            placed.settings.preview_lights = self.method != Method::Hierarchical;
         }
         if self.method == Method::Hierarchical {
             return self.solve_hierarchical(&placed, frame, start, self.preview, progress);

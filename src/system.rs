@@ -299,6 +299,34 @@ impl System {
         out
     }
 
+    /// Takes a frame's sources ([`frame_sources`]: emission, the lights' `rho E_d`, the lights)
+    /// in place of the current ones, adding their change to `delta` (Delta e of eq. 9, one entry
+    /// per coefficient), which the caller adds to the solution and its unshot part.
+    pub fn take_sources(&mut self, (emission, direct, lights): FrameSources, delta: &mut [[f64; 3]]) {
+        let old = self.sources();
+        for (k, d) in delta.iter_mut().enumerate() {
+            let new =
+                std::array::from_fn::<f64, 3, _>(|c| emission[k][c] + direct.get(k).map_or(0.0, |x| x[c]));
+            for c in 0..3 {
+                d[c] += new[c] - old[k][c];
+            }
+        }
+        (self.emission, self.direct, self.lights) = (emission, direct, lights);
+    }
+
+    /// [`System::take_sources`] with the change added to the solution at once: `b` and its
+    /// unshot part both gain Delta e, which keeps the shooting invariant `b = e + K (b - u)`.
+    pub fn replace_sources(&mut self, sources: FrameSources) {
+        let mut delta = vec![[0.0; 3]; self.solution.b.len()];
+        self.take_sources(sources, &mut delta);
+        for (k, d) in delta.iter().enumerate() {
+            for c in 0..3 {
+                self.solution.b[k][c] += d[c];
+                self.solution.unshot[k][c] += d[c];
+            }
+        }
+    }
+
     /// One line per object whose emitting faces deliver nothing to any other face (an emissive
     /// plane left facing the sky): no link leaves any of them.
     pub fn dark_emitters(&self, scene: &Scene) -> Vec<String> {
@@ -536,6 +564,7 @@ pub fn frame_sources(
     let Some(mut lights) = DirectLight::new(scene, frame, elements) else {
         return (emission, Vec::new(), None);
     };
+    lights.settle_rule(last.as_ref().map(|l| l.lights));
     let rho: Vec<[f64; 3]> = elements.iter().map(|e| e.reflectance(scene)).collect();
     // Each element's shadow rays are kept for the next frame, which takes those no move can
     // have changed (crate::lights::direct::DirectLight::project_keeping).

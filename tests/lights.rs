@@ -926,3 +926,94 @@ fn assert_frames_agree(inc: &[Vec<[f32; 3]>], full: &[Vec<[f32; 3]>]) {
         assert!(w <= 1e-3 * peak, "frame {}: {w} vs {peak}", f + 1);
     }
 }
+
+/// A live preview projects lights that moved on a coarser rule (3 x 3 points an element instead
+/// of 6 x 6: a quarter of the shadow rays), and refining the frame projects them again in full:
+/// the refined frame equals a session's that never previewed. Lights placed as in the frame
+/// before keep the full rule, and take that frame's rays where no move changed them.
+#[test]
+fn previews_project_moving_lights_coarsely_and_refining_projects_them_in_full() {
+    use galerkin_radiosity::scene::{Key, KeyTransform};
+    use galerkin_radiosity::session::preview_tolerance;
+    let block = |keys: Vec<Key>| {
+        let mut b = box_mesh("Block", DVec3::new(-0.3, -0.3, 0.0), DVec3::new(0.3, 0.3, 0.6), 2, false, 0);
+        b.animation = keys;
+        b
+    };
+    let slide =
+        |frame: f64, x: f64| Key { frame, transform: KeyTransform::Translation(DVec3::new(x, 0.0, 0.0)) };
+    let mut moving =
+        Light::new("Point", LightKind::Point, DMat4::from_translation(DVec3::new(-0.8, 0.2, 1.5)), 120.0);
+    moving.animation = vec![
+        LightKey { frame: 1.0, ..LightKey::default() },
+        LightKey {
+            frame: 4.0,
+            matrix: Some(DMat4::from_translation(DVec3::new(0.9, -0.1, 1.3))),
+            ..LightKey::default()
+        },
+    ];
+    let still =
+        Light::new("Point", LightKind::Point, DMat4::from_translation(DVec3::new(0.2, 0.4, 1.6)), 120.0);
+    // (The light moving over a still block; then a still light over a block sliding.)
+    let cases = [
+        (vec![floor(), block(Vec::new())], moving, true),
+        (vec![floor(), block(vec![slide(1.0, -0.6), slide(4.0, 0.7)])], still, false),
+    ];
+    for (objects, light, light_moves) in cases {
+        let mut sc = scene(objects, vec![light], (1, 4));
+        // Tight, so that the two sessions' shooting paths agree far closer than the check below.
+        sc.settings.tolerance = 1e-7;
+        assert_eq!(preview_tolerance(sc.settings.tolerance), 1e-6);
+        let mut every = Session::new(sc.clone(), Method::Incremental).unwrap();
+        let mut preview = Session::new(sc, Method::Incremental).unwrap();
+        every.solve_frame(1.0, &no_progress).unwrap();
+        preview.solve_frame(1.0, &no_progress).unwrap();
+        preview.set_preview(true);
+        for f in 2..=4 {
+            let full = every.solve_frame(f as f64, &no_progress).unwrap();
+            let quick = preview.solve_frame(f as f64, &no_progress).unwrap();
+            assert!(quick.preview, "frame {f}");
+            let (traced, taken) = (quick.direct_rays_traced, quick.direct_rays_taken);
+            if light_moves {
+                // Every ray is cast again, on a quarter of the points.
+                assert_eq!((full.direct_rays_taken, taken), (0, 0), "frame {f}");
+                assert!(
+                    3 * traced < full.direct_rays_traced,
+                    "frame {f}: {traced} vs {}",
+                    full.direct_rays_traced
+                );
+            } else {
+                // The full rule, and the same rays as the session that never previews.
+                assert!(taken > 0, "frame {f}: {quick:?}");
+                assert_eq!((traced, taken), (full.direct_rays_traced, full.direct_rays_taken), "frame {f}");
+            }
+        }
+        assert!(preview.refine(&no_progress).unwrap().is_some());
+        let corners = |s: &Session| -> Vec<[f32; 3]> {
+            s.face_results().unwrap().into_iter().flat_map(|r| r.corner_radiosity).collect()
+        };
+        // The gathered corners (whose direct light is the lights' own at the corner) and the
+        // faces' polynomials at their centres (whose direct light is the projection).
+        let centres = |s: &Session| -> Vec<[f32; 3]> {
+            (0..2)
+                .flat_map(|o| (0..s.scene().objects[o].faces.len()).map(move |f| (o, f)))
+                .map(|(o, f)| s.eval(o, f, 0.5, 0.5).unwrap().map(|x| x as f32))
+                .collect()
+        };
+        for (what, got, want) in
+            [("corners", corners(&preview), corners(&every)), ("centres", centres(&preview), centres(&every))]
+        {
+            let peak = want.iter().flatten().fold(0.0f32, |m, x| m.max(*x));
+            let worst = got
+                .iter()
+                .zip(&want)
+                .flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).abs()))
+                .fold(0.0, f32::max);
+            eprintln!(
+                "light moving {light_moves}: refined frame 4's {what} {:.2e} of the peak off",
+                worst / peak
+            );
+            assert!(worst <= 1e-5 * peak, "{what}: {:.2e} of the peak", worst / peak);
+        }
+    }
+}

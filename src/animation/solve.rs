@@ -27,19 +27,11 @@ pub(super) fn enter_frame(
     // Emission changes, the lights' direct light among them, enter as Delta e (eq. 9). The last
     // frame's shadow rays are taken again where no move can have changed them.
     let last = sys.lights.as_deref().map(|lights| LastFrame { lights, moved, swept });
-    let (emission, direct, lights) = crate::system::frame_sources(next, frame, &elements, sys.basis, last);
-    if let Some(rays) = lights.as_deref().map(DirectLight::kept_rays) {
+    let sources = crate::system::frame_sources(next, frame, &elements, sys.basis, last);
+    if let Some(rays) = sources.2.as_deref().map(DirectLight::kept_rays) {
         (stats.direct_rays_traced, stats.direct_rays_taken) = (rays.traced, rays.taken);
     }
-    let old_sources = sys.sources();
-    (sys.direct, sys.lights) = (direct, lights);
-    for (k, d) in delta_b.iter_mut().enumerate() {
-        let new =
-            std::array::from_fn::<f64, 3, _>(|c| emission[k][c] + sys.direct.get(k).map_or(0.0, |x| x[c]));
-        for c in 0..3 {
-            d[c] += new[c] - old_sources[k][c];
-        }
-    }
+    sys.take_sources(sources, delta_b);
     for (k, d) in delta_b.iter().enumerate() {
         for c in 0..3 {
             sys.solution.b[k][c] += d[c];
@@ -49,7 +41,6 @@ pub(super) fn enter_frame(
     sys.elements = elements;
     // The transfers were moved with the previous areas; a scaled element reweighs them all.
     sys.links.set_receiver_areas(&sys.areas());
-    sys.emission = emission;
     let surface: Vec<[f64; 3]> = sys.elements.iter().map(|e| e.reflectance(next)).collect();
     if surface != sys.surface_reflectance {
         // A material changed: Delta K is not formed for that (as before the bound), the bound

@@ -288,6 +288,7 @@ pub fn parse_scene(text: &str) -> Result<Scene> {
         reflecting_backs: s.reflecting_backs.unwrap_or(d.reflecting_backs),
         memory_budget_mb: s.memory_budget_mb.unwrap_or(d.memory_budget_mb),
         accuracy: s.accuracy.unwrap_or(d.accuracy),
+        preview_lights: false,
     };
     let mut materials = Vec::new();
     let mut emission_keys = Vec::new();

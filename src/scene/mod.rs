@@ -50,6 +50,11 @@ pub struct Settings {
     /// The hierarchical solve's one accuracy knob ([`crate::hierarchy`]): the largest share of
     /// the emitted power a link may carry without being refined (smaller is finer and slower).
     pub accuracy: f64,
+    /// The lights' direct light projected on each element at preview quality (3 x 3 points
+    /// instead of 6 x 6, [`crate::lights::direct`]): set by [`crate::session::Session`] for a
+    /// live preview's frames, whose refinement projects it again in full. Not a scene file's
+    /// setting.
+    pub preview_lights: bool,
 }
 
 impl Default for Settings {
@@ -66,6 +71,7 @@ impl Default for Settings {
             reflecting_backs: false,
             memory_budget_mb: 0,
             accuracy: crate::hierarchy::DEFAULT_ACCURACY,
+            preview_lights: false,
         }
     }
 }

@@ -78,7 +78,8 @@ impl State {
                     && !tree.nodes[id].is_cluster()
             })
             .collect();
-        let rule = DirectLight::projection_rule();
+        // (A preview's lights take a coarser rule: `Settings::preview_lights`.)
+        let rule = lights.map_or_else(DirectLight::projection_rule, DirectLight::rule);
         let (last, swept) = match (&rays.last, lights) {
             (Some(last), Some(lights)) => (Some(last), lights.swept_for_rays(&last.swept)),
             _ => (None, Vec::new()),
