@@ -242,13 +242,13 @@ fn kept_gather_equals_fresh_gather() {
 }
 
 /// The lights' direct light at the corners is kept too: a block sliding over a floor under a
-/// World and a soft Point light (frames 1-3, then still), each frame's kept gather equals a fresh
-/// gather of the same frame, and once nothing moved every corner's shadow ray is taken from the
-/// last gather's.
+/// World and a soft Point light (frames 1-3, then still; the light moving from frame 4 to 6), each
+/// frame's kept gather equals a fresh gather of the same frame, once nothing moved every corner's
+/// shadow ray is taken from the last gather's, and while the light moves all but its own.
 #[test]
 fn kept_direct_light_at_corners_equals_a_fresh_gathers() {
     use galerkin_radiosity::animation::AnimationState;
-    use galerkin_radiosity::lights::{Light, LightKind, World};
+    use galerkin_radiosity::lights::{Light, LightKey, LightKind, World};
     let p = DVec3::new;
     let floor = scenes::subdivided_quad(
         "Floor",
@@ -261,8 +261,18 @@ fn kept_direct_light_at_corners_equals_a_fresh_gathers() {
     let mut lamp =
         Light::new("Lamp", LightKind::Point, glam::DMat4::from_translation(p(0.4, -0.6, 1.5)), 60.0);
     lamp.base.radius = 0.1;
+    // Still until frame 4, then moving over the still block: its rays are cast again, the
+    // World's taken.
+    lamp.animation = vec![
+        LightKey { frame: 4.0, ..LightKey::default() },
+        LightKey {
+            frame: 6.0,
+            matrix: Some(glam::DMat4::from_translation(p(-0.5, 0.3, 1.2))),
+            ..LightKey::default()
+        },
+    ];
     let settings = Settings { basis_order: 1, tolerance: 1e-6, ..Settings::default() };
-    let scene = Scene::new(settings, (1, 4), materials(0.6, 0.0), vec![vec![]; 2], vec![floor, block])
+    let scene = Scene::new(settings, (1, 6), materials(0.6, 0.0), vec![vec![]; 2], vec![floor, block])
         .unwrap()
         .with_lights(vec![lamp])
         .unwrap()
@@ -271,7 +281,7 @@ fn kept_direct_light_at_corners_equals_a_fresh_gathers() {
     let mut sys = solved(&scene);
     sys.gather_corners(&scene, 1.0, &no_progress).unwrap();
     let mut state = AnimationState::new(sys.elements.len(), true);
-    for frame in 2..=4 {
+    for frame in 2..=6 {
         let (kept, all, worst) = kept_and_fresh_gather(&mut sys, &mut state, &scene, frame as f64);
         eprintln!(
             "frame {frame}: corners' shadow rays {} traced, {} taken; worst relative difference {worst:.1e}",
@@ -281,6 +291,10 @@ fn kept_direct_light_at_corners_equals_a_fresh_gathers() {
         assert_eq!(kept.direct_rays_traced + kept.direct_rays_taken, all.direct_rays_traced);
         if frame == 4 {
             assert!(kept.direct_rays_traced == 0 && kept.direct_rays_taken > 0, "nothing moved: {kept:?}");
+        } else if frame > 4 {
+            // The lamp's 64 rays a corner (Medium) cast again, the World's 289 and more taken.
+            let (traced, taken) = (kept.direct_rays_traced, kept.direct_rays_taken);
+            assert!(traced > 0 && taken > 2 * traced, "frame {frame}, the lamp moved: {kept:?}");
         } else {
             assert!(kept.direct_rays_taken > 0, "frame {frame}: no corner ray taken");
         }

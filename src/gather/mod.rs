@@ -513,10 +513,15 @@ fn direct_at_points(
     let Some(lights) = sys.lights.as_deref() else {
         return (vec![None; points.len()], Vec::new(), Default::default());
     };
-    // (`previous` holds the same points: the caller kept it only then.)
-    let last = previous.filter(|p| {
-        p.direct_outcomes.len() == points.len() && p.lights.as_deref().is_some_and(|l| l.same_sources(lights))
-    });
+    // (`previous` holds the same points: the caller kept it only then.) Sources placed otherwise
+    // since (a light that moved) cast their rays again; the others' are taken where they hold.
+    let (last, changed) = match previous.filter(|p| p.direct_outcomes.len() == points.len()) {
+        Some(p) => match p.lights.as_deref().and_then(|l| lights.changed_sources(l)) {
+            Some(changed) if changed.iter().any(|&c| !c) => (Some(p), changed),
+            _ => (None, Vec::new()),
+        },
+        None => (None, Vec::new()),
+    };
     let swept = lights.swept_for_rays(swept);
     let each: Vec<_> = points
         .par_iter()
@@ -525,7 +530,8 @@ fn direct_at_points(
             let Some((e, s, t)) = p.at else { return (None, Default::default(), Default::default()) };
             let kept = last.filter(|_| !moved[e]).map(|l| &l.direct_outcomes[k]);
             let (x, n) = shading_point(&sys.elements[e].patch, s, t, p.normal);
-            let (irradiance, outcomes, rays) = lights.irradiance_keeping(x, n, e as u32, kept, &swept);
+            let (irradiance, outcomes, rays) =
+                lights.irradiance_keeping(x, n, e as u32, (kept, &changed), &swept);
             (Some(irradiance), outcomes, rays)
         })
         .collect();

@@ -82,6 +82,9 @@ pub(super) struct Probe<'a> {
     diverged: bool,
     /// The next section's number.
     section: usize,
+    /// Per source (a section's number modulo their count), whether it changed since the record:
+    /// its sections are traced whole. Empty: none changed.
+    changed: &'a [bool],
     record: Option<Outcomes>,
     /// Rays traced, and taken from the record.
     rays: KeptRays,
@@ -102,9 +105,19 @@ impl<'a> Probe<'a> {
             end: usize::MAX,
             diverged: false,
             section: 0,
+            changed: &[],
             record: record.then(Outcomes::default),
             rays: KeptRays::default(),
         }
+    }
+
+    /// This probe with `changed`, per source in the order each point casts their sections,
+    /// whether the source changed since the record (a light that moved): its sections are traced
+    /// whole, the others taken as before. Each point casts one section per source, so a section's
+    /// source is its number modulo their count.
+    pub(super) fn with_changed(mut self, changed: &'a [bool]) -> Self {
+        self.changed = changed;
+        self
     }
 
     /// Starts the next section: one source's rays at one point, cast alike whatever the rays
@@ -113,7 +126,8 @@ impl<'a> Probe<'a> {
         if let Some(record) = &mut self.record {
             record.starts.push(record.len as u32);
         }
-        match self.last.and_then(|o| Some((o, *o.starts.get(self.section)?))) {
+        let changed = !self.changed.is_empty() && self.changed[self.section % self.changed.len()];
+        match self.last.and_then(|o| Some((o, *o.starts.get(self.section)?))).filter(|_| !changed) {
             Some((o, start)) => {
                 let end = o.starts.get(self.section + 1).map_or(o.len, |&e| e as usize);
                 (self.at, self.end, self.diverged) = (start as usize, end, false);

@@ -588,13 +588,14 @@ fn the_furnace_gathers_again_only_what_changed() {
 }
 
 /// The leaves' and the corners' direct light is kept between frames: a block sliding over a floor
-/// under a World, a soft Point light and a Sun (frames 1-3, then still), each updated frame's leaf
-/// sources equal a fresh projection of the same leaves and its corners a fresh gather's, bit for
-/// bit, and once nothing moves every leaf takes its shadow rays from the frame before.
+/// under a World, a soft Point light and a Sun (frames 1-3, then still; the light moving from frame
+/// 4 to 6), each updated frame's leaf sources equal a fresh projection of the same leaves and its
+/// corners a fresh gather's, bit for bit, once nothing moves every leaf takes its shadow rays from
+/// the frame before, and while the light moves all but its own.
 #[test]
 fn kept_leaf_rays_give_the_sources_a_fresh_projection_gives() {
     use galerkin_radiosity::lights::direct::DirectLight;
-    use galerkin_radiosity::lights::{Light, LightKind, World};
+    use galerkin_radiosity::lights::{Light, LightKey, LightKind, World};
     use galerkin_radiosity::scene::Material;
     use galerkin_radiosity::scenes::{box_mesh, subdivided_quad, translation_keys};
     use glam::{DMat4, DVec3};
@@ -605,9 +606,19 @@ fn kept_leaf_rays_give_the_sources_a_fresh_projection_gives() {
     block.animation = translation_keys(&[(1.0, p(-0.8, 0.0, 0.0)), (3.0, p(0.8, 0.0, 0.0))]);
     let mut lamp = Light::new("Lamp", LightKind::Point, DMat4::from_translation(p(0.4, -0.6, 1.5)), 60.0);
     lamp.base.radius = 0.1;
+    // Still until frame 4, then moving over the still block: its rays are cast again, the World's
+    // and the Sun's taken.
+    lamp.animation = vec![
+        LightKey { frame: 4.0, ..LightKey::default() },
+        LightKey {
+            frame: 6.0,
+            matrix: Some(DMat4::from_translation(p(-0.5, 0.3, 1.2))),
+            ..LightKey::default()
+        },
+    ];
     let sun = Light::new("Sun", LightKind::Sun, DMat4::from_rotation_x(0.3), 1.5);
     let grey = Material { name: "grey".into(), reflectance: [0.6; 3], emission: [0.0; 3] };
-    let scene = Scene::new(settings(), (1, 4), vec![grey], vec![vec![]], vec![floor, block])
+    let scene = Scene::new(settings(), (1, 6), vec![grey], vec![vec![]], vec![floor, block])
         .unwrap()
         .with_lights(vec![lamp, sun])
         .unwrap()
@@ -615,7 +626,7 @@ fn kept_leaf_rays_give_the_sources_a_fresh_projection_gives() {
         .unwrap();
     let hs = keeping_gather();
     let mut h = solve_frame(&scene, 1.0, &hs, &no_progress).unwrap();
-    for frame in 2..=4 {
+    for frame in 2..=6 {
         let f = frame as f64;
         let next = update_frame(&mut h, &scene, f, &hs, &no_progress).unwrap();
         let lights = next.direct.as_ref().expect("the frame keeps its lights");
@@ -650,6 +661,12 @@ fn kept_leaf_rays_give_the_sources_a_fresh_projection_gives() {
         );
         if frame == 4 {
             assert!(s.direct_rays_traced == 0 && s.direct_rays_taken > 0, "nothing moved: {s:?}");
+        } else if frame > 4 {
+            let (traced, taken) = (s.direct_rays_traced, s.direct_rays_taken);
+            assert!(
+                s.moved_faces == 0 && traced > 0 && taken > 2 * traced,
+                "frame {frame}, the lamp moved: {s:?}"
+            );
         } else {
             assert!(s.moved_faces > 0 && s.direct_rays_taken > 0, "frame {frame}: {s:?}");
         }

@@ -401,17 +401,19 @@ impl<'k> Memo<'k> {
     }
 
     /// The lights' direct irradiance at the point `(x, n)` on face `f`, its shadow rays taken from
-    /// the point's kept outcomes where `swept` is given (the kept values' lights are these, and
-    /// `swept` holds what moved since) and no box of it meets a ray; the outcomes kept for the
-    /// next frame. The same irradiance as [`DirectLight::irradiance`], bit for bit.
+    /// the point's kept outcomes where `kept` is given (the kept values' lights cast alike: the
+    /// boxes the moves since swept, and the sources placed otherwise since) and no box meets a
+    /// ray, but for the changed sources' rays; the outcomes kept for the next frame. The same
+    /// irradiance as [`DirectLight::irradiance`], bit for bit.
     pub fn direct(
         &mut self,
         lights: &DirectLight,
         (x, n, f): (DVec3, DVec3, u32),
-        swept: Option<&[Aabb]>,
+        kept: Option<(&[Aabb], &[bool])>,
     ) -> [f64; 3] {
-        let last = swept.and(self.previous.map(|(p, _)| &p.direct));
-        let (irradiance, outcomes, _) = lights.irradiance_keeping(x, n, f, last, swept.unwrap_or(&[]));
+        let last = kept.and(self.previous.map(|(p, _)| &p.direct));
+        let (swept, changed) = kept.unwrap_or((&[], &[]));
+        let (irradiance, outcomes, _) = lights.irradiance_keeping(x, n, f, (last, changed), swept);
         if let Some(k) = &mut self.keeping {
             k.direct = outcomes;
         }

@@ -276,11 +276,12 @@ pub fn corners_keeping(
         return Err(crate::error::Error::Cancelled);
     }
     let mut gather = Gather::new(inputs, &stop, mode)?;
-    // The points' direct light takes its kept shadow rays when the kept values' lights are
-    // placed as this frame's (crate::lights::kept).
-    gather.direct_swept = keeping.from.and_then(|(kept, changes)| {
+    // The points' direct light takes its kept shadow rays when the kept values' lights cast
+    // alike, but for the sources placed otherwise since (crate::lights::kept).
+    gather.direct_kept = keeping.from.and_then(|(kept, changes)| {
         let (now, then) = (inputs.lights?, kept.lights.as_deref()?);
-        now.same_sources(then).then(|| now.swept_for_rays(changes.swept()))
+        let changed = now.changed_sources(then).filter(|c| c.iter().any(|&c| !c))?;
+        Some((now.swept_for_rays(changes.swept()), changed))
     });
     let solids = inputs
         .occluders
@@ -371,9 +372,9 @@ struct Gather<'a> {
     /// The rule past [`FAR_RATIO`].
     far_rule: GaussLegendre,
     counters: Counters,
-    /// With the kept values' lights placed as this frame's, the boxes the moves since swept,
-    /// for the points' direct light ([`Memo::direct`]).
-    direct_swept: Option<Vec<crate::geometry::Aabb>>,
+    /// With the kept values' lights cast alike, the boxes the moves since swept and the sources
+    /// placed otherwise since, for the points' direct light ([`Memo::direct`]).
+    direct_kept: Option<(Vec<crate::geometry::Aabb>, Vec<bool>)>,
 }
 
 impl<'a> Gather<'a> {
@@ -392,7 +393,7 @@ impl<'a> Gather<'a> {
             rule: GaussLegendre::new(GAUSS_POINTS),
             far_rule: GaussLegendre::new(FAR_POINTS),
             counters: Counters::default(),
-            direct_swept: None,
+            direct_kept: None,
         })
     }
 
@@ -422,8 +423,8 @@ impl<'a> Gather<'a> {
         let rx = Receiver { x, n, face: f as u32, radius: face.patch.bounding_sphere().1 };
         let feet = feet.then_some(solids);
         let (leaf, _, _) = tree.leaf_at(f, s, t);
-        let swept = self.direct_swept.as_deref();
-        let direct = self.inputs.lights.map_or([0.0; 3], |l| memo.direct(l, (x, n, f as u32), swept));
+        let kept = self.direct_kept.as_ref().map(|(swept, changed)| (&swept[..], &changed[..]));
+        let direct = self.inputs.lights.map_or([0.0; 3], |l| memo.direct(l, (x, n, f as u32), kept));
         let mut got = Received::default();
         let mut ranked = Vec::new();
         let mut tails = [0.0; 3];

@@ -27,23 +27,29 @@ struct LastRays {
     moved_faces: Vec<bool>,
     /// Boxes holding the moved faces' old and new places.
     swept: Vec<Aabb>,
+    /// Per source, whether it was placed otherwise since ([`DirectLight::changed_sources`]).
+    changed: Vec<bool>,
 }
 
 impl LeafRays {
     /// The rays to keep after `last`, this frame's of a tree cloned from that frame's (node ids
-    /// hold), `lights` placed as `last_lights` were ([`DirectLight::same_sources`]); otherwise
-    /// none are taken.
+    /// hold), `lights` casting alike as `last_lights` did ([`DirectLight::changed_sources`]: the
+    /// sources placed otherwise cast their rays again); otherwise none are taken.
     pub fn after(
         last: LeafRays,
         (lights, last_lights): (Option<&DirectLight>, Option<&DirectLight>),
         moved_faces: &[bool],
         swept: &[Aabb],
     ) -> Self {
-        let same = matches!((lights, last_lights), (Some(a), Some(b)) if a.same_sources(b));
-        let last = same.then(|| LastRays {
+        let changed = match (lights, last_lights) {
+            (Some(a), Some(b)) => a.changed_sources(b).filter(|c| c.iter().any(|&c| !c)),
+            _ => None,
+        };
+        let last = changed.map(|changed| LastRays {
             outcomes: last.now,
             moved_faces: moved_faces.to_vec(),
             swept: swept.to_vec(),
+            changed,
         });
         LeafRays { now: Vec::new(), last, counts: KeptRays::default() }
     }
@@ -94,6 +100,7 @@ impl State {
                 let Some(lights) = lights else { return (out, Outcomes::default(), KeptRays::default()) };
                 // A node's id and patch hold from frame to frame where its face did not move.
                 let kept = last.filter(|l| !l.moved_faces[f]).and_then(|l| l.outcomes.get(id));
+                let changed = last.map_or(&[][..], |l| &l.changed[..]);
                 let rho = tree.reflectance[f];
                 let (outcomes, counts) = lights.project_onto_keeping(
                     &s.patch,
@@ -102,7 +109,7 @@ impl State {
                     tree.basis,
                     &rule,
                     &mut out,
-                    (kept, &swept),
+                    (kept, &swept, changed),
                 );
                 (out, outcomes, counts)
             })

@@ -313,18 +313,19 @@ impl DirectLight {
     }
 
     /// [`DirectLight::irradiance`] at a gathered point, recording its shadow rays' outcomes and
-    /// taking those of `last` (the same point's at the last gather, with lights placed as these:
-    /// [`DirectLight::same_sources`]) whose segments meet none of `swept`
-    /// ([`crate::lights::kept`]): the same irradiance as [`DirectLight::irradiance`], bit for bit.
+    /// taking those of `last` (the same point's at the last gather, its lights cast alike:
+    /// [`DirectLight::changed_sources`]) whose segments meet none of `swept`, but for the
+    /// sources `changed` marks ([`crate::lights::kept`]; empty: none changed): the same
+    /// irradiance as [`DirectLight::irradiance`], bit for bit.
     pub(crate) fn irradiance_keeping(
         &self,
         x: DVec3,
         n: DVec3,
         e: u32,
-        last: Option<&Outcomes>,
+        (last, changed): (Option<&Outcomes>, &[bool]),
         swept: &[Aabb],
     ) -> ([f64; 3], Outcomes, KeptRays) {
-        let mut probe = Probe::new(last, swept, true);
+        let mut probe = Probe::new(last, swept, true).with_changed(changed);
         let irradiance = self.irradiance_with(&mut probe, x, n, e, self.world_axis.0, self.soft_corner);
         let (outcomes, rays) = probe.finish();
         (irradiance, outcomes, rays)

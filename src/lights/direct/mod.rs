@@ -3,7 +3,7 @@
 //!
 //! [`DirectLight`] is split by phase, an `impl DirectLight` block per file: this file holds the
 //! struct, the placing of a frame's sources ([`DirectLight::new`]) and the comparison of two
-//! frames' (`same_sources`, `same_placement`); `placed.rs` the lights as placed at a frame, the
+//! frames' (`changed_sources`, `same_placement`); `placed.rs` the lights as placed at a frame, the
 //! fixed points of the soft lights' shadow rays and the World's strata per point;
 //! `irradiance.rs` the point queries ([`DirectLight::irradiance`]) with their shadow rays;
 //! `project.rs` the projections of `rho E_d` onto the bases ([`DirectLight::project`], the Gauss
@@ -83,13 +83,32 @@ impl DirectLight {
         })
     }
 
-    /// Whether `other` places the same lights, World and emitters' backs as `self` and casts their
-    /// rays alike: its shadow rays from an unmoved element are `self`'s.
-    pub(crate) fn same_sources(&self, other: &DirectLight) -> bool {
-        self.same_placement(other) && self.projection_points == other.projection_points
+    /// Per source, in the order a point casts their sections (the lights, the World, the
+    /// emitters' backs: [`DirectLight::irradiance_with`]), whether `other` placed it otherwise
+    /// than `self` (its rays from an unmoved element are then cast again, the others' taken where
+    /// no move changed them); `None` when the two do not cast their sections alike (other
+    /// sources, another rule, rays of another reach), so that none of `other`'s record serves.
+    pub(crate) fn changed_sources(&self, other: &DirectLight) -> Option<Vec<bool>> {
+        let alike = self.lights.len() == other.lights.len()
+            && self.world.is_some() == other.world.is_some()
+            && self.backs.len() == other.backs.len()
+            && self.world_axis == other.world_axis
+            && self.soft_corner == other.soft_corner
+            && self.projection_points == other.projection_points
+            && self.far == other.far;
+        if !alike {
+            return None;
+        }
+        let mut changed: Vec<bool> = self.lights.iter().zip(&other.lights).map(|(a, b)| a != b).collect();
+        if let (Some(a), Some(b)) = (&self.world, &other.world) {
+            changed.push(!a.same_as(b));
+        }
+        changed.extend(self.backs.iter().zip(&other.backs).map(|(a, b)| a != b));
+        Some(changed)
     }
 
-    /// [`DirectLight::same_sources`] but for the projection's rule.
+    /// Whether `other` places the same lights, World and emitters' backs as `self` and casts their
+    /// rays alike, whatever the projection's rule.
     fn same_placement(&self, other: &DirectLight) -> bool {
         let same_world = match (&self.world, &other.world) {
             (None, None) => true,

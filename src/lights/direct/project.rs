@@ -47,8 +47,9 @@ impl DirectLight {
 
     /// [`DirectLight::project`], keeping each element's shadow-ray outcomes for the next frame and
     /// taking those of `last` where they still hold ([`crate::lights::kept`]): the same
-    /// coefficients as [`DirectLight::project`], bit for bit. `last` serves only when it placed
-    /// its lights, World and emitters' backs as this frame does, over as many elements.
+    /// coefficients as [`DirectLight::project`], bit for bit. `last` serves only when it casts
+    /// its sources' rays alike over as many elements ([`DirectLight::changed_sources`]), and then
+    /// for the sources it placed as this frame does.
     pub fn project_keeping(
         &mut self,
         patches: &[Patch],
@@ -58,7 +59,13 @@ impl DirectLight {
     ) -> (Vec<[f64; 3]>, KeptRays) {
         let nb = basis.len();
         let rule = self.rule();
-        let last = last.filter(|l| l.lights.same_sources(self) && l.lights.outcomes.len() == patches.len());
+        // The sources `last` placed otherwise: their sections are cast again, the others' rays
+        // taken where they hold (a light moving under a still World casts its own rays alone).
+        let changed = last
+            .filter(|l| l.lights.outcomes.len() == patches.len())
+            .and_then(|l| self.changed_sources(l.lights))
+            .unwrap_or_default();
+        let last = last.filter(|_| changed.iter().any(|&c| !c));
         let swept = last.map_or_else(Vec::new, |l| self.swept_for_rays(l.swept));
         let this = &*self;
         // Per element: its coefficients, its rays' outcomes, and how many were traced and taken.
@@ -69,8 +76,15 @@ impl DirectLight {
                 let kept = last.filter(|l| !l.moved[e]).map(|l| &l.lights.outcomes[e]);
                 let mut coeffs = vec![[0.0; 3]; nb];
                 let (p, rho) = (&patches[e], reflectance[e]);
-                let kept =
-                    this.project_onto_keeping(p, e as u32, rho, basis, &rule, &mut coeffs, (kept, &swept));
+                let kept = this.project_onto_keeping(
+                    p,
+                    e as u32,
+                    rho,
+                    basis,
+                    &rule,
+                    &mut coeffs,
+                    (kept, &swept, &changed),
+                );
                 (coeffs, kept)
             })
             .collect();
@@ -129,10 +143,10 @@ impl DirectLight {
     }
 
     /// [`DirectLight::project_onto`], recording its shadow rays' outcomes and taking those of
-    /// `last` (the same patch's at the last frame, with lights placed as these:
-    /// [`DirectLight::same_sources`]) whose segments meet none of `swept` (made by
-    /// [`DirectLight::swept_for_rays`]): the same coefficients, bit for bit
-    /// ([`crate::lights::kept`]).
+    /// `last` (the same patch's at the last frame, its lights cast alike:
+    /// [`DirectLight::changed_sources`]) whose segments meet none of `swept` (made by
+    /// [`DirectLight::swept_for_rays`]), but for the sources `changed` marks (empty: none): the
+    /// same coefficients, bit for bit ([`crate::lights::kept`]).
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn project_onto_keeping(
         &self,
@@ -142,9 +156,9 @@ impl DirectLight {
         basis: Basis,
         rule: &GaussLegendre,
         coeffs: &mut [[f64; 3]],
-        (last, swept): (Option<&Outcomes>, &[Aabb]),
+        (last, swept, changed): (Option<&Outcomes>, &[Aabb], &[bool]),
     ) -> (Outcomes, KeptRays) {
-        let mut probe = Probe::new(last, swept, true);
+        let mut probe = Probe::new(last, swept, true).with_changed(changed);
         self.project_onto_with(&mut probe, p, owner, rho, basis, rule, coeffs);
         probe.finish()
     }
@@ -205,14 +219,15 @@ mod tests {
     use glam::{DMat4, DVec3};
 
     use super::*;
-    use crate::lights::{Light, LightKind, World};
+    use crate::lights::{Light, LightKey, LightKind, World};
     use crate::scene::{Material, Scene, Settings};
     use crate::scenes::{box_mesh, subdivided_quad, translation_keys};
 
     /// A block sliding over a floor beside a wall (frames 1-3, then still), lit by a World, a soft
-    /// Point light, a soft Sun and an Area light: each frame's projection that keeps the last
-    /// frame's rays equals a fresh projection bit for bit; it takes the rays no move can have
-    /// changed, and every ray once nothing moved.
+    /// Point light (moving from frame 4 to 6), a soft Sun and an Area light: each frame's
+    /// projection that keeps the last frame's rays equals a fresh projection bit for bit; it takes
+    /// the rays no move can have changed, every ray once nothing moved, and all but the moving
+    /// light's while it moves.
     #[test]
     fn kept_rays_project_as_fresh_ones() {
         let p = DVec3::new;
@@ -226,12 +241,21 @@ mod tests {
         let mut point =
             Light::new("Point", LightKind::Point, DMat4::from_translation(p(0.5, -0.5, 1.5)), 80.0);
         point.base.radius = 0.1;
+        // Still until frame 4, then moving: its rays are cast again, the other sources' taken.
+        point.animation = vec![
+            LightKey { frame: 4.0, ..LightKey::default() },
+            LightKey {
+                frame: 6.0,
+                matrix: Some(DMat4::from_translation(p(0.9, -0.2, 1.3))),
+                ..LightKey::default()
+            },
+        ];
         let mut sun = Light::new("Sun", LightKind::Sun, DMat4::from_rotation_x(0.4), 2.0);
         sun.base.angle = 0.1;
         let mut area = Light::new("Area", LightKind::Area, DMat4::from_translation(p(-0.5, 0.0, 1.8)), 60.0);
         area.base.size = [0.4, 0.4];
         let settings = Settings { basis_order: 1, ..Settings::default() };
-        let scene = Scene::new(settings, (1, 4), vec![grey], vec![vec![]], vec![floor, wall, block])
+        let scene = Scene::new(settings, (1, 6), vec![grey], vec![vec![]], vec![floor, wall, block])
             .unwrap()
             .with_lights(vec![point, sun, area])
             .unwrap()
@@ -239,7 +263,7 @@ mod tests {
             .unwrap();
         let basis = Basis::new(1);
         let mut last: Option<(DirectLight, Vec<Patch>)> = None;
-        for f in 1..=4 {
+        for f in 1..=6 {
             let elements = crate::system::build_elements(&scene, f as f64, basis);
             let patches: Vec<Patch> = elements.iter().map(|e| e.patch).collect();
             let rho: Vec<[f64; 3]> = elements.iter().map(|e| e.reflectance(&scene)).collect();
@@ -267,7 +291,16 @@ mod tests {
                     // Measured: 24-26% of the rays taken (the block is large against the floor).
                     assert!(4 * rays.taken > rays.traced, "frame {f}: {rays:?}");
                 }
-                _ => assert!(rays.traced == 0 && rays.taken > 0, "frame {f}, nothing moved: {rays:?}"),
+                4 => assert!(rays.traced == 0 && rays.taken > 0, "frame {f}, nothing moved: {rays:?}"),
+                _ => {
+                    // The Point light's rays (16 a point) cast again, the World's, the Sun's and
+                    // the Area light's taken.
+                    assert!(!moved.iter().any(|&m| m), "frame {f}");
+                    assert!(
+                        rays.traced > 0 && rays.taken > 2 * rays.traced,
+                        "frame {f}, the light moved: {rays:?}"
+                    );
+                }
             }
             last = Some((lights, patches));
         }
