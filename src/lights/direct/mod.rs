@@ -3,7 +3,7 @@
 //!
 //! [`DirectLight`] is split by phase, an `impl DirectLight` block per file: this file holds the
 //! struct, the placing of a frame's sources ([`DirectLight::new`]) and the comparison of two
-//! frames' (`changed_sources`, `same_placement`); `placed.rs` the lights as placed at a frame, the
+//! frames' (`changed_sources`); `placed.rs` the lights as placed at a frame, the
 //! fixed points of the soft lights' shadow rays and the World's strata per point;
 //! `irradiance.rs` the point queries ([`DirectLight::irradiance`]) with their shadow rays;
 //! `project.rs` the projections of `rho E_d` onto the bases ([`DirectLight::project`], the Gauss
@@ -89,12 +89,16 @@ impl DirectLight {
     /// no move changed them); `None` when the two do not cast their sections alike (other
     /// sources, another rule, rays of another reach), so that none of `other`'s record serves.
     pub(crate) fn changed_sources(&self, other: &DirectLight) -> Option<Vec<bool>> {
+        (self.projection_points == other.projection_points).then(|| self.changed_placements(other))?
+    }
+
+    /// [`DirectLight::changed_sources`] whatever the projections' rules.
+    fn changed_placements(&self, other: &DirectLight) -> Option<Vec<bool>> {
         let alike = self.lights.len() == other.lights.len()
             && self.world.is_some() == other.world.is_some()
             && self.backs.len() == other.backs.len()
             && self.world_axis == other.world_axis
             && self.soft_corner == other.soft_corner
-            && self.projection_points == other.projection_points
             && self.far == other.far;
         if !alike {
             return None;
@@ -105,21 +109,5 @@ impl DirectLight {
         }
         changed.extend(self.backs.iter().zip(&other.backs).map(|(a, b)| a != b));
         Some(changed)
-    }
-
-    /// Whether `other` places the same lights, World and emitters' backs as `self` and casts their
-    /// rays alike, whatever the projection's rule.
-    fn same_placement(&self, other: &DirectLight) -> bool {
-        let same_world = match (&self.world, &other.world) {
-            (None, None) => true,
-            (Some(a), Some(b)) => a.same_as(b),
-            _ => false,
-        };
-        same_world
-            && self.lights == other.lights
-            && self.backs == other.backs
-            && self.world_axis == other.world_axis
-            && self.soft_corner == other.soft_corner
-            && self.far == other.far
     }
 }

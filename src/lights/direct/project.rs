@@ -116,13 +116,16 @@ impl DirectLight {
     }
 
     /// A preview's lights (`Settings::preview_lights`) take the full rule after all where `last`,
-    /// the frame before, placed them alike: its shadow rays are then taken where no move changed
-    /// them, and a frame so projected needs no projecting again when it is refined (a World over
-    /// a moving block: 1.1 s to project the 1,015-face box again in full, against 0.15 s to
-    /// refine without). The coarse rule is for lights that moved, whose rays are all cast again
+    /// the frame before, placed some of its sources alike: their shadow rays are then taken where
+    /// no move changed them ([`DirectLight::changed_sources`]), and a frame so projected needs no
+    /// projecting again when it is refined (a World over a moving block, or under a moving light:
+    /// 1.1 s to project the 1,015-face box again in full, against 0.15 s to refine without). The
+    /// coarse rule is for frames whose every source changed, whose rays are all cast again
     /// whatever the rule.
     pub(crate) fn settle_rule(&mut self, last: Option<&DirectLight>) {
-        if self.is_preview() && last.is_some_and(|l| self.same_placement(l)) {
+        let keeps_some =
+            last.and_then(|l| self.changed_placements(l)).is_some_and(|changed| changed.iter().any(|&c| !c));
+        if self.is_preview() && keeps_some {
             self.projection_points = PROJECTION_POINTS;
         }
     }
