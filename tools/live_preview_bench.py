@@ -1,7 +1,8 @@
 """Times the add-on's live preview while scrubbing: what an artist waits for per frame change.
 
     .venv/bin/python -m tools.live_preview_bench [--subdiv 13] [--frames 24] [--lib A --lib B ...]
-        [--mode full --mode idle] [--method HIERARCHICAL] [--light quad|point|static-point|world]
+        [--mode full --mode idle] [--method HIERARCHICAL]
+        [--light quad|point|static-point|world|world-point]
 
 Builds the test suite's Cornell box (six walls of subdiv x subdiv faces, a 0.5 x 0.5 ceiling
 light keyframed across the room over 48 frames, no block: 1,015 faces at 13) under the bpy
@@ -66,20 +67,21 @@ def measure(subdiv: int, frames: int, mode: str = "full", method: str = "INCREME
     objs = scenes.cornell_box(bpy, n=subdiv, light_frames=(1, 48), box=light in ("world", "static-point"))
     if light != "quad":
         bpy.data.objects.remove(objs["Light"])
-    if light in ("point", "static-point"):
+    if light in ("point", "static-point", "world-point"):
         # A Blender Point light in place of the emissive quad: moving along the quad's path (no
         # face moves, only the lights' direct light changes), or still above the moving block.
         lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", type="POINT"))
         lamp.data.energy = 100.0
         bpy.context.scene.collection.objects.link(lamp)
         lamp.location = (0.0, 0.0, 1.8)
-        if light == "point":
+        if light in ("point", "world-point"):
             for frame, x in ((1, -0.5), (48, 0.5)):
                 lamp.location = (x, 0.0, 1.8)
                 lamp.keyframe_insert("location", index=0, frame=frame)
             scenes._linear(lamp)
-    if light == "world":
-        # The box open to a World: its ceiling taken away, the block moving on the floor.
+    if light in ("world", "world-point"):
+        # The box open to a World: its ceiling taken away, the block moving on the floor (or the
+        # Point light moving above it, for world-point).
         world = bpy.data.worlds.new("Sky")
         world.use_nodes = True
         world.node_tree.nodes["Background"].inputs[1].default_value = 1.0
@@ -172,9 +174,11 @@ def main(argv=None):
                     help="solve every frame change in full, or refine when idle (repeatable; default: full)")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--method", default="INCREMENTAL", help="the panel's Method (INCREMENTAL, HIERARCHICAL)")
-    ap.add_argument("--light", choices=("quad", "point", "static-point", "world"), default="quad",
+    ap.add_argument("--light", choices=("quad", "point", "static-point", "world", "world-point"),
+                    default="quad",
                     help="the light: the emissive ceiling quad moving (default), a Blender Point light "
-                    "moving; a still Point light or a World (the ceiling taken away) over the block moving")
+                    "moving; a still Point light or a World (the ceiling taken away) over the block moving; "
+                    "a Point light moving under a World (world-point, no block)")
     ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # child mode
     args = ap.parse_args(argv)
     modes = args.mode or ["full"]
