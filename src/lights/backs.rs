@@ -28,6 +28,18 @@ pub(super) struct Back {
     pub samples: Vec<DVec3>,
 }
 
+impl Back {
+    /// Whether `other` casts the same shadow rays as this back: the same but for its exitance,
+    /// which weighs what the rays find.
+    pub(super) fn casts_alike(&self, other: &Back) -> bool {
+        let Back { element, exitance: _, polygon, normal, samples } = self;
+        *element == other.element
+            && *polygon == other.polygon
+            && *normal == other.normal
+            && *samples == other.samples
+    }
+}
+
 /// The backs of the emitting faces of `scene`'s two-sided objects at `frame`.
 pub(super) fn emitter_backs(scene: &Scene, frame: f64, elements: &[Element]) -> Vec<Back> {
     if !scene.two_sided.iter().any(|&t| t) {

@@ -156,16 +156,6 @@ impl PlacedWorld {
         (scale.iter().any(|&c| c > 0.0)).then(|| PlacedWorld { scale, image: world.image.clone() })
     }
 
-    /// Whether `other` is the same sky: the same scale and the same image.
-    pub(super) fn same_as(&self, other: &PlacedWorld) -> bool {
-        let same_image = match (&self.image, &other.image) {
-            (None, None) => true,
-            (Some(a), Some(b)) => Arc::ptr_eq(a, b),
-            _ => false,
-        };
-        same_image && self.scale == other.scale
-    }
-
     /// Radiance arriving from direction `d` (unit, pointing away from the receiver).
     pub(super) fn radiance(&self, d: DVec3) -> [f64; 3] {
         match &self.image {

@@ -84,9 +84,9 @@ impl DirectLight {
     }
 
     /// Per source, in the order a point casts their sections (the lights, the World, the
-    /// emitters' backs: [`DirectLight::irradiance_with`]), whether `other` placed it otherwise
-    /// than `self` (its rays from an unmoved element are then cast again, the others' taken where
-    /// no move changed them); `None` when the two do not cast their sections alike (other
+    /// emitters' backs: [`DirectLight::irradiance_with`]), whether `other` cast its rays otherwise
+    /// than `self` (a light that moved or changed shape: its rays from an unmoved element are then
+    /// cast again, the others' taken where no move changed them); `None` when the two do not cast their sections alike (other
     /// sources, another rule, rays of another reach), so that none of `other`'s record serves.
     pub(crate) fn changed_sources(&self, other: &DirectLight) -> Option<Vec<bool>> {
         (self.projection_points == other.projection_points).then(|| self.changed_placements(other))?
@@ -103,11 +103,15 @@ impl DirectLight {
         if !alike {
             return None;
         }
-        let mut changed: Vec<bool> = self.lights.iter().zip(&other.lights).map(|(a, b)| a != b).collect();
-        if let (Some(a), Some(b)) = (&self.world, &other.world) {
-            changed.push(!a.same_as(b));
+        // What a source casts depends on where it is and its shape, not on its colour or power
+        // (which weigh what the rays find): a light fading or a sky dimming keeps its rays. The
+        // World's rays are its strata's, set by the receiver's normal and the quality alone.
+        let mut changed: Vec<bool> =
+            self.lights.iter().zip(&other.lights).map(|(a, b)| !a.casts_alike(b)).collect();
+        if self.world.is_some() {
+            changed.push(false);
         }
-        changed.extend(self.backs.iter().zip(&other.backs).map(|(a, b)| a != b));
+        changed.extend(self.backs.iter().zip(&other.backs).map(|(a, b)| !a.casts_alike(b)));
         Some(changed)
     }
 }

@@ -64,6 +64,26 @@ pub(super) struct Placed {
 }
 
 impl Placed {
+    /// Whether `other` casts the same shadow rays from any point as this light: the same but for
+    /// its colour and power (`scale`), which weigh what the rays find and choose none of them (a
+    /// light fading in or flickering casts the rays of the frame before).
+    pub(super) fn casts_alike(&self, other: &Placed) -> bool {
+        let Placed { kind, position, axis, scale: _, cos_half, smooth, extent, sphere, polygon, samples } =
+            self;
+        (*kind, *position, *axis, *cos_half, *smooth, *extent, *sphere)
+            == (
+                other.kind,
+                other.position,
+                other.axis,
+                other.cos_half,
+                other.smooth,
+                other.extent,
+                other.sphere,
+            )
+            && *polygon == other.polygon
+            && *samples == other.samples
+    }
+
     pub(super) fn new(light: &Light, s: &LightState) -> Self {
         let position = s.matrix.w_axis.truncate();
         let axis = direction(&s.matrix);

@@ -222,15 +222,15 @@ mod tests {
     use glam::{DMat4, DVec3};
 
     use super::*;
-    use crate::lights::{Light, LightKey, LightKind, World};
+    use crate::lights::{Light, LightKey, LightKind, World, WorldKey};
     use crate::scene::{Material, Scene, Settings};
     use crate::scenes::{box_mesh, subdivided_quad, translation_keys};
 
-    /// A block sliding over a floor beside a wall (frames 1-3, then still), lit by a World, a soft
-    /// Point light (moving from frame 4 to 6), a soft Sun and an Area light: each frame's
-    /// projection that keeps the last frame's rays equals a fresh projection bit for bit; it takes
-    /// the rays no move can have changed, every ray once nothing moved, and all but the moving
-    /// light's while it moves.
+    /// A block sliding over a floor beside a wall (frames 1-3, then still), lit by a World (dimming
+    /// at frame 4), a soft Point light (moving from frame 4 to 6), a soft Sun (brighter at frame 4)
+    /// and an Area light: each frame's projection that keeps the last frame's rays equals a fresh
+    /// projection bit for bit; it takes the rays no move can have changed, every ray once nothing
+    /// moved (whatever the colours), and all but the moving light's while it moves.
     #[test]
     fn kept_rays_project_as_fresh_ones() {
         let p = DVec3::new;
@@ -255,6 +255,17 @@ mod tests {
         ];
         let mut sun = Light::new("Sun", LightKind::Sun, DMat4::from_rotation_x(0.4), 2.0);
         sun.base.angle = 0.1;
+        // Brighter and redder at frame 4, the sky dimmer: colours and powers choose no ray, so
+        // frame 4, where nothing moved, still takes every ray.
+        sun.animation = vec![
+            LightKey { frame: 3.0, ..LightKey::default() },
+            LightKey { frame: 4.0, power: Some(3.0), color: Some([1.0, 0.7, 0.5]), ..LightKey::default() },
+        ];
+        let mut sky = World::uniform([0.3, 0.4, 0.5], 1.0);
+        sky.animation = vec![
+            WorldKey { frame: 3.0, color: None, strength: Some(1.0) },
+            WorldKey { frame: 4.0, color: None, strength: Some(0.6) },
+        ];
         let mut area = Light::new("Area", LightKind::Area, DMat4::from_translation(p(-0.5, 0.0, 1.8)), 60.0);
         area.base.size = [0.4, 0.4];
         let settings = Settings { basis_order: 1, ..Settings::default() };
@@ -262,7 +273,7 @@ mod tests {
             .unwrap()
             .with_lights(vec![point, sun, area])
             .unwrap()
-            .with_world(Some(World::uniform([0.3, 0.4, 0.5], 1.0)))
+            .with_world(Some(sky))
             .unwrap();
         let basis = Basis::new(1);
         let mut last: Option<(DirectLight, Vec<Patch>)> = None;
