@@ -314,11 +314,18 @@ impl System {
         (self.emission, self.direct, self.lights) = (emission, direct, lights);
     }
 
-    /// [`System::take_sources`] with the change added to the solution at once: `b` and its
-    /// unshot part both gain Delta e, which keeps the shooting invariant `b = e + K (b - u)`.
+    /// [`System::take_sources`] with the change added to the solution at once
+    /// ([`System::add_unshot`]).
     pub fn replace_sources(&mut self, sources: FrameSources) {
         let mut delta = vec![[0.0; 3]; self.solution.b.len()];
         self.take_sources(sources, &mut delta);
+        self.add_unshot(&delta);
+    }
+
+    /// Adds `delta` (one entry per coefficient) to `b` and to its unshot part alike: a change of
+    /// the sources (or of `K (b - u)`) not yet shot, which keeps the shooting invariant
+    /// `b = e + K (b - u)`.
+    pub fn add_unshot(&mut self, delta: &[[f64; 3]]) {
         for (k, d) in delta.iter().enumerate() {
             for c in 0..3 {
                 self.solution.b[k][c] += d[c];

@@ -32,12 +32,7 @@ pub(super) fn enter_frame(
         (stats.direct_rays_traced, stats.direct_rays_taken) = (rays.traced, rays.taken);
     }
     sys.take_sources(sources, delta_b);
-    for (k, d) in delta_b.iter().enumerate() {
-        for c in 0..3 {
-            sys.solution.b[k][c] += d[c];
-            sys.solution.unshot[k][c] += d[c];
-        }
-    }
+    sys.add_unshot(delta_b);
     sys.elements = elements;
     // The transfers were moved with the previous areas; a scaled element reweighs them all.
     sys.links.set_receiver_areas(&sys.areas());

@@ -515,13 +515,11 @@ fn direct_at_points(
     };
     // (`previous` holds the same points: the caller kept it only then.) Sources placed otherwise
     // since (a light that moved) cast their rays again; the others' are taken where they hold.
-    let (last, changed) = match previous.filter(|p| p.direct_outcomes.len() == points.len()) {
-        Some(p) => match p.lights.as_deref().and_then(|l| lights.changed_sources(l)) {
-            Some(changed) if changed.iter().any(|&c| !c) => (Some(p), changed),
-            _ => (None, Vec::new()),
-        },
-        None => (None, Vec::new()),
-    };
+    let kept = previous.filter(|p| p.direct_outcomes.len() == points.len()).and_then(|p| {
+        let changed = lights.changed_sources(p.lights.as_deref()?)?;
+        Some((p, changed))
+    });
+    let (last, changed) = kept.map_or((None, Vec::new()), |(p, changed)| (Some(p), changed));
     let swept = lights.swept_for_rays(swept);
     let each: Vec<_> = points
         .par_iter()

@@ -16,7 +16,7 @@ use crate::system::Element;
 const BACK_SAMPLES: usize = 2;
 
 /// The back of one emitting face.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub(super) struct Back {
     /// The face's element: shadow rays ending on it skip it.
     pub element: u32,

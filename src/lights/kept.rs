@@ -6,8 +6,9 @@
 //! It records each ray's outcome in that order ([`Outcomes`]). The next frame, where the element
 //! did not move, casts the same rays in the same order for every source placed as before, as
 //! long as their outcomes are the same; a source placed otherwise (a light that moved) casts its
-//! own sections again ([`Probe::with_changed`]). A ray whose segment meets no box a moving object swept
-//! between the two frames has the same outcome: every triangle it could meet is where it was.
+//! own sections again ([`Probe::with_changed`]). A ray whose segment meets no box a moving
+//! object swept between the two frames has the same outcome: every triangle it could meet is
+//! where it was.
 //! So such a ray's outcome is taken from the record, the others are traced again, and from the
 //! first traced ray whose outcome changed on (the sequence may differ from there) every ray is
 //! traced until the next section ([`Probe`]): a section is one source's rays at one projection

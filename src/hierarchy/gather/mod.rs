@@ -280,7 +280,7 @@ pub fn corners_keeping(
     // alike, but for the sources placed otherwise since (crate::lights::kept).
     gather.direct_kept = keeping.from.and_then(|(kept, changes)| {
         let (now, then) = (inputs.lights?, kept.lights.as_deref()?);
-        let changed = now.changed_sources(then).filter(|c| c.iter().any(|&c| !c))?;
+        let changed = now.changed_sources(then)?;
         Some((now.swept_for_rays(changes.swept()), changed))
     });
     let solids = inputs

@@ -42,7 +42,7 @@ impl LeafRays {
         swept: &[Aabb],
     ) -> Self {
         let changed = match (lights, last_lights) {
-            (Some(a), Some(b)) => a.changed_sources(b).filter(|c| c.iter().any(|&c| !c)),
+            (Some(a), Some(b)) => a.changed_sources(b),
             _ => None,
         };
         let last = changed.map(|changed| LastRays {
@@ -90,6 +90,7 @@ impl State {
             (Some(last), Some(lights)) => (Some(last), lights.swept_for_rays(&last.swept)),
             _ => (None, Vec::new()),
         };
+        let changed = last.map_or(&[][..], |l| &l.changed[..]);
         let computed: Vec<(Vec<[f64; 3]>, Outcomes, KeptRays)> = todo
             .par_iter()
             .map(|&id| {
@@ -100,7 +101,6 @@ impl State {
                 let Some(lights) = lights else { return (out, Outcomes::default(), KeptRays::default()) };
                 // A node's id and patch hold from frame to frame where its face did not move.
                 let kept = last.filter(|l| !l.moved_faces[f]).and_then(|l| l.outcomes.get(id));
-                let changed = last.map_or(&[][..], |l| &l.changed[..]);
                 let rho = tree.reflectance[f];
                 let (outcomes, counts) = lights.project_onto_keeping(
                     &s.patch,

@@ -117,23 +117,9 @@ impl DirectLight {
         if b.element == e {
             return 0.0;
         }
-        let f = point_to_polygon(x, n, &b.polygon, b.normal);
-        if f <= 0.0 {
-            return 0.0;
-        }
-        let (mut seen, mut all) = (0.0, 0.0);
-        for &y in &b.samples {
-            let d = y - x;
-            let d2 = d.length_squared();
-            let w = (n.dot(d) * (-b.normal).dot(d)).max(0.0) / (d2 * d2);
-            if w > 0.0 {
-                all += w;
-                if self.shadows.visible_between(probe, x, y, e, b.element) {
-                    seen += w;
-                }
-            }
-        }
-        if all > 0.0 { f * seen / all } else { f }
+        polygon_factor((x, n), (&b.polygon, b.normal, &b.samples), |y| {
+            self.shadows.visible_between(probe, x, y, e, b.element)
+        })
     }
 
     /// The light's irradiance at `x` per unit of its `scale`.
@@ -167,27 +153,9 @@ impl DirectLight {
                 }
                 cos
             }
-            LightKind::Area => {
-                let f = point_to_polygon(x, n, &l.polygon, l.axis);
-                if f <= 0.0 {
-                    return 0.0;
-                }
-                // The unoccluded form factor times the arriving share of the sample points'
-                // form-factor weights.
-                let (mut seen, mut all) = (0.0, 0.0);
-                for &y in &l.samples {
-                    let d = y - x;
-                    let d2 = d.length_squared();
-                    let w = (n.dot(d) * (-l.axis).dot(d)).max(0.0) / (d2 * d2);
-                    if w > 0.0 {
-                        all += w;
-                        if self.shadows.visible(probe, x, y, e) {
-                            seen += w;
-                        }
-                    }
-                }
-                if all > 0.0 { f * seen / all } else { f }
-            }
+            LightKind::Area => polygon_factor((x, n), (&l.polygon, l.axis, &l.samples), |y| {
+                self.shadows.visible(probe, x, y, e)
+            }),
         }
     }
 
@@ -330,4 +298,31 @@ impl DirectLight {
         let (outcomes, rays) = probe.finish();
         (irradiance, outcomes, rays)
     }
+}
+
+/// The form factor from the point `(x, n)` to a polygon facing `normal` (an Area light, an
+/// emitter's back), times the arriving share of its sample points' form-factor weights: the
+/// unoccluded form factor where no sample weighs (`visible(y)`: whether sample `y` is seen).
+fn polygon_factor(
+    (x, n): (DVec3, DVec3),
+    (polygon, normal, samples): (&[DVec3], DVec3, &[DVec3]),
+    mut visible: impl FnMut(DVec3) -> bool,
+) -> f64 {
+    let f = point_to_polygon(x, n, polygon, normal);
+    if f <= 0.0 {
+        return 0.0;
+    }
+    let (mut seen, mut all) = (0.0, 0.0);
+    for &y in samples {
+        let d = y - x;
+        let d2 = d.length_squared();
+        let w = (n.dot(d) * (-normal).dot(d)).max(0.0) / (d2 * d2);
+        if w > 0.0 {
+            all += w;
+            if visible(y) {
+                seen += w;
+            }
+        }
+    }
+    if all > 0.0 { f * seen / all } else { f }
 }

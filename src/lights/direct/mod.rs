@@ -86,8 +86,9 @@ impl DirectLight {
     /// Per source, in the order a point casts their sections (the lights, the World, the
     /// emitters' backs: [`DirectLight::irradiance_with`]), whether `other` cast its rays otherwise
     /// than `self` (a light that moved or changed shape: its rays from an unmoved element are then
-    /// cast again, the others' taken where no move changed them); `None` when the two do not cast their sections alike (other
-    /// sources, another rule, rays of another reach), so that none of `other`'s record serves.
+    /// cast again, the others' taken where no move changed them); `None` when none of `other`'s
+    /// record serves: the two do not cast their sections alike (other sources, another rule, rays
+    /// of another reach), or every source changed.
     pub(crate) fn changed_sources(&self, other: &DirectLight) -> Option<Vec<bool>> {
         (self.projection_points == other.projection_points).then(|| self.changed_placements(other))?
     }
@@ -112,6 +113,6 @@ impl DirectLight {
             changed.push(false);
         }
         changed.extend(self.backs.iter().zip(&other.backs).map(|(a, b)| !a.casts_alike(b)));
-        Some(changed)
+        changed.iter().any(|&c| !c).then_some(changed)
     }
 }

@@ -42,7 +42,7 @@ pub(super) const WORLD_CORNER_AXIS: usize = 8;
 pub(super) const WORLD_PROJECTION_AXIS: usize = 4;
 
 /// One light as placed at a frame, ready for point queries.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub(super) struct Placed {
     pub(super) kind: LightKind,
     pub(super) position: DVec3,

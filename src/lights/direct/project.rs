@@ -63,9 +63,9 @@ impl DirectLight {
         // taken where they hold (a light moving under a still World casts its own rays alone).
         let changed = last
             .filter(|l| l.lights.outcomes.len() == patches.len())
-            .and_then(|l| self.changed_sources(l.lights))
-            .unwrap_or_default();
-        let last = last.filter(|_| changed.iter().any(|&c| !c));
+            .and_then(|l| self.changed_sources(l.lights));
+        let last = last.filter(|_| changed.is_some());
+        let changed = changed.unwrap_or_default();
         let swept = last.map_or_else(Vec::new, |l| self.swept_for_rays(l.swept));
         let this = &*self;
         // Per element: its coefficients, its rays' outcomes, and how many were traced and taken.
@@ -123,8 +123,7 @@ impl DirectLight {
     /// coarse rule is for frames whose every source changed, whose rays are all cast again
     /// whatever the rule.
     pub(crate) fn settle_rule(&mut self, last: Option<&DirectLight>) {
-        let keeps_some =
-            last.and_then(|l| self.changed_placements(l)).is_some_and(|changed| changed.iter().any(|&c| !c));
+        let keeps_some = last.and_then(|l| self.changed_placements(l)).is_some();
         if self.is_preview() && keeps_some {
             self.projection_points = PROJECTION_POINTS;
         }
