@@ -3,6 +3,7 @@
 use galerkin_radiosity::gather;
 use galerkin_radiosity::scene::{Material, Object, Scene, Settings};
 use galerkin_radiosity::scenes;
+use galerkin_radiosity::session::{Method, Session};
 use galerkin_radiosity::system::{System, no_progress};
 use glam::DVec3;
 
@@ -431,4 +432,63 @@ fn frames_after_previews_and_after_a_cancel_equal_solving_in_full() {
     let worst = corner_error(&preview, &full);
     eprintln!("frame 3 refined after a cancelled frame 4: worst corner {worst:.2e} of peak");
     assert!(worst <= 1e-5, "{worst:.2e} of peak");
+}
+
+/// A small emitter hovering just above a large floor (one face): its corners' light from the
+/// floor comes from the floor's contact light right under them, which no polynomial over the
+/// floor holds and the foot's ball takes (`B` gathered at the foot). The ball, four times the
+/// height across, is a coaxial disk of form factor `1 - 1/16`; the floor at the foot is `rho`
+/// times the emitter's form factor from there (four rectangles superposed); the rest of the
+/// floor is dark. Both methods' gathers. Until the ball's edge was split below the twelfth
+/// level, a ball smaller than a twelfth-level part of the floor was lost and the corners took
+/// the floor's polynomial instead: `B` = 1.000 against 1.174.
+#[test]
+fn a_small_emitter_over_a_large_floor_takes_the_contact_light_at_its_foot() {
+    let (size, height, half_floor) = (0.01, 1e-5, 100.0);
+    let floor = scenes::subdivided_quad(
+        "floor",
+        [
+            DVec3::new(-half_floor, -half_floor, 0.0),
+            DVec3::new(half_floor, -half_floor, 0.0),
+            DVec3::new(half_floor, half_floor, 0.0),
+            DVec3::new(-half_floor, half_floor, 0.0),
+        ],
+        1,
+        0,
+    );
+    // Facing down over [0, size]^2.
+    let e = [
+        DVec3::new(0.0, 0.0, height),
+        DVec3::new(0.0, size, height),
+        DVec3::new(size, size, height),
+        DVec3::new(size, 0.0, height),
+    ];
+    let emitter = scenes::subdivided_quad("emitter", e, 1, 1);
+    let (rho, be) = (0.5, 1.0);
+    let materials = vec![
+        Material { name: "grey".into(), reflectance: [rho; 3], emission: [0.0; 3] },
+        Material { name: "emitter".into(), reflectance: [rho; 3], emission: [be; 3] },
+    ];
+    let settings = Settings { basis_order: 2, tolerance: 1e-9, ..Settings::default() };
+    let scene = Scene::new(settings, (1, 1), materials, vec![vec![], vec![]], vec![floor, emitter]).unwrap();
+    let d = gather::INSET * size;
+    // The foot lies `d` in from two edges of the emitter, `height` below it.
+    let f = corner_rectangle(d, d, height)
+        + 2.0 * corner_rectangle(size - d, d, height)
+        + corner_rectangle(size - d, size - d, height);
+    let ball = 1.0 - 1.0 / 16.0;
+    let want = be + rho * ball * rho * be * f;
+    for method in [Method::Full, Method::Hierarchical] {
+        let mut session = Session::new(scene.clone(), method).unwrap();
+        session.solve_frame(0.0, &no_progress).unwrap();
+        let results = session.face_results().unwrap();
+        for (k, got) in results[1].corner_radiosity.iter().enumerate() {
+            let got = got[0] as f64;
+            let rel = (got - want).abs() / (want - be);
+            eprintln!(
+                "{method:?}: emitter corner {k}: gathered {got:.5}, closed form {want:.5} ({rel:.1e} of the floor's part)"
+            );
+            assert!(rel < 2e-3, "{method:?}: corner {k}: gathered {got} vs {want}");
+        }
+    }
 }

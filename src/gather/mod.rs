@@ -85,11 +85,20 @@ const MAX_DEPTH: u32 = 12;
 /// in four, down to a 16th of the light per axis (tests/penumbra.rs).
 pub(crate) const PENUMBRA_DEPTH: u32 = 4;
 
-/// A foot's ball ([`Foot`]) is told from the rest of its source to this fraction of its radius:
-/// past it the part of a rectangle the ball holds counts with the side its centre is on. (To
-/// [`MAX_DEPTH`], the ball's edge was most of a real mesh's gather: 53M rectangles at the last
-/// level of the decimated monastery's 3.7M corner-source pairs.)
-pub(crate) const BALL_EDGE: f64 = 1.0 / 8.0;
+/// A part of a source across the edge of a foot's ball ([`Foot`]) is split while its bounding
+/// radius exceeds this fraction of the ball's radius, to [`BALL_DEPTH`] levels at most; then its
+/// seen Gauss nodes count on the side of the edge each lies on. (Before 2026-12-08 a part counted
+/// wholly on its centre's side, split to an eighth of the ball and to [`MAX_DEPTH`] at most: the
+/// edge alone was most of a real mesh's gather, and a ball smaller than a twelfth-level part of a
+/// large source, a small face touching a large one, lost its foot. docs/benchmarks.md, "The
+/// foot's ball".)
+pub(crate) const BALL_EDGE: f64 = 0.25;
+
+/// Deepest split across a foot's ball edge, a guard only: parts `2^-30` of a source's side, a
+/// ball a billionth of its source (a centimetre face hovering 10 um over a 200 m floor is
+/// `1e-7`; tests/gather.rs). The ring of parts across the edge costs about the same at every
+/// level, so the depth a ball needs costs little.
+pub(crate) const BALL_DEPTH: u32 = 30;
 
 /// A corner whose normal and a source's are opposed by more than this cosine faces the source.
 pub(crate) const FACING: f64 = 0.5;

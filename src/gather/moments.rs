@@ -9,8 +9,8 @@ use glam::DVec3;
 use super::nodes::{GaussNodes, N};
 use super::penumbra::Corners;
 use super::{
-    Among, BALL_EDGE, FACING, FOOT_BALL, GAUSS_RATIO, Gather, MAX_DEPTH, Mode, NEAR_FACING, PENUMBRA_DEPTH,
-    Receiver, Touch, behind_plane,
+    Among, BALL_DEPTH, BALL_EDGE, FACING, FOOT_BALL, GAUSS_RATIO, Gather, MAX_DEPTH, Mode, NEAR_FACING,
+    PENUMBRA_DEPTH, Receiver, Touch, behind_plane,
 };
 use crate::geometry::{Patch, Rect};
 use crate::kernel::point::{point_kernel, point_to_polygon};
@@ -34,22 +34,27 @@ impl Gather<'_> {
         let Some((sub, centre, radius)) = self.front_part(rx, j, rect) else { return };
         let patch = &self.patches[j];
         let distance = rx.x.distance(centre);
+        // A foot's ball: a rectangle wholly inside it adds its seen form factor to `weight`; one
+        // across its edge is split while it is coarse against the ball ([`BALL_EDGE`]), then
+        // taken as any rectangle with its seen nodes shared out by the side they lie on
+        // (`across`); one outside is any rectangle.
+        let mut across = None;
         if let Some((r, weight)) = ball {
-            // The ball's edge is resolved to BALL_EDGE of its radius: a rectangle smaller than
-            // that goes wholly to the side its centre is on.
-            let edge = depth >= MAX_DEPTH || radius <= BALL_EDGE * r;
-            if distance + radius <= r || (edge && distance <= r) {
+            if distance + radius <= r || (depth >= BALL_DEPTH && distance <= r) {
                 // Gamma_0 = 1 on the unit square: the l = 0 moment is the plain integral.
                 let mut m = [0.0; crate::basis::MAX_LEN];
                 self.moments(rx, j, rect, mode, depth, &mut m[..out.len()], None);
                 *weight += m[0];
                 return;
             }
-            if distance - radius < r && !edge {
-                for q in rect.quadrants() {
-                    self.moments(rx, j, &q, mode, depth + 1, out, Some((r, &mut *weight)));
+            if distance - radius < r {
+                if radius > BALL_EDGE * r && depth < BALL_DEPTH {
+                    for q in rect.quadrants() {
+                        self.moments(rx, j, &q, mode, depth + 1, out, Some((r, &mut *weight)));
+                    }
+                    return;
                 }
-                return;
+                across = Some((r, weight));
             }
         }
         if distance >= GAUSS_RATIO * radius {
@@ -65,44 +70,76 @@ impl Gather<'_> {
             let mut corners = Corners::of((rx.x, rx.n), patch, rect, refine);
             let mut m = [0.0; crate::basis::MAX_LEN];
             let m = &mut m[..out.len()];
+            let mut inside = 0.0;
+            let split = across.as_ref().map(|(r, _)| (*r, &mut inside));
+            let among = Among::Bounds(&sub.bounds());
             let (seen, count) = if depth == 0 {
-                self.gauss(rx, j, &self.nodes[j], Among::Bounds(&sub.bounds()), mode, &mut corners, m)
+                self.gauss(rx, j, &self.nodes[j], among, mode, &mut corners, m, split)
             } else {
                 let nodes = GaussNodes::new(patch, rect, self.rule, self.sys.basis, self.cells_per_axis);
-                self.gauss(rx, j, &nodes, Among::Bounds(&sub.bounds()), mode, &mut corners, m)
+                self.gauss(rx, j, &nodes, among, mode, &mut corners, m, split)
             };
             let mixed = corners.disagree(seen, count);
+            // A penumbra's rectangle across a ball's edge counts on its centre's side.
+            let (out, weight) = match across {
+                Some((r, weight)) if mixed && distance <= r => {
+                    let mut whole = [0.0; crate::basis::MAX_LEN];
+                    let whole = &mut whole[..out.len()];
+                    self.penumbra_parts(rx, j, rect, depth, &sub, whole);
+                    *weight += whole[0];
+                    return;
+                }
+                Some((_, weight)) => (out, Some(weight)),
+                None => (out, None),
+            };
             if mixed {
-                // Every quadrant's shaft lies in this rectangle's: its candidates serve them all.
-                // (Queried again here, only for a rectangle in a penumbra: the Gauss sum above
-                // keeps its list in a thread-local, which no allocation per rectangle needs.)
-                let mut candidates = Vec::new();
-                if let Some(o) = self.occluders {
-                    o.point_candidates(rx.x, rx.n, (rx.element, j as u32), &sub.bounds(), &mut candidates);
-                }
-                for q in rect.quadrants() {
-                    self.penumbra(rx, j, &q, depth + 1, &candidates, out);
-                }
+                self.penumbra_parts(rx, j, rect, depth, &sub, out);
             } else {
                 for (o, x) in out.iter_mut().zip(m.iter()) {
                     *o += x;
+                }
+                if let Some(weight) = weight {
+                    *weight += inside;
                 }
             }
             return;
         }
         if depth >= MAX_DEPTH {
             let (s, t) = rect.map(0.5, 0.5);
-            if !self.visible(rx, j, patch.point(s, t), cell_of(s, t, self.cells_per_axis), mode) {
+            let y = patch.point(s, t);
+            if !self.visible(rx, j, y, cell_of(s, t, self.cells_per_axis), mode) {
                 return;
             }
             let f = point_to_polygon(rx.x, rx.n, &sub.corners, sub.centre_normal());
+            if let Some((r, weight)) = across
+                && rx.x.distance(y) <= r
+            {
+                *weight += f;
+                return;
+            }
             for (l, g) in self.sys.basis.eval(s, t).into_iter().enumerate() {
                 out[l] += f * g;
             }
             return;
         }
         for q in rect.quadrants() {
-            self.moments(rx, j, &q, mode, depth + 1, out, None);
+            let across = across.as_mut().map(|(r, w)| (*r, &mut **w));
+            self.moments(rx, j, &q, mode, depth + 1, out, across);
+        }
+    }
+
+    /// An emitter's rectangle whose rays disagree (a penumbra), split in four and each quadrant
+    /// taken by [`Gather::penumbra`].
+    fn penumbra_parts(&self, rx: &Receiver, j: usize, rect: &Rect, depth: u32, sub: &Patch, out: &mut [f64]) {
+        // Every quadrant's shaft lies in this rectangle's: its candidates serve them all.
+        // (Queried again here, only for a rectangle in a penumbra: the Gauss sum keeps its list
+        // in a thread-local, which no allocation per rectangle needs.)
+        let mut candidates = Vec::new();
+        if let Some(o) = self.occluders {
+            o.point_candidates(rx.x, rx.n, (rx.element, j as u32), &sub.bounds(), &mut candidates);
+        }
+        for q in rect.quadrants() {
+            self.penumbra(rx, j, &q, depth + 1, &candidates, out);
         }
     }
 
@@ -151,7 +188,7 @@ impl Gather<'_> {
         let m = &mut m[..out.len()];
         let nodes = GaussNodes::new(patch, rect, self.rule, self.sys.basis, self.cells_per_axis);
         let (seen, count) =
-            self.gauss(rx, j, &nodes, Among::Candidates(candidates), Mode::Rays, &mut corners, m);
+            self.gauss(rx, j, &nodes, Among::Candidates(candidates), Mode::Rays, &mut corners, m, None);
         if corners.disagree(seen, count) {
             for q in rect.quadrants() {
                 self.penumbra(rx, j, &q, depth + 1, candidates, out);
@@ -212,6 +249,7 @@ impl Gather<'_> {
         mode: Mode,
         corners: &mut Corners,
         out: &mut [f64],
+        mut ball: Option<(f64, &mut f64)>,
     ) -> (usize, usize) {
         // GAUSS_POINTS^2 nodes: fixed arrays, no allocation per moment.
         let mut lit = [(0usize, 0.0f64); N];
@@ -254,6 +292,13 @@ impl Gather<'_> {
         }
         let nb = out.len();
         for (&(k, g), _) in lit[..count].iter().zip(&visible).filter(|(_, v)| **v) {
+            // (Gamma_0 = 1: a node's l = 0 weight is its area weight.)
+            if let Some((r, weight)) = ball.as_mut()
+                && rx.x.distance(nodes.position[k]) <= *r
+            {
+                **weight += g * nodes.weighted_basis[k * nb];
+                continue;
+            }
             for l in 0..nb {
                 out[l] += g * nodes.weighted_basis[k * nb + l];
             }

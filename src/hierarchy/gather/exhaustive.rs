@@ -7,7 +7,7 @@
 use super::surface::{Rays, Source};
 use super::{Counters, FAR_RATIO, GAUSS_RATIO, Gather, Receiver};
 use crate::basis::MAX_LEN as MAX_NB;
-use crate::gather::{BALL_EDGE, behind_plane};
+use crate::gather::{BALL_DEPTH, BALL_EDGE, behind_plane};
 use crate::geometry::Rect;
 use crate::kernel::point::point_to_polygon;
 
@@ -57,25 +57,37 @@ impl Gather<'_> {
             return;
         }
         let distance = rx.x.distance(centre);
+        // A foot's ball, as [`super::near`] takes it.
+        let mut across = None;
         if let Some((r, weight)) = ball {
-            let edge = depth >= MAX_DEPTH || radius <= BALL_EDGE * r;
-            if distance + radius <= r || (edge && distance <= r) {
+            if distance + radius <= r || (depth >= BALL_DEPTH && distance <= r) {
                 let mut m = [0.0; MAX_NB];
                 self.exhaustive_rect(rx, src, candidates, rect, depth, &mut m[..out.len()], None);
                 *weight += m[0];
                 return;
             }
-            if distance - radius < r && !edge {
-                for q in rect.quadrants() {
-                    self.exhaustive_rect(rx, src, candidates, &q, depth + 1, out, Some((r, &mut *weight)));
+            if distance - radius < r {
+                if radius > BALL_EDGE * r && depth < BALL_DEPTH {
+                    for q in rect.quadrants() {
+                        self.exhaustive_rect(
+                            rx,
+                            src,
+                            candidates,
+                            &q,
+                            depth + 1,
+                            out,
+                            Some((r, &mut *weight)),
+                        );
+                    }
+                    return;
                 }
-                return;
+                across = Some((r, weight));
             }
         }
         let basis = self.inputs.tree.basis;
         if distance >= GAUSS_RATIO * radius {
             let rule = if distance >= FAR_RATIO * radius { &self.far_rule } else { &self.rule };
-            self.gauss(rx, src, rect, rule, Rays::Among(candidates), out);
+            self.gauss_split(rx, src, rect, rule, Rays::Among(candidates), out, across);
             return;
         }
         if depth >= MAX_DEPTH {
@@ -90,6 +102,12 @@ impl Gather<'_> {
                 }
             }
             let f = point_to_polygon(rx.x, rx.n, &sub.corners, sub.centre_normal());
+            if let Some((r, weight)) = across
+                && rx.x.distance(y) <= r
+            {
+                *weight += f;
+                return;
+            }
             let mut g = [0.0; MAX_NB];
             basis.eval_into(s, t, &mut g[..out.len()]);
             for (o, g) in out.iter_mut().zip(g) {
@@ -98,7 +116,8 @@ impl Gather<'_> {
             return;
         }
         for q in rect.quadrants() {
-            self.exhaustive_rect(rx, src, candidates, &q, depth + 1, out, None);
+            let across = across.as_mut().map(|(r, w)| (*r, &mut **w));
+            self.exhaustive_rect(rx, src, candidates, &q, depth + 1, out, across);
         }
     }
 }

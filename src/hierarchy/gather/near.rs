@@ -19,7 +19,7 @@ use std::ops::Range;
 use super::surface::{Rays, Source};
 use super::{Counters, FAR_RATIO, GAUSS_RATIO, Gather, Receiver, polygon};
 use crate::basis::MAX_LEN as MAX_NB;
-use crate::gather::{BALL_EDGE, behind_plane};
+use crate::gather::{BALL_DEPTH, BALL_EDGE, behind_plane};
 use crate::geometry::{Patch, Rect};
 
 /// An unoccluded part is split until it spans at most `2^-BASIS_DEPTH` of its source's
@@ -31,7 +31,7 @@ const BASIS_DEPTH: u32 = 3;
 /// parameters: the finest detail of a contact shadow a near source resolves.
 const VIS_DEPTH: u32 = 6;
 
-/// Deepest split at a foot's ball edge (as [`super::exhaustive`]).
+/// Deepest split of a part the point lies next to (a contact) while its shaft holds candidates.
 const MAX_DEPTH: u32 = 12;
 
 /// A part far enough for the Gauss rule casts its rays against its holder's candidates when
@@ -105,19 +105,25 @@ impl Walk<'_, '_> {
             return;
         }
         let distance = self.rx.x.distance(centre);
+        // A foot's ball: a part wholly inside it adds its seen form factor to `weight`; one across
+        // its edge is split while it is coarse against the ball, then taken as any part with its
+        // seen nodes shared out by the side they lie on (`across`); one outside is any part.
+        let mut across = None;
         if let Some((r, weight)) = ball {
-            let edge = depth >= MAX_DEPTH || radius <= BALL_EDGE * r;
-            if distance + radius <= r || (edge && distance <= r) {
+            if distance + radius <= r || (depth >= BALL_DEPTH && distance <= r) {
                 let mut m = [0.0; MAX_NB];
                 self.rect(rect, depth, candidates, &mut m[..out.len()], None);
                 *weight += m[0];
                 return;
             }
-            if distance - radius < r && !edge {
-                for q in rect.quadrants() {
-                    self.rect(&q, depth + 1, candidates.clone(), out, Some((r, &mut *weight)));
+            if distance - radius < r {
+                if radius > BALL_EDGE * r && depth < BALL_DEPTH {
+                    for q in rect.quadrants() {
+                        self.rect(&q, depth + 1, candidates.clone(), out, Some((r, &mut *weight)));
+                    }
+                    return;
                 }
-                return;
+                across = Some((r, weight));
             }
         }
         if distance >= GAUSS_RATIO * radius {
@@ -126,7 +132,7 @@ impl Walk<'_, '_> {
             let rule = if distance >= FAR_RATIO * radius { &g.far_rule } else { &g.rule };
             let rays =
                 if candidates.len() <= SHORT_LIST { Rays::Among(&self.lists[candidates]) } else { Rays::Bvh };
-            g.gauss(self.rx, self.src, rect, rule, rays, out);
+            g.gauss_split(self.rx, self.src, rect, rule, rays, out, across);
             return;
         }
         let (own, pushed) = self.narrow(&sub, candidates);
@@ -135,13 +141,14 @@ impl Walk<'_, '_> {
         let settled = depth >= VIS_DEPTH && distance >= radius;
         if own.is_empty() && depth >= BASIS_DEPTH || settled || depth >= MAX_DEPTH {
             let mut m = [0.0; MAX_NB];
-            self.polygon(rect, &sub, Rays::Among(&self.lists[own.clone()]), &mut m[..out.len()]);
+            self.polygon(rect, &sub, Rays::Among(&self.lists[own.clone()]), &mut m[..out.len()], across);
             for (o, m) in out.iter_mut().zip(m) {
                 *o += m;
             }
         } else {
             for q in rect.quadrants() {
-                self.rect(&q, depth + 1, own.clone(), out, None);
+                let across = across.as_mut().map(|(r, w)| (*r, &mut **w));
+                self.rect(&q, depth + 1, own.clone(), out, across);
             }
         }
         if pushed {
@@ -177,14 +184,21 @@ impl Walk<'_, '_> {
     /// Writes the moments of `rect` (`sub` of the source) taken as a polygon to `out`: its exact
     /// form factor from the point, shared out over the basis (and the `rays`) by its Gauss
     /// nodes' kernel.
-    fn polygon(&self, rect: &Rect, sub: &Patch, rays: Rays, out: &mut [f64]) {
+    fn polygon(&self, rect: &Rect, sub: &Patch, rays: Rays, out: &mut [f64], ball: Option<(f64, &mut f64)>) {
         let (g, rx) = (self.gather, self.rx);
         let f = polygon::form_factor(rx.x, rx.n, &sub.corners, sub.centre_normal());
         if f <= 0.0 {
             return;
         }
-        let unoccluded = g.gauss(rx, self.src, rect, &g.rule, rays, out);
+        let mut inside = 0.0;
+        let split = ball.as_ref().map(|(r, _)| (*r, &mut inside));
+        let unoccluded = g.gauss_split(rx, self.src, rect, &g.rule, rays, out, split);
         // (With no node in front the part is a sliver at the point's horizon: taken as seen.)
         super::rank::scale_to(out, unoccluded, f);
+        if let Some((_, weight)) = ball
+            && unoccluded > 0.0
+        {
+            *weight += inside * f / unoccluded;
+        }
     }
 }

@@ -101,10 +101,22 @@ impl Gather<'_> {
     pub(super) fn touch(&self, rx: &Receiver, radius: f64, s: &Surface) -> Option<Touch> {
         let (normal, centre) = (s.normal, s.patch.point(0.5, 0.5));
         let d = normal.dot(rx.x - centre);
-        let on = |foot: DVec3, radius: f64| {
-            let (u, v) = s.patch.locate(foot);
-            ((0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v)).then_some(Touch { s: u, t: v, radius })
-        };
+        // The foot on `s`, or on a neighbour of `s` in its face with the ball reaching `s`: the
+        // ball's part on each node of the face counts with `B` at the one foot (a corner above
+        // the meeting of the face's nodes would otherwise take most of its ball from their
+        // polynomials).
+        let on =
+            |foot: DVec3, radius: f64| {
+                let (u, v) = s.patch.locate(foot);
+                let unit = 0.0..=1.0;
+                if unit.contains(&u) && unit.contains(&v) {
+                    return Some(Touch { s: u, t: v, radius });
+                }
+                let (fs, ft) = s.domain.map(u, v);
+                let nearest = s.patch.point(u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
+                (unit.contains(&fs) && unit.contains(&ft) && foot.distance(nearest) < radius)
+                    .then_some(Touch { s: u, t: v, radius })
+            };
         if rx.n.dot(normal) < -FACING {
             return (d > 0.0 && d < NEAR_FACING * radius).then(|| on(rx.x - d * normal, FOOT_BALL * d))?;
         }
@@ -134,6 +146,23 @@ impl Gather<'_> {
         rule: &GaussLegendre,
         rays: Rays,
         out: &mut [f64],
+    ) -> f64 {
+        self.gauss_split(rx, src, rect, rule, rays, out, None)
+    }
+
+    /// [`Gather::gauss`], with `ball = Some((r, weight))` the seen nodes within `r` of the point
+    /// adding their weight to `weight` instead of their moments to `out` (a rectangle across a
+    /// foot's ball, [`super::near`]).
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn gauss_split(
+        &self,
+        rx: &Receiver,
+        src: Source,
+        rect: &Rect,
+        rule: &GaussLegendre,
+        rays: Rays,
+        out: &mut [f64],
+        mut ball: Option<(f64, &mut f64)>,
     ) -> f64 {
         let lit = Lit::nodes(rx, src.patch, rect, rule);
         if lit.count == 0 {
@@ -169,12 +198,23 @@ impl Gather<'_> {
         corners.seen[..corners.count].copy_from_slice(&visible[count..all]);
         let seen = visible[..count].iter().filter(|&&v| v).count();
         if corners.disagree(seen, count) {
-            return rect.quadrants().iter().map(|q| self.gauss(rx, src, q, rule, rays, out)).sum();
+            let mut sum = 0.0;
+            for q in rect.quadrants() {
+                let ball = ball.as_mut().map(|(r, w)| (*r, &mut **w));
+                sum += self.gauss_split(rx, src, &q, rule, rays, out, ball);
+            }
+            return sum;
         }
         let basis = self.inputs.tree.basis;
         let nb = out.len();
         let mut g = [0.0; MAX_NB];
-        for (&(_, w, s, t), _) in lit.nodes[..count].iter().zip(&visible).filter(|(_, v)| **v) {
+        for (&(y, w, s, t), _) in lit.nodes[..count].iter().zip(&visible).filter(|(_, v)| **v) {
+            if let Some((r, weight)) = ball.as_mut()
+                && rx.x.distance(y) <= *r
+            {
+                **weight += w;
+                continue;
+            }
             basis.eval_into(s, t, &mut g[..nb]);
             for l in 0..nb {
                 out[l] += w * g[l];
