@@ -100,6 +100,42 @@ pub(crate) const BALL_EDGE: f64 = 0.25;
 /// level, so the depth a ball needs costs little.
 pub(crate) const BALL_DEPTH: u32 = 30;
 
+/// A foot's ball as the recursions carry it: its radius around the point, and the foot's
+/// parameters on the source.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Ball {
+    pub radius: f64,
+    pub foot: (f64, f64),
+}
+
+impl Ball {
+    /// Whether a rectangle across the ball's edge (`sub` of the source, bounding radius `radius`)
+    /// is split again: while it is coarse against the ball ([`BALL_EDGE`]) and above
+    /// [`BALL_DEPTH`]; past [`MAX_DEPTH`] only near the foot, within as many of its own widths as
+    /// the ball spans of its shorter side (at most [`FOOT_REACH`]). A sliver source's rectangles
+    /// are far longer than wide, so that their bounding spheres, all across the ball's edge,
+    /// would double in number with each level (an arbitrary scene of the C ABI's property test,
+    /// a triangle 1e8 long, ran for minutes); near the foot they stay a few hundred at most.
+    pub(crate) fn splits(&self, rect: &Rect, sub: &Patch, radius: f64, depth: u32) -> bool {
+        if radius <= BALL_EDGE * self.radius || depth >= BALL_DEPTH {
+            return false;
+        }
+        if depth < MAX_DEPTH {
+            return true;
+        }
+        let [c0, c1, _, c3] = sub.corners;
+        let side = c0.distance(c1).min(c0.distance(c3));
+        let reach = (self.radius / side).ceil().min(FOOT_REACH) + 1.0;
+        let (ws, wt) = (reach * (rect.s1 - rect.s0), reach * (rect.t1 - rect.t0));
+        let (s, t) = self.foot;
+        rect.s0 - ws <= s && s <= rect.s1 + ws && rect.t0 - wt <= t && t <= rect.t1 + wt
+    }
+}
+
+/// How many of its own widths from the foot a rectangle past [`MAX_DEPTH`] may lie and still split
+/// for the ball ([`Ball::splits`]).
+const FOOT_REACH: f64 = 8.0;
+
 /// A corner whose normal and a source's are opposed by more than this cosine faces the source.
 pub(crate) const FACING: f64 = 0.5;
 

@@ -9,7 +9,7 @@ use glam::DVec3;
 use super::nodes::{GaussNodes, N};
 use super::penumbra::Corners;
 use super::{
-    Among, BALL_DEPTH, BALL_EDGE, FACING, FOOT_BALL, GAUSS_RATIO, Gather, MAX_DEPTH, Mode, NEAR_FACING,
+    Among, BALL_DEPTH, Ball, FACING, FOOT_BALL, GAUSS_RATIO, Gather, MAX_DEPTH, Mode, NEAR_FACING,
     PENUMBRA_DEPTH, Receiver, Touch, behind_plane,
 };
 use crate::geometry::{Patch, Rect};
@@ -29,7 +29,7 @@ impl Gather<'_> {
         mode: Mode,
         depth: u32,
         out: &mut [f64],
-        ball: Option<(f64, &mut f64)>,
+        ball: Option<(Ball, &mut f64)>,
     ) {
         let Some((sub, centre, radius)) = self.front_part(rx, j, rect) else { return };
         let patch = &self.patches[j];
@@ -39,7 +39,8 @@ impl Gather<'_> {
         // taken as any rectangle with its seen nodes shared out by the side they lie on
         // (`across`); one outside is any rectangle.
         let mut across = None;
-        if let Some((r, weight)) = ball {
+        if let Some((ball, weight)) = ball {
+            let r = ball.radius;
             if distance + radius <= r || (depth >= BALL_DEPTH && distance <= r) {
                 // Gamma_0 = 1 on the unit square: the l = 0 moment is the plain integral.
                 let mut m = [0.0; crate::basis::MAX_LEN];
@@ -48,13 +49,13 @@ impl Gather<'_> {
                 return;
             }
             if distance - radius < r {
-                if radius > BALL_EDGE * r && depth < BALL_DEPTH {
+                if ball.splits(rect, &sub, radius, depth) {
                     for q in rect.quadrants() {
-                        self.moments(rx, j, &q, mode, depth + 1, out, Some((r, &mut *weight)));
+                        self.moments(rx, j, &q, mode, depth + 1, out, Some((ball, &mut *weight)));
                     }
                     return;
                 }
-                across = Some((r, weight));
+                across = Some((ball, weight));
             }
         }
         if distance >= GAUSS_RATIO * radius {
@@ -71,7 +72,7 @@ impl Gather<'_> {
             let mut m = [0.0; crate::basis::MAX_LEN];
             let m = &mut m[..out.len()];
             let mut inside = 0.0;
-            let split = across.as_ref().map(|(r, _)| (*r, &mut inside));
+            let split = across.as_ref().map(|(b, _)| (b.radius, &mut inside));
             let among = Among::Bounds(&sub.bounds());
             let (seen, count) = if depth == 0 {
                 self.gauss(rx, j, &self.nodes[j], among, mode, &mut corners, m, split)
@@ -82,7 +83,7 @@ impl Gather<'_> {
             let mixed = corners.disagree(seen, count);
             // A penumbra's rectangle across a ball's edge counts on its centre's side.
             let (out, weight) = match across {
-                Some((r, weight)) if mixed && distance <= r => {
+                Some((b, weight)) if mixed && distance <= b.radius => {
                     let mut whole = [0.0; crate::basis::MAX_LEN];
                     let whole = &mut whole[..out.len()];
                     self.penumbra_parts(rx, j, rect, depth, &sub, whole);
@@ -111,8 +112,8 @@ impl Gather<'_> {
                 return;
             }
             let f = point_to_polygon(rx.x, rx.n, &sub.corners, sub.centre_normal());
-            if let Some((r, weight)) = across
-                && rx.x.distance(y) <= r
+            if let Some((b, weight)) = across
+                && rx.x.distance(y) <= b.radius
             {
                 *weight += f;
                 return;
@@ -123,7 +124,7 @@ impl Gather<'_> {
             return;
         }
         for q in rect.quadrants() {
-            let across = across.as_mut().map(|(r, w)| (*r, &mut **w));
+            let across = across.as_mut().map(|(b, w)| (*b, &mut **w));
             self.moments(rx, j, &q, mode, depth + 1, out, across);
         }
     }

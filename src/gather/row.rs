@@ -349,7 +349,7 @@ impl Gather<'_> {
         let mut m = [0.0; MAX_NB];
         let m = &mut m[..moments.len()];
         let mut weight = 0.0;
-        let ball = touch.map(|t| (t.radius, &mut weight));
+        let ball = touch.map(|t| (super::Ball { radius: t.radius, foot: (t.s, t.t) }, &mut weight));
         self.moments(rx, j as usize, &Rect::UNIT, mode, 0, m, ball);
         for (o, v) in moments.iter_mut().zip(m.iter()) {
             *o = *v as f32;

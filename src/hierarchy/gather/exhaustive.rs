@@ -7,7 +7,7 @@
 use super::surface::{Rays, Source};
 use super::{Counters, FAR_RATIO, GAUSS_RATIO, Gather, Receiver};
 use crate::basis::MAX_LEN as MAX_NB;
-use crate::gather::{BALL_DEPTH, BALL_EDGE, behind_plane};
+use crate::gather::{BALL_DEPTH, Ball, behind_plane};
 use crate::geometry::Rect;
 use crate::kernel::point::point_to_polygon;
 
@@ -21,7 +21,7 @@ impl Gather<'_> {
         rx: &Receiver,
         src: Source,
         out: &mut [f64],
-        ball: Option<(f64, &mut f64)>,
+        ball: Option<(Ball, &mut f64)>,
     ) {
         // The triangles that may block the point's rays to any part of the source, found once.
         let mut candidates = Vec::new();
@@ -45,7 +45,7 @@ impl Gather<'_> {
         rect: &Rect,
         depth: u32,
         out: &mut [f64],
-        ball: Option<(f64, &mut f64)>,
+        ball: Option<(Ball, &mut f64)>,
     ) {
         if self.stop.stopped() {
             return;
@@ -59,7 +59,8 @@ impl Gather<'_> {
         let distance = rx.x.distance(centre);
         // A foot's ball, as [`super::near`] takes it.
         let mut across = None;
-        if let Some((r, weight)) = ball {
+        if let Some((ball, weight)) = ball {
+            let r = ball.radius;
             if distance + radius <= r || (depth >= BALL_DEPTH && distance <= r) {
                 let mut m = [0.0; MAX_NB];
                 self.exhaustive_rect(rx, src, candidates, rect, depth, &mut m[..out.len()], None);
@@ -67,7 +68,7 @@ impl Gather<'_> {
                 return;
             }
             if distance - radius < r {
-                if radius > BALL_EDGE * r && depth < BALL_DEPTH {
+                if ball.splits(rect, &sub, radius, depth) {
                     for q in rect.quadrants() {
                         self.exhaustive_rect(
                             rx,
@@ -76,18 +77,26 @@ impl Gather<'_> {
                             &q,
                             depth + 1,
                             out,
-                            Some((r, &mut *weight)),
+                            Some((ball, &mut *weight)),
                         );
                     }
                     return;
                 }
-                across = Some((r, weight));
+                across = Some((ball, weight));
             }
         }
         let basis = self.inputs.tree.basis;
         if distance >= GAUSS_RATIO * radius {
             let rule = if distance >= FAR_RATIO * radius { &self.far_rule } else { &self.rule };
-            self.gauss_split(rx, src, rect, rule, Rays::Among(candidates), out, across);
+            self.gauss_split(
+                rx,
+                src,
+                rect,
+                rule,
+                Rays::Among(candidates),
+                out,
+                across.map(|(b, w)| (b.radius, w)),
+            );
             return;
         }
         if depth >= MAX_DEPTH {
@@ -102,8 +111,8 @@ impl Gather<'_> {
                 }
             }
             let f = point_to_polygon(rx.x, rx.n, &sub.corners, sub.centre_normal());
-            if let Some((r, weight)) = across
-                && rx.x.distance(y) <= r
+            if let Some((b, weight)) = across
+                && rx.x.distance(y) <= b.radius
             {
                 *weight += f;
                 return;
@@ -116,7 +125,7 @@ impl Gather<'_> {
             return;
         }
         for q in rect.quadrants() {
-            let across = across.as_mut().map(|(r, w)| (*r, &mut **w));
+            let across = across.as_mut().map(|(b, w)| (*b, &mut **w));
             self.exhaustive_rect(rx, src, candidates, &q, depth + 1, out, across);
         }
     }

@@ -19,7 +19,7 @@ use std::ops::Range;
 use super::surface::{Rays, Source};
 use super::{Counters, FAR_RATIO, GAUSS_RATIO, Gather, Receiver, polygon};
 use crate::basis::MAX_LEN as MAX_NB;
-use crate::gather::{BALL_DEPTH, BALL_EDGE, behind_plane};
+use crate::gather::{BALL_DEPTH, Ball, behind_plane};
 use crate::geometry::{Patch, Rect};
 
 /// An unoccluded part is split until it spans at most `2^-BASIS_DEPTH` of its source's
@@ -69,7 +69,7 @@ impl Gather<'_> {
         rx: &Receiver,
         src: Source,
         out: &mut [f64],
-        ball: Option<(f64, &mut f64)>,
+        ball: Option<(Ball, &mut f64)>,
     ) {
         LISTS.with_borrow_mut(|(lists, query)| {
             lists.clear();
@@ -93,7 +93,7 @@ impl Walk<'_, '_> {
         depth: u32,
         candidates: Range<usize>,
         out: &mut [f64],
-        ball: Option<(f64, &mut f64)>,
+        ball: Option<(Ball, &mut f64)>,
     ) {
         let g = self.gather;
         if g.stop.stopped() {
@@ -109,7 +109,8 @@ impl Walk<'_, '_> {
         // its edge is split while it is coarse against the ball, then taken as any part with its
         // seen nodes shared out by the side they lie on (`across`); one outside is any part.
         let mut across = None;
-        if let Some((r, weight)) = ball {
+        if let Some((ball, weight)) = ball {
+            let r = ball.radius;
             if distance + radius <= r || (depth >= BALL_DEPTH && distance <= r) {
                 let mut m = [0.0; MAX_NB];
                 self.rect(rect, depth, candidates, &mut m[..out.len()], None);
@@ -117,13 +118,13 @@ impl Walk<'_, '_> {
                 return;
             }
             if distance - radius < r {
-                if radius > BALL_EDGE * r && depth < BALL_DEPTH {
+                if ball.splits(rect, &sub, radius, depth) {
                     for q in rect.quadrants() {
-                        self.rect(&q, depth + 1, candidates.clone(), out, Some((r, &mut *weight)));
+                        self.rect(&q, depth + 1, candidates.clone(), out, Some((ball, &mut *weight)));
                     }
                     return;
                 }
-                across = Some((r, weight));
+                across = Some((ball, weight));
             }
         }
         if distance >= GAUSS_RATIO * radius {
@@ -132,7 +133,7 @@ impl Walk<'_, '_> {
             let rule = if distance >= FAR_RATIO * radius { &g.far_rule } else { &g.rule };
             let rays =
                 if candidates.len() <= SHORT_LIST { Rays::Among(&self.lists[candidates]) } else { Rays::Bvh };
-            g.gauss_split(self.rx, self.src, rect, rule, rays, out, across);
+            g.gauss_split(self.rx, self.src, rect, rule, rays, out, across.map(|(b, w)| (b.radius, w)));
             return;
         }
         let (own, pushed) = self.narrow(&sub, candidates);
@@ -147,7 +148,7 @@ impl Walk<'_, '_> {
             }
         } else {
             for q in rect.quadrants() {
-                let across = across.as_mut().map(|(r, w)| (*r, &mut **w));
+                let across = across.as_mut().map(|(b, w)| (*b, &mut **w));
                 self.rect(&q, depth + 1, own.clone(), out, across);
             }
         }
@@ -184,14 +185,14 @@ impl Walk<'_, '_> {
     /// Writes the moments of `rect` (`sub` of the source) taken as a polygon to `out`: its exact
     /// form factor from the point, shared out over the basis (and the `rays`) by its Gauss
     /// nodes' kernel.
-    fn polygon(&self, rect: &Rect, sub: &Patch, rays: Rays, out: &mut [f64], ball: Option<(f64, &mut f64)>) {
+    fn polygon(&self, rect: &Rect, sub: &Patch, rays: Rays, out: &mut [f64], ball: Option<(Ball, &mut f64)>) {
         let (g, rx) = (self.gather, self.rx);
         let f = polygon::form_factor(rx.x, rx.n, &sub.corners, sub.centre_normal());
         if f <= 0.0 {
             return;
         }
         let mut inside = 0.0;
-        let split = ball.as_ref().map(|(r, _)| (*r, &mut inside));
+        let split = ball.as_ref().map(|(b, _)| (b.radius, &mut inside));
         let unoccluded = g.gauss_split(rx, self.src, rect, &g.rule, rays, out, split);
         // (With no node in front the part is a sliver at the point's horizon: taken as seen.)
         super::rank::scale_to(out, unoccluded, f);

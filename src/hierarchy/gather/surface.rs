@@ -65,7 +65,8 @@ impl Gather<'_> {
         // The moments, then the ball's form factor.
         let v = memo.values(slot, source, how, |v| {
             let (m, weight) = v.split_at_mut(nb);
-            let ball = touch.map(|t| (t.radius, &mut weight[0]));
+            let ball =
+                touch.map(|t| (crate::gather::Ball { radius: t.radius, foot: (t.s, t.t) }, &mut weight[0]));
             let src = Source { face: s.face, patch: &s.patch };
             match self.mode {
                 Mode::Exhaustive => self.exhaustive_moments(rx, src, m, ball),
