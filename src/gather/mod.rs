@@ -108,7 +108,35 @@ pub(crate) struct Ball {
     pub foot: (f64, f64),
 }
 
+/// Where a rectangle of a source lies against a foot's ball ([`Ball::side`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Side {
+    /// Wholly inside: its seen form factor counts with `B` at the foot.
+    Inside,
+    /// Across the edge and coarse against the ball: split in four, each quadrant with the ball.
+    Split,
+    /// Across the edge, fine enough: taken as any rectangle, its seen nodes shared out by side.
+    Across,
+    /// Wholly outside: any rectangle.
+    Outside,
+}
+
 impl Ball {
+    /// Where the rectangle `rect` (`sub` of the source, its bounding sphere `distance` from the
+    /// point with radius `radius`) lies against the ball, at depth `depth`: the one rule the
+    /// flat gather and both of the hierarchy's recursions take it by.
+    pub(crate) fn side(&self, rect: &Rect, sub: &Patch, (distance, radius): (f64, f64), depth: u32) -> Side {
+        let r = self.radius;
+        if distance + radius <= r || (depth >= BALL_DEPTH && distance <= r) {
+            Side::Inside
+        } else if distance - radius < r {
+            // (Written so that a NaN is outside, never split.)
+            if self.splits(rect, sub, radius, depth) { Side::Split } else { Side::Across }
+        } else {
+            Side::Outside
+        }
+    }
+
     /// Whether a rectangle across the ball's edge (`sub` of the source, bounding radius `radius`)
     /// is split again: while it is coarse against the ball ([`BALL_EDGE`]) and above
     /// [`BALL_DEPTH`]; past [`MAX_DEPTH`] only near the foot, within as many of its own widths as
@@ -116,7 +144,7 @@ impl Ball {
     /// are far longer than wide, so that their bounding spheres, all across the ball's edge,
     /// would double in number with each level (an arbitrary scene of the C ABI's property test,
     /// a triangle 1e8 long, ran for minutes); near the foot they stay a few hundred at most.
-    pub(crate) fn splits(&self, rect: &Rect, sub: &Patch, radius: f64, depth: u32) -> bool {
+    fn splits(&self, rect: &Rect, sub: &Patch, radius: f64, depth: u32) -> bool {
         if radius <= BALL_EDGE * self.radius || depth >= BALL_DEPTH {
             return false;
         }

@@ -9,8 +9,8 @@ use glam::DVec3;
 use super::nodes::{GaussNodes, N};
 use super::penumbra::Corners;
 use super::{
-    Among, BALL_DEPTH, Ball, FACING, FOOT_BALL, GAUSS_RATIO, Gather, MAX_DEPTH, Mode, NEAR_FACING,
-    PENUMBRA_DEPTH, Receiver, Touch, behind_plane,
+    Among, Ball, FACING, FOOT_BALL, GAUSS_RATIO, Gather, MAX_DEPTH, Mode, NEAR_FACING, PENUMBRA_DEPTH,
+    Receiver, Side, Touch, behind_plane,
 };
 use crate::geometry::{Patch, Rect};
 use crate::kernel::point::{point_kernel, point_to_polygon};
@@ -40,22 +40,22 @@ impl Gather<'_> {
         // (`across`); one outside is any rectangle.
         let mut across = None;
         if let Some((ball, weight)) = ball {
-            let r = ball.radius;
-            if distance + radius <= r || (depth >= BALL_DEPTH && distance <= r) {
-                // Gamma_0 = 1 on the unit square: the l = 0 moment is the plain integral.
-                let mut m = [0.0; crate::basis::MAX_LEN];
-                self.moments(rx, j, rect, mode, depth, &mut m[..out.len()], None);
-                *weight += m[0];
-                return;
-            }
-            if distance - radius < r {
-                if ball.splits(rect, &sub, radius, depth) {
+            match ball.side(rect, &sub, (distance, radius), depth) {
+                Side::Inside => {
+                    // Gamma_0 = 1 on the unit square: the l = 0 moment is the plain integral.
+                    let mut m = [0.0; crate::basis::MAX_LEN];
+                    self.moments(rx, j, rect, mode, depth, &mut m[..out.len()], None);
+                    *weight += m[0];
+                    return;
+                }
+                Side::Split => {
                     for q in rect.quadrants() {
                         self.moments(rx, j, &q, mode, depth + 1, out, Some((ball, &mut *weight)));
                     }
                     return;
                 }
-                across = Some((ball, weight));
+                Side::Across => across = Some((ball, weight)),
+                Side::Outside => {}
             }
         }
         if distance >= GAUSS_RATIO * radius {

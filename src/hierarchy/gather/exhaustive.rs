@@ -7,7 +7,7 @@
 use super::surface::{Rays, Source};
 use super::{Counters, FAR_RATIO, GAUSS_RATIO, Gather, Receiver};
 use crate::basis::MAX_LEN as MAX_NB;
-use crate::gather::{BALL_DEPTH, Ball, behind_plane};
+use crate::gather::{Ball, Side, behind_plane};
 use crate::geometry::Rect;
 use crate::kernel::point::point_to_polygon;
 
@@ -60,29 +60,22 @@ impl Gather<'_> {
         // A foot's ball, as [`super::near`] takes it.
         let mut across = None;
         if let Some((ball, weight)) = ball {
-            let r = ball.radius;
-            if distance + radius <= r || (depth >= BALL_DEPTH && distance <= r) {
-                let mut m = [0.0; MAX_NB];
-                self.exhaustive_rect(rx, src, candidates, rect, depth, &mut m[..out.len()], None);
-                *weight += m[0];
-                return;
-            }
-            if distance - radius < r {
-                if ball.splits(rect, &sub, radius, depth) {
+            match ball.side(rect, &sub, (distance, radius), depth) {
+                Side::Inside => {
+                    let mut m = [0.0; MAX_NB];
+                    self.exhaustive_rect(rx, src, candidates, rect, depth, &mut m[..out.len()], None);
+                    *weight += m[0];
+                    return;
+                }
+                Side::Split => {
                     for q in rect.quadrants() {
-                        self.exhaustive_rect(
-                            rx,
-                            src,
-                            candidates,
-                            &q,
-                            depth + 1,
-                            out,
-                            Some((ball, &mut *weight)),
-                        );
+                        let ball = Some((ball, &mut *weight));
+                        self.exhaustive_rect(rx, src, candidates, &q, depth + 1, out, ball);
                     }
                     return;
                 }
-                across = Some((ball, weight));
+                Side::Across => across = Some((ball, weight)),
+                Side::Outside => {}
             }
         }
         let basis = self.inputs.tree.basis;

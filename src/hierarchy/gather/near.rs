@@ -19,7 +19,7 @@ use std::ops::Range;
 use super::surface::{Rays, Source};
 use super::{Counters, FAR_RATIO, GAUSS_RATIO, Gather, Receiver, polygon};
 use crate::basis::MAX_LEN as MAX_NB;
-use crate::gather::{BALL_DEPTH, Ball, behind_plane};
+use crate::gather::{Ball, Side, behind_plane};
 use crate::geometry::{Patch, Rect};
 
 /// An unoccluded part is split until it spans at most `2^-BASIS_DEPTH` of its source's
@@ -110,21 +110,21 @@ impl Walk<'_, '_> {
         // seen nodes shared out by the side they lie on (`across`); one outside is any part.
         let mut across = None;
         if let Some((ball, weight)) = ball {
-            let r = ball.radius;
-            if distance + radius <= r || (depth >= BALL_DEPTH && distance <= r) {
-                let mut m = [0.0; MAX_NB];
-                self.rect(rect, depth, candidates, &mut m[..out.len()], None);
-                *weight += m[0];
-                return;
-            }
-            if distance - radius < r {
-                if ball.splits(rect, &sub, radius, depth) {
+            match ball.side(rect, &sub, (distance, radius), depth) {
+                Side::Inside => {
+                    let mut m = [0.0; MAX_NB];
+                    self.rect(rect, depth, candidates, &mut m[..out.len()], None);
+                    *weight += m[0];
+                    return;
+                }
+                Side::Split => {
                     for q in rect.quadrants() {
                         self.rect(&q, depth + 1, candidates.clone(), out, Some((ball, &mut *weight)));
                     }
                     return;
                 }
-                across = Some((ball, weight));
+                Side::Across => across = Some((ball, weight)),
+                Side::Outside => {}
             }
         }
         if distance >= GAUSS_RATIO * radius {
