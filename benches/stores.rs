@@ -48,7 +48,7 @@ fn main() {
             b: i.wrapping_mul(7),
             coupling: match i % 3000 {
                 0 => Coupling::Surfaces(vec![1.0; 8].into()),
-                k if k % 9 == 0 => Coupling::Clusters { transmittance: 1.0 },
+                k if k % 9 == 0 => Coupling::Clusters { transmittance: 1.0, partial: false },
                 _ => Coupling::Constants { ab: 1.0, ba: 2.0 },
             },
         })

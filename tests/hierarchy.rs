@@ -288,8 +288,9 @@ fn gathered_corners_of_a_closed_box_balance() {
 
 /// Corners gathered through the hierarchy against Cycles, per corner: the 300-triangle bunny
 /// standing on a ground under a light quad (tests/data/real/bunny_scene.json, Cycles' DIFFUSE
-/// bake at 16384 spp in bunny_cycles.json). Measured: at accuracy 1e-4, Bunny 6.49% relative
-/// RMSE, Ground 0.29% since cluster links pair 8 points an end (5.36%, 0.28% before: see
+/// bake at 16384 spp in bunny_cycles.json). Measured: at accuracy 1e-4, Bunny 6.40% relative
+/// RMSE, Ground 0.29% (6.49% before the gather took coarse clusters with the corner's own rays;
+/// since cluster links pair 8 points an end, 5.36%, 0.28% before that: see
 /// docs/benchmarks.md, "Cluster links' points"; 5.71%, 0.69% when written; the flat path's
 /// corner gather now 3.27%, 0.15%; the hierarchy's leaf polynomials alone: 29%, 11%).
 #[test]

@@ -39,8 +39,10 @@ pub enum Coupling {
     /// [`crate::visibility::Occluders::share_visible`]'s segments that arrive folded in.
     Constants { ab: f32, ba: f32 },
     /// A cluster at one end at least: the mean over sampled segments between the nodes of
-    /// `V d^2 / r^2` (`transmittance` below), which turns the centres' `1/d^2` into the pair's.
-    Clusters { transmittance: f32 },
+    /// `V d^2 / r^2` (`transmittance` below), which turns the centres' `1/d^2` into the pair's;
+    /// `partial` when some of the segments were blocked (the corner gather then casts its own:
+    /// what a part of the node sees may be anything from none to all).
+    Clusters { transmittance: f32, partial: bool },
 }
 
 /// A link between nodes `a` and `b`, both directions.
@@ -153,7 +155,10 @@ pub fn compute_cast(
             };
             let t = rays.weighted;
             let computed = Computed {
-                coupling: (t > 0.0).then_some(Coupling::Clusters { transmittance: t as f32 }),
+                coupling: (t > 0.0).then_some(Coupling::Clusters {
+                    transmittance: t as f32,
+                    partial: rays.arrived < rays.facing,
+                }),
                 partial: rays.arrived > 0 && rays.arrived < rays.facing,
                 blocked: rays.facing > 0 && rays.arrived == 0,
             };

@@ -190,7 +190,7 @@ impl ReceivedBlocks {
                             white[0] += g as f64;
                             j += 1;
                         }
-                        Coupling::Clusters { transmittance } => {
+                        Coupling::Clusters { transmittance, .. } => {
                             clu[i] = geometry(r as NodeId, source, *transmittance);
                             i += 1;
                         }
@@ -428,7 +428,7 @@ mod tests {
         let coupling = match (a + b) % 3 {
             0 => Coupling::Surfaces((0..2 * nb * nb).map(|k| x + k as f32).collect()),
             1 => Coupling::Constants { ab: x, ba: -x },
-            _ => Coupling::Clusters { transmittance: x },
+            _ => Coupling::Clusters { transmittance: x, partial: a.is_multiple_of(2) },
         };
         Link { a, b, coupling }
     }

@@ -38,8 +38,11 @@ pub fn check_pairs(
             (Coupling::Constants { ab: x, ba: u }, Coupling::Constants { ab: y, ba: v }) => {
                 assert_eq!((x, u), (y, v), "frame {frame}: light link {}-{} is stale", l.a, l.b)
             }
-            (Coupling::Clusters { transmittance: x }, Coupling::Clusters { transmittance: y }) => {
-                assert_eq!(x, y, "frame {frame}: cluster link {}-{} is stale", l.a, l.b)
+            (
+                Coupling::Clusters { transmittance: x, partial: p },
+                Coupling::Clusters { transmittance: y, partial: q },
+            ) => {
+                assert_eq!((x, p), (y, q), "frame {frame}: cluster link {}-{} is stale", l.a, l.b)
             }
             _ => panic!("frame {frame}: link {}-{} changed kind", l.a, l.b),
         }

@@ -28,7 +28,8 @@
 //! keep only the occluders of their own shaft and are taken by their exact polygon form factor
 //! where none is left; a far one whole by the Gauss rule, [`far`]) until the rest could bring at
 //! most a tenth of the corner's light; those take one Gauss sum with a ray per node (a surface)
-//! or their link's transmittance (a cluster).
+//! or one packet of rays for the point's transmittance (a cluster: its link's is the receiving
+//! cluster's, blind to what shadows only part of it).
 //!
 //! Three things the first version lacked, measured on the 300-triangle bunny against Cycles per
 //! corner (tests/hierarchy.rs; Bunny / Ground relative RMSE at accuracy 1e-4):

@@ -10,8 +10,9 @@
 //!   one as the exhaustive gather takes it whole ([`super::far`]);
 //! - past that, a surface takes one Gauss sum with a ray per node through the BVH, without
 //!   splitting (a near one's scaled to its exact polygon form factor); once what is left brings
-//!   no light at all, a surface takes one ray to its centre, for its form factor; a cluster takes
-//!   what its link carries ([`Gather::link_estimate`]).
+//!   no light at all, a surface takes one ray to its centre, for its form factor; a cluster
+//!   takes its intensity times its link's transmittance where the link's rays all arrived or
+//!   were all blocked, and the point's own where they were mixed ([`Gather::dim_cluster`]).
 //!
 //! The rays go where the light is: on a mesh most of a corner's hundreds of sources are dim
 //! neighbours, and each of them was a shaft query and up to twelve levels of splitting in the
@@ -53,8 +54,6 @@ pub(super) struct Ranked {
     /// The ranking: the form factor times the mean radiosity, summed over the channels (a
     /// cluster's unoccluded light).
     weight: f64,
-    /// A cluster's unoccluded light `H` at the point.
-    cluster_light: [f64; 3],
     /// A surface's unoccluded form factor.
     form_factor: f64,
 }
@@ -74,7 +73,6 @@ impl Gather<'_> {
                 near: false,
                 touched: false,
                 weight,
-                cluster_light: light,
                 form_factor: 0.0,
             });
         };
@@ -104,7 +102,6 @@ impl Gather<'_> {
             near,
             touched,
             weight,
-            cluster_light: [0.0; 3],
             form_factor,
         })
     }
@@ -183,8 +180,8 @@ impl Gather<'_> {
                     return;
                 }
             } else if tree.node(source).is_cluster() {
-                let (h, form_factor) = self.link_estimate(r.linked, (r.cluster_light, 0.0));
-                got.add(h, form_factor);
+                Counters::add(&self.counters.coarse, 1);
+                got.add(self.dim_cluster(rx, r.linked, r.slot, memo), 0.0);
             } else if rest <= 0.0 {
                 // Nothing left brings light: one ray for the form factor (the hemisphere bound).
                 Counters::add(&self.counters.coarse, 1);

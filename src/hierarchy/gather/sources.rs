@@ -29,9 +29,13 @@ const HEAD_SHARE: f64 = 0.01;
 /// ...or this many. The tail has no visibility from the point: a model's light on itself (its
 /// own faces and the ground linked with its cluster) must be in the head. Measured on the bunny
 /// at accuracy 1e-4 against Cycles per corner (tests/hierarchy.rs; the exhaustive gather 5.39%):
-/// 10% and 16 8.11%, 1% and 64 5.46%, no tail 5.36%; the 10k-face monastery crop's fast gather
-/// 93 s -> 100 s (one run each, 2 threads).
-const HEAD_MAX: usize = 64;
+/// 10% and 16 8.11%, 1% and 64 5.46%, no tail 5.36%. In a room lit indirectly the light is
+/// spread over hundreds of sources and 64 cut the head long before the share: the room of
+/// tools/validate_real.py on `--hierarchy`, every corner against Cycles, 9.77% with 64, 8.47%
+/// with 128, 7.88% with 256, 7.83% with 512 (the exhaustive gather 7.71%), its ceiling 6.87 ->
+/// 3.16%; the 10k-face monastery crop's fast gather 512M -> 515M rays (docs/benchmarks.md, "A
+/// cluster's head").
+const HEAD_MAX: usize = 512;
 
 /// How the solve took a source's light to the receiving node.
 #[derive(Clone, Copy, Debug)]
@@ -180,7 +184,7 @@ impl<'a> Sources<'a> {
                 let arriving = intensity.map(|i| i / d2);
                 let t = match linked.via {
                     Via::Link { index, .. } => match &self.links[index as usize].coupling {
-                        Coupling::Clusters { transmittance } => *transmittance as f64,
+                        Coupling::Clusters { transmittance, .. } => *transmittance as f64,
                         // (A cluster receives through cluster links only.)
                         Coupling::Surfaces(_) | Coupling::Constants { .. } => 1.0,
                     },
