@@ -27,12 +27,16 @@ pub struct ClusterEntry {
     /// What an intensity becomes at the receiver: the transmittance over `d^2`, times the
     /// cosine at the receiver when it is planar. Zero: a link taken out.
     pub scale: f32,
+    /// For a planar cluster receiver, the relative slope of what arrives over its plane at its
+    /// centroid (`grad H / H`, per unit length; [`crate::hierarchy::solve::cluster_entry`]);
+    /// zero for any other.
+    pub slope: [f32; 3],
 }
 
 impl ClusterEntry {
     /// An entry that delivers nothing (a link taken out, or ends at one place), from `source`.
     pub fn none(source: NodeId) -> Self {
-        Self { source, w: [0.0; 3], emit: 0.0, scale: 0.0 }
+        Self { source, w: [0.0; 3], emit: 0.0, scale: 0.0, slope: [0.0; 3] }
     }
 }
 
@@ -435,7 +439,7 @@ mod tests {
 
     /// A cluster entry made from its link's numbers alone (these links join no tree).
     fn geometry(_r: NodeId, source: NodeId, transmittance: f32) -> ClusterEntry {
-        ClusterEntry { source, w: [0.0; 3], emit: 0.5, scale: transmittance }
+        ClusterEntry { source, w: [0.0; 3], emit: 0.5, scale: transmittance, slope: [0.0; 3] }
     }
 
     /// Per receiver, what it gets from each source, over every part, zeroed entries left out.

@@ -6,6 +6,7 @@
 
 use std::marker::PhantomData;
 
+use glam::DVec3;
 use rayon::prelude::*;
 
 use super::lobes::{self, Lobes};
@@ -107,6 +108,9 @@ pub(super) struct Walk<'a> {
     pub nb: usize,
 }
 
+/// What [`Walk::push`] starts from at the root, and hands below a face: no slope.
+pub const NO_SLOPE: [DVec3; 3] = [DVec3::ZERO; 3];
+
 impl Walk<'_> {
     /// Pushes what the subtree of `id` received (with `inherited` lobes and `pushed`
     /// coefficients from above) to its leaves, sets `b = e + rho H` there and, with `pull`,
@@ -118,7 +122,7 @@ impl Walk<'_> {
     pub fn push(
         &self,
         id: NodeId,
-        inherited: &Lobes,
+        (inherited, slope): (&Lobes, &[DVec3; 3]),
         pushed: &[[f64; 3]],
         got: &Gathered,
         level: usize,
@@ -133,8 +137,11 @@ impl Walk<'_> {
                 if let Some(own) = got.lobes.get(i) {
                     lobes::add(&mut l, own);
                 }
-                // What a planar cluster gathered is a constant irradiance of all its faces. (On
-                // the stack, as the surfaces' below: a heap vector per node and sweep was a
+                // What a planar cluster gathered is an irradiance over its plane: a constant at
+                // its centroid and a slope, handed to each child at the child's centroid (the
+                // slope inherited from a planar parent too, whose plane is this one's). The
+                // centroid is the children's area-weighted, so that the slope moves no light.
+                // (On the stack, as the surfaces' below: a heap vector per node and sweep was a
                 // tenth of the push-pull.)
                 let mut flat = [[0.0; 3]; crate::basis::MAX_LEN];
                 let flat = &mut flat[..nb];
@@ -144,13 +151,32 @@ impl Walk<'_> {
                         flat[0][c] += own[c];
                     }
                 }
-                let flat = &*flat;
+                let mut g = if node.plane_normal.is_some() { *slope } else { [DVec3::ZERO; 3] };
+                if let (Some(own), Some(_)) = (got.slopes.get(i), node.plane_normal) {
+                    for c in 0..3 {
+                        g[c] += own[c];
+                    }
+                }
+                let sloped = g != [DVec3::ZERO; 3];
+                let here = if sloped { self.tree.centroid(id) } else { DVec3::ZERO };
+                let (flat, g) = (&*flat, &g);
+                let child = |c: NodeId| {
+                    let mut at = [[0.0; 3]; crate::basis::MAX_LEN];
+                    let at = &mut at[..nb];
+                    at.copy_from_slice(flat);
+                    if sloped {
+                        let d = self.tree.centroid(c) - here;
+                        for ch in 0..3 {
+                            at[0][ch] += g[ch].dot(d);
+                        }
+                    }
+                    self.push(c, (&l, g), at, got, level + 1, pull)
+                };
                 if level < PARALLEL_LEVELS {
-                    let parts: Vec<f64> =
-                        children.par_iter().map(|&c| self.push(c, &l, flat, got, level + 1, pull)).collect();
+                    let parts: Vec<f64> = children.par_iter().map(|&c| child(c)).collect();
                     parts.iter().sum()
                 } else {
-                    children.iter().map(|&c| self.push(c, &l, flat, got, level + 1, pull)).sum()
+                    children.iter().map(|&c| child(c)).sum()
                 }
             }
             Kind::Surface(s) => {
@@ -198,7 +224,8 @@ impl Walk<'_> {
                         for (q, &c) in children.iter().enumerate() {
                             let mut hq = [[0.0; 3]; crate::basis::MAX_LEN];
                             self.two_scale.push_add(q, h, &mut hq[..nb]);
-                            change += self.push(c, &lobes::ZERO, &hq[..nb], got, level + 1, pull);
+                            change +=
+                                self.push(c, (&lobes::ZERO, &NO_SLOPE), &hq[..nb], got, level + 1, pull);
                         }
                         change
                     }

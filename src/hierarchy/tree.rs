@@ -115,6 +115,10 @@ struct FaceDraws {
     run: Vec<(u32, u32)>,
     /// `area_before[k]`: the area of `order[..k]`.
     area_before: Vec<f64>,
+    /// Per node of the build ([`Tree::built`]), its area centroid ([`Tree::centroid`]): a face's
+    /// by [`face_centroid`], a cluster's its run's `sum A_f c_f` over its area, so that it is its
+    /// children's area-weighted (read by every sweep's push).
+    centroids: Vec<DVec3>,
     /// `(face, patch)` of `order[k]`: a drawn point reads its face from here, a cluster's faces
     /// side by side, not from the face's node (a cache miss per point, an eighth of the time of
     /// drawing one).
@@ -162,7 +166,7 @@ impl Tree {
         let bounds: Vec<Aabb> = tree.faces.iter().map(|e| e.patch.bounds()).collect();
         let mut runs = vec![(0, 0); tree.faces.len()];
         tree.root = tree.cluster(&mut ids, 0, &bounds, &mut runs);
-        tree.draws = FaceDraws { order: ids, run: runs, area_before: Vec::new(), patches: Vec::new() };
+        tree.draws = FaceDraws { order: ids, run: runs, ..Default::default() };
         tree.refresh_draws();
         tree
     }
@@ -203,20 +207,51 @@ impl Tree {
 
     /// The running area sums and the patches of [`FaceDraws`], from the faces' current nodes.
     fn refresh_draws(&mut self) {
-        let mut sum = 0.0;
+        let (mut sum, mut moment) = (0.0, DVec3::ZERO);
         let mut before = Vec::with_capacity(self.draws.order.len() + 1);
+        let mut moment_before = Vec::with_capacity(self.draws.order.len() + 1);
         before.push(0.0);
+        moment_before.push(DVec3::ZERO);
+        let mut centroids = vec![DVec3::ZERO; self.draws.run.len()];
         for &f in &self.draws.order {
-            sum += self.nodes[f as usize].area;
+            let node = &self.nodes[f as usize];
+            let c = face_centroid(&node.surface().expect("faces are surfaces").patch);
+            centroids[f as usize] = c;
+            sum += node.area;
+            moment += node.area * c;
             before.push(sum);
+            moment_before.push(moment);
+        }
+        for id in self.faces.len()..self.draws.run.len() {
+            let (lo, hi) = self.draws.run[id];
+            let area = before[hi as usize] - before[lo as usize];
+            centroids[id] = if area > 0.0 {
+                (moment_before[hi as usize] - moment_before[lo as usize]) / area
+            } else {
+                self.nodes[id].centre
+            };
         }
         self.draws.area_before = before;
+        self.draws.centroids = centroids;
         self.draws.patches = (self.draws.order.iter())
             .map(|&f| {
                 let s = self.nodes[f as usize].surface().expect("faces are surfaces");
                 (s.face, s.patch)
             })
             .collect();
+    }
+
+    /// The area centroid of the faces below node `id`, a cluster or a face (its bounding
+    /// sphere's centre for a node below a face). A cluster's is its children's, area-weighted,
+    /// so that a slope pushed from it to them moves no light ([`crate::hierarchy::push_pull`]).
+    pub fn centroid(&self, id: NodeId) -> DVec3 {
+        self.draws.centroids.get(id as usize).copied().unwrap_or(self.nodes[id as usize].centre)
+    }
+
+    /// The nodes of the cluster build, the faces then the clusters (`0..built`); the nodes
+    /// below faces come after.
+    pub fn built(&self) -> usize {
+        self.draws.run.len()
     }
 
     /// A face below cluster `id` drawn with probability proportional to its area, from `u` in
@@ -466,6 +501,21 @@ impl Tree {
             }
         }
     }
+}
+
+/// The area centroid of a face's patch: `int x dA / int dA` by the 2 x 2 Gauss rule, exact for
+/// a planar bilinear patch (its area element is linear in each parameter).
+pub fn face_centroid(patch: &Patch) -> DVec3 {
+    const G: [f64; 2] = [0.211_324_865_405_187_1, 0.788_675_134_594_812_9];
+    let (mut moment, mut area) = (DVec3::ZERO, 0.0);
+    for s in G {
+        for t in G {
+            let da = patch.area_vector(s, t).length();
+            moment += da * patch.point(s, t);
+            area += da;
+        }
+    }
+    if area > 0.0 { moment / area } else { patch.point(0.5, 0.5) }
 }
 
 #[cfg(test)]

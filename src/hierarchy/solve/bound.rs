@@ -2,14 +2,16 @@
 //! gives each leaf its form factors summed, and a leaf whose sum is too large takes its
 //! reflectance scaled down ([`State::bound_leaves`], [`bound_of`]).
 
+use glam::DVec3;
 use rayon::prelude::*;
 
+use super::sweep::slope_rows;
 use super::{Gathered, State};
 use crate::budget;
 use crate::error::{Error, Result};
 use crate::hierarchy::lobes::{self, Lobes};
 use crate::hierarchy::packed::PackedLinks;
-use crate::hierarchy::push_pull::{Leaves, Nodes, Walk};
+use crate::hierarchy::push_pull::{Leaves, NO_SLOPE, Nodes, Walk};
 use crate::hierarchy::tree::{Kind, NodeId, Tree};
 
 impl State {
@@ -61,7 +63,7 @@ impl State {
             two_scale: &white.two_scale,
             nb,
         };
-        walk.push(tree.root, &lobes::ZERO, &zero[..nb], gathered, 0, false);
+        walk.push(tree.root, (&lobes::ZERO, &NO_SLOPE), &zero[..nb], gathered, 0, false);
         let mut bound = budget::try_filled(n, 1.0, what)?;
         for &id in leaves {
             let face = tree.nodes[id as usize].surface().expect("leaves are surfaces").face;
@@ -157,35 +159,57 @@ impl State {
         let more = n * nb - out.h.len().min(n * nb);
         budget::try_reserve(&mut out.h, more, what)?;
         budget::try_reserve(&mut out.lobes, n - held.min(n), what)?;
+        let built = tree.built();
+        let more_slopes = built - out.slopes.len().min(built);
+        budget::try_reserve(&mut out.slopes, more_slopes, what)?;
         out.h.resize(n * nb, [0.0; 3]);
         out.lobes.resize(n, lobes::ZERO);
+        out.slopes.resize(built, [DVec3::ZERO; 3]);
         let Some(rows) = some else {
-            out.h.par_chunks_mut(nb).zip(out.lobes.par_iter_mut()).enumerate().for_each(|(r, (hr, lr))| {
-                self.furnace_row(tree, packed, r, hr, lr);
-            });
+            let slopes = slope_rows(&mut out.slopes, n);
+            out.h.par_chunks_mut(nb).zip(out.lobes.par_iter_mut()).zip(slopes).enumerate().for_each(
+                |(r, ((hr, lr), sr))| {
+                    let slope = self.furnace_row(tree, packed, r, hr, lr);
+                    if let Some(sr) = sr {
+                        *sr = slope;
+                    }
+                },
+            );
             return Ok(n);
         };
-        let gathered: Vec<([[f64; 3]; crate::basis::MAX_LEN], Lobes)> = rows
+        let gathered: Vec<([[f64; 3]; crate::basis::MAX_LEN], Lobes, [DVec3; 3])> = rows
             .par_iter()
             .map(|&r| {
                 let (mut hr, mut lr) = ([[0.0; 3]; crate::basis::MAX_LEN], lobes::ZERO);
-                self.furnace_row(tree, packed, r as usize, &mut hr[..nb], &mut lr);
-                (hr, lr)
+                let slope = self.furnace_row(tree, packed, r as usize, &mut hr[..nb], &mut lr);
+                (hr, lr, slope)
             })
             .collect();
-        for (&r, (hr, lr)) in rows.iter().zip(gathered) {
+        for (&r, (hr, lr, slope)) in rows.iter().zip(gathered) {
             let r = r as usize;
             out.h[r * nb..(r + 1) * nb].copy_from_slice(&hr[..nb]);
             out.lobes[r] = lr;
+            if let Some(sr) = out.slopes.get_mut(r) {
+                *sr = slope;
+            }
         }
         Ok(rows.len())
     }
 
-    /// What receiver `r` gathers in a furnace ([`State::furnace_gather`]), into `hr` and `lr`.
-    fn furnace_row(&self, tree: &Tree, packed: &PackedLinks, r: usize, hr: &mut [[f64; 3]], lr: &mut Lobes) {
+    /// What receiver `r` gathers in a furnace ([`State::furnace_gather`]), into `hr` and `lr`;
+    /// returns its slope (a planar cluster's, [`Gathered::slopes`]).
+    fn furnace_row(
+        &self,
+        tree: &Tree,
+        packed: &PackedLinks,
+        r: usize,
+        hr: &mut [[f64; 3]],
+        lr: &mut Lobes,
+    ) -> [DVec3; 3] {
         hr.fill([0.0; 3]);
         *lr = lobes::ZERO;
         let mut h0 = [0.0f64; 3];
+        let mut slope = [DVec3::ZERO; 3];
         let planar = tree.nodes[r].plane_normal.is_some();
         for blocks in packed.parts() {
             for (h, &w) in hr.iter_mut().zip(blocks.white_of(r)) {
@@ -194,12 +218,13 @@ impl State {
                 }
             }
             for e in blocks.clusters_of(r) {
-                self.cluster_arrival(e, planar, &mut h0, lr);
+                self.cluster_arrival(e, planar, (&mut h0, &mut slope), lr);
             }
         }
         for c in 0..3 {
             hr[0][c] += h0[c];
         }
+        slope
     }
 }
 
@@ -228,12 +253,25 @@ fn check_rows(kept: &Gathered, whole: &Gathered) -> Result<()> {
         || kept.h.iter().flatten().zip(whole.h.iter().flatten()).any(|(a, b)| (a - b).abs() > 1e-12 * scale)
         || kept.lobes.iter().zip(&whole.lobes).any(|(a, b)| {
             a.iter().flatten().zip(b.iter().flatten()).any(|(x, y)| (x - y).abs() > 1e-12 * scale)
-        });
+        })
+        || slopes_apart(&kept.slopes, &whole.slopes);
     if apart {
         return Err(Error::Internal("the hemisphere bound's kept furnace rows are not the furnace's".into()));
     }
     Ok(())
 }
+
+/// Whether two furnaces' slopes differ by more than rounding (of the largest, per unit length).
+fn slopes_apart(kept: &[[DVec3; 3]], whole: &[[DVec3; 3]]) -> bool {
+    let scale = whole.iter().flatten().map(|g| g.abs().max_element()).fold(1e-300, f64::max);
+    kept.len() != whole.len()
+        || kept
+            .iter()
+            .flatten()
+            .zip(whole.iter().flatten())
+            .any(|(a, b)| (*a - *b).abs().max_element() > 1e-12 * scale)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -272,7 +310,7 @@ mod tests {
         for (x, y) in white.lobes.iter().zip(&pulled.lobes) {
             assert!((0..9).all(|k| (0..3).all(|c| close(x[k][c], y[k][c]))), "lobe {x:?} vs pulled {y:?}");
         }
-        let empty = || Gathered { h: Vec::new(), lobes: Vec::new(), constant: Vec::new() };
+        let empty = Gathered::empty;
         let (mut swept, mut furnace) = (empty(), empty());
         pulled.gather(tree, packed, &mut swept).unwrap();
         white.furnace_gather(tree, packed, &mut furnace, None).unwrap();
