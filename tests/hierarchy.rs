@@ -18,6 +18,36 @@ mod update;
 #[path = "hierarchy/gather_modes.rs"]
 mod gather_modes;
 
+/// A 4 x 3 x 4 m room of grey 0.7 (walls split `per_metre` a metre, y up) lit by a 1 x 1 m
+/// panel 1 cm under its ceiling, with `more` objects of the grey (material 0), at `basis_order`,
+/// the corner gather off.
+fn room_under_a_fixture(
+    per_metre: f64,
+    basis_order: usize,
+    more: Vec<galerkin_radiosity::scene::Object>,
+) -> galerkin_radiosity::scene::Scene {
+    use galerkin_radiosity::scene::{Material, Scene};
+    use galerkin_radiosity::scenes::{panel, room};
+    use glam::DVec3;
+    let mut objects = room(4.0, 3.0, 4.0, per_metre, [0; 6]);
+    objects.push(panel(
+        "Fixture",
+        DVec3::new(0.0, 2.99, 0.0),
+        DVec3::X * 0.5,
+        DVec3::Z * 0.5,
+        -DVec3::Y,
+        1,
+        1,
+    ));
+    objects.extend(more);
+    let materials = vec![
+        Material { name: "grey".into(), reflectance: [0.7; 3], emission: [0.0; 3] },
+        Material { name: "lamp".into(), reflectance: [0.0; 3], emission: [10.0; 3] },
+    ];
+    let settings = Settings { basis_order, corner_gather: false, ..Default::default() };
+    Scene::new(settings, (0, 0), materials, vec![Vec::new(); 2], objects).unwrap()
+}
+
 /// A closed box that emits `E = 1` everywhere with `rho = 0.5` has `B = E / (1 - rho) = 2`
 /// on every face, whatever the links: clusters must neither lose nor make light.
 #[test]
@@ -47,25 +77,7 @@ fn closed_box_balances_with_clusters() {
 /// rooms"), faces 3.43% RMS; evenly, means 0.968-0.980 and 4.22%.
 #[test]
 fn a_room_lit_through_cluster_links_follows_the_flat_solve_face_by_face() {
-    use galerkin_radiosity::scene::{Material, Scene};
-    use galerkin_radiosity::scenes::{panel, room};
-    use glam::DVec3;
-    let mut objects = room(4.0, 3.0, 4.0, 2.0, [0; 6]);
-    objects.push(panel(
-        "Fixture",
-        DVec3::new(0.0, 2.99, 0.0),
-        DVec3::X * 0.5,
-        DVec3::Z * 0.5,
-        -DVec3::Y,
-        1,
-        1,
-    ));
-    let materials = vec![
-        Material { name: "grey".into(), reflectance: [0.7; 3], emission: [0.0; 3] },
-        Material { name: "lamp".into(), reflectance: [0.0; 3], emission: [10.0; 3] },
-    ];
-    let settings = Settings { basis_order: 2, corner_gather: false, ..Default::default() };
-    let scene = Scene::new(settings, (0, 0), materials, vec![Vec::new(); 2], objects).unwrap();
+    let scene = room_under_a_fixture(2.0, 2, Vec::new());
     let h = solve_frame(&scene, 0.0, &HierarchySettings::of(&scene.settings), &no_progress).unwrap();
     assert!(h.stats.cluster_links > 0, "no cluster links: nothing tested");
     let mut flat = System::build(&scene, 0.0, &no_progress).unwrap();

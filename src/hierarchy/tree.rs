@@ -505,7 +505,7 @@ impl Tree {
 
 /// The area centroid of a face's patch: `int x dA / int dA` by the 2 x 2 Gauss rule, exact for
 /// a planar bilinear patch (its area element is linear in each parameter).
-pub fn face_centroid(patch: &Patch) -> DVec3 {
+fn face_centroid(patch: &Patch) -> DVec3 {
     const G: [f64; 2] = [0.211_324_865_405_187_1, 0.788_675_134_594_812_9];
     let (mut moment, mut area) = (DVec3::ZERO, 0.0);
     for s in G {

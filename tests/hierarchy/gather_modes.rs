@@ -7,6 +7,30 @@ use galerkin_radiosity::hierarchy::{HierarchySettings, Lighting, solve_frame};
 use galerkin_radiosity::scene::json::read_scene;
 use galerkin_radiosity::system::no_progress;
 
+/// A corner's `B`, its channels' mean.
+fn lum(v: &[f64; 3]) -> f64 {
+    (v[0] + v[1] + v[2]) / 3.0
+}
+
+/// How far the fast gather's corners are from the exhaustive one's: the relative RMS (over the
+/// exhaustive corners' mean), the worst corner over the brightest, and whether any corner is
+/// lit; printed.
+fn apart(fast: &gather::Gathered, slow: &gather::Gathered) -> (f64, f64, bool) {
+    let (mut sq, mut sum, mut peak, mut worst, mut n) = (0.0, 0.0, 0.0f64, 0.0f64, 0usize);
+    for (g, w) in fast.radiosity.iter().flatten().zip(slow.radiosity.iter().flatten()) {
+        let (g, w) = (lum(g), lum(w));
+        sq += (g - w).powi(2);
+        sum += w;
+        peak = peak.max(w);
+        worst = worst.max((g - w).abs());
+        n += 1;
+    }
+    let rms = (sq / n as f64).sqrt() / (sum / n as f64);
+    let max = worst / peak;
+    println!("fast against exhaustive: {:.2}% RMS, {:.2}% of the peak at worst", 100.0 * rms, 100.0 * max);
+    (rms, max, n > 0 && sum > 0.0)
+}
+
 /// The bunny on its ground under a light quad (tests/data/real/bunny_scene.json), order 1:
 /// measured 0.17% relative RMS over all corners, 0.05% of the brightest corner at worst (the
 /// exhaustive gather itself is 5.4% from Cycles per corner on the bunny).
@@ -29,21 +53,11 @@ fn the_fast_gather_agrees_with_the_exhaustive_one_on_the_bunny() {
         slow.counts.rays
     );
 
-    let lum = |v: &[f64; 3]| (v[0] + v[1] + v[2]) / 3.0;
-    let (mut sq, mut sum, mut peak, mut worst, mut n) = (0.0, 0.0, 0.0f64, 0.0f64, 0usize);
-    for (g, w) in fast.radiosity.iter().flatten().zip(slow.radiosity.iter().flatten()) {
-        let (g, w) = (lum(g), lum(w));
+    for g in fast.radiosity.iter().flatten().map(lum) {
         assert!(g.is_finite() && g >= 0.0, "corner B {g}");
-        sq += (g - w).powi(2);
-        sum += w;
-        peak = peak.max(w);
-        worst = worst.max((g - w).abs());
-        n += 1;
     }
-    assert!(n > 0 && sum > 0.0, "no lit corners");
-    let rms = (sq / n as f64).sqrt() / (sum / n as f64);
-    let max = worst / peak;
-    println!("fast against exhaustive: {:.2}% RMS, {:.2}% of the peak at worst", 100.0 * rms, 100.0 * max);
+    let (rms, max, lit) = apart(&fast, &slow);
+    assert!(lit, "no lit corners");
     assert!(rms < 0.01, "relative RMS {rms} of the fast corners from the exhaustive ones");
     assert!(max < 0.01, "worst corner {max} of the peak from the exhaustive one");
 }
@@ -61,26 +75,10 @@ fn the_fast_gather_agrees_with_the_exhaustive_one_on_the_bunny() {
 /// 5.8% under the fixture with the first fixed alone).
 #[test]
 fn the_fast_gather_takes_each_corner_s_own_view_under_a_ceiling_fixture() {
-    use galerkin_radiosity::scene::{Material, Scene, Settings};
-    use galerkin_radiosity::scenes::{bumpy_sphere, panel, room};
+    use galerkin_radiosity::scenes::bumpy_sphere;
     use glam::DVec3;
-    let mut objects = room(4.0, 3.0, 4.0, 4.0, [0; 6]);
-    objects.push(panel(
-        "Fixture",
-        DVec3::new(0.0, 2.99, 0.0),
-        DVec3::X * 0.5,
-        DVec3::Z * 0.5,
-        -DVec3::Y,
-        1,
-        1,
-    ));
-    objects.push(bumpy_sphere("Ball", DVec3::new(0.7, 0.5, 0.4), 0.5, 3, 0.1, 0));
-    let materials = vec![
-        Material { name: "grey".into(), reflectance: [0.7; 3], emission: [0.0; 3] },
-        Material { name: "lamp".into(), reflectance: [0.0; 3], emission: [10.0; 3] },
-    ];
-    let settings = Settings { basis_order: 1, corner_gather: false, ..Default::default() };
-    let scene = Scene::new(settings, (0, 0), materials, vec![Vec::new(); 2], objects).unwrap();
+    let ball = bumpy_sphere("Ball", DVec3::new(0.7, 0.5, 0.4), 0.5, 3, 0.1, 0);
+    let scene = super::room_under_a_fixture(4.0, 1, vec![ball]);
     let h = solve_frame(&scene, 0.0, &HierarchySettings::of(&scene.settings), &no_progress).unwrap();
     assert!(h.stats.cluster_links > 0, "no cluster links: nothing tested");
     let lit = Lighting::new(&scene, 0.0, &h.hierarchy.tree.faces);
@@ -88,19 +86,7 @@ fn the_fast_gather_takes_each_corner_s_own_view_under_a_ceiling_fixture() {
     let fast = gather::corners_with(&inputs, &scene, 0.0, &no_progress, Mode::Fast).unwrap();
     let slow = gather::corners_with(&inputs, &scene, 0.0, &no_progress, Mode::Exhaustive).unwrap();
 
-    let lum = |v: &[f64; 3]| (v[0] + v[1] + v[2]) / 3.0;
-    let (mut sq, mut sum, mut peak, mut worst, mut n) = (0.0, 0.0, 0.0f64, 0.0f64, 0usize);
-    for (g, w) in fast.radiosity.iter().flatten().zip(slow.radiosity.iter().flatten()) {
-        let (g, w) = (lum(g), lum(w));
-        sq += (g - w).powi(2);
-        sum += w;
-        peak = peak.max(w);
-        worst = worst.max((g - w).abs());
-        n += 1;
-    }
-    let rms = (sq / n as f64).sqrt() / (sum / n as f64);
-    let max = worst / peak;
-    println!("fast against exhaustive: {:.2}% RMS, {:.2}% of the peak at worst", 100.0 * rms, 100.0 * max);
+    let (rms, max, _) = apart(&fast, &slow);
     // The ceiling's corners strictly under the fixture (|x|, |z| < 0.5): shadowed but for the
     // 1 cm gap at its edges.
     let ceiling = scene.objects.iter().position(|o| o.name == "Ceiling").unwrap();

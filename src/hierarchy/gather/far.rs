@@ -21,26 +21,33 @@ use crate::hierarchy::coupling::{Coupling, SplitMix, kernel_weighted_rays, sampl
 use crate::hierarchy::tree::NodeId;
 
 impl Gather<'_> {
-    /// The light of the cluster source `linked`, one the ranking takes coarsely, at the point:
-    /// its intensity times its link's transmittance where the link's rays all arrived or all
-    /// were blocked (a blocked pair: nothing), times the point's own ([`Self::cluster_cast`])
+    /// The light of the cluster source `linked`, one the ranking takes coarsely, at the point,
+    /// from `light`, what it would bring unoccluded ([`Self::cluster_light`]): that times its
+    /// link's transmittance where the link's rays all arrived or all were blocked (a blocked
+    /// pair: nothing), times the point's own ([`Self::cluster_cast`])
     /// where the link saw it partly. A partial link's transmittance is a mean over its
     /// receiving cluster, and the point may see anything from none to all of the source: a
     /// ceiling corner under a light fixture 1 cm below the ceiling, whose cluster's links
     /// carried 0.005, or one at the fixture's edge that sees half the room.
-    pub(super) fn dim_cluster(&self, rx: &Receiver, linked: Linked, slot: Slot, memo: &mut Memo) -> [f64; 3] {
+    pub(super) fn dim_cluster(
+        &self,
+        rx: &Receiver,
+        (linked, slot): (Linked, Slot),
+        light: [f64; 3],
+        memo: &mut Memo,
+    ) -> [f64; 3] {
         match linked.via {
             Via::Blocked => [0.0; 3],
             Via::Link { index } => match &self.inputs.links[index as usize].coupling {
                 Coupling::Clusters { partial: true, .. } => {
-                    self.cluster_cast(rx, (linked.source, slot), memo)
+                    self.cluster_cast_lit(rx, (linked.source, slot), light, memo)
                 }
                 Coupling::Clusters { transmittance, partial: false } => {
                     let t = *transmittance as f64;
-                    self.cluster_light(rx, linked.source).map(|h| h * t)
+                    light.map(|h| h * t)
                 }
                 // (A cluster's links are cluster links.)
-                Coupling::Surfaces(_) | Coupling::Constants { .. } => self.cluster_light(rx, linked.source),
+                Coupling::Surfaces(_) | Coupling::Constants { .. } => light,
             },
         }
     }
@@ -110,7 +117,18 @@ impl Gather<'_> {
         (source, slot): (NodeId, Slot),
         memo: &mut Memo,
     ) -> [f64; 3] {
-        let light = self.cluster_light(rx, source);
+        self.cluster_cast_lit(rx, (source, slot), self.cluster_light(rx, source), memo)
+    }
+
+    /// [`Self::cluster_cast`] with the cluster's unoccluded light at the point, `light`,
+    /// already worked out ([`Self::cluster_light`]).
+    fn cluster_cast_lit(
+        &self,
+        rx: &Receiver,
+        (source, slot): (NodeId, Slot),
+        light: [f64; 3],
+        memo: &mut Memo,
+    ) -> [f64; 3] {
         // The intensity first: a dark cluster costs no rays.
         if light == [0.0; 3] {
             return light;

@@ -54,6 +54,8 @@ pub(super) struct Ranked {
     /// The ranking: the form factor times the mean radiosity, summed over the channels (a
     /// cluster's unoccluded light).
     weight: f64,
+    /// A cluster's unoccluded light `H` at the point.
+    cluster_light: [f64; 3],
     /// A surface's unoccluded form factor.
     form_factor: f64,
 }
@@ -73,6 +75,7 @@ impl Gather<'_> {
                 near: false,
                 touched: false,
                 weight,
+                cluster_light: light,
                 form_factor: 0.0,
             });
         };
@@ -102,6 +105,7 @@ impl Gather<'_> {
             near,
             touched,
             weight,
+            cluster_light: [0.0; 3],
             form_factor,
         })
     }
@@ -181,7 +185,7 @@ impl Gather<'_> {
                 }
             } else if tree.node(source).is_cluster() {
                 Counters::add(&self.counters.coarse, 1);
-                got.add(self.dim_cluster(rx, r.linked, r.slot, memo), 0.0);
+                got.add(self.dim_cluster(rx, (r.linked, r.slot), r.cluster_light, memo), 0.0);
             } else if rest <= 0.0 {
                 // Nothing left brings light: one ray for the form factor (the hemisphere bound).
                 Counters::add(&self.counters.coarse, 1);
